@@ -1,0 +1,1 @@
+"""vascsim recorder package."""

@@ -1,0 +1,16 @@
+"""Linear tetrahedral FEM with penalty-condensation and the biphase model."""
+
+from sim.fem.material import STABLE_POISSON_LIMIT, Material, PoissonRatioWarning
+from sim.fem.model import Precomputation, TissueModel, fixed_nodes_of
+from sim.fem.solution import ContactHandle, ContactSolution
+
+__all__ = [
+    "STABLE_POISSON_LIMIT",
+    "ContactHandle",
+    "ContactSolution",
+    "Material",
+    "PoissonRatioWarning",
+    "Precomputation",
+    "TissueModel",
+    "fixed_nodes_of",
+]

@@ -1,0 +1,402 @@
+"""The tissue model: linear tetrahedral FEM with penalty-condensation (PAPER.md 3-4).
+
+Fixed nodes are held by penalty springs C on their dofs, giving the SPD matrix
+K0 = K + C sum_fixed e e^T. A contact set J (nodes driven to intended
+displacements a) adds C at its dofs; with G = K0^-1 the exact response is
+
+    R = C (I + C G_JJ)^-1 a        (reaction forces, R = -C (u_J - a))
+    u = G[:, J] R                  (displacement anywhere)
+
+so only columns of K0^-1 at contact dofs are ever needed. ``precompute()`` gets
+the block of K0^-1 over every contact-candidate dof at once (condensation);
+without it, columns are solved when a node first becomes a contact and kept in
+a memory-bounded cache (on-demand mode).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from sim.errors import ModelError
+from sim.fem import cache
+from sim.fem.assembly import (
+    SparsityPattern,
+    displacement_gradients,
+    element_stiffness,
+    principal_stretches,
+    shape_gradients,
+    small_strain,
+    von_mises_stress,
+)
+from sim.fem.condensation import condensed_inverse, node_dofs, sparse_cholesky
+from sim.fem.material import Material, MaterialSpec, describe_materials, element_lame
+from sim.fem.solution import ContactHandle, ContactSolution
+from sim.geometry import ray_triangle_distances, vertex_normals
+from sim.mesh.tetmesh import TetMesh, signed_volumes
+
+# Penalty constant C = factor x the largest diagonal entry of K. The constraint
+# error of a penalty spring is about (local stiffness / C), i.e. ~1e-5 relative.
+DEFAULT_PENALTY_FACTOR = 1e5
+# Memory budget of the on-demand column cache.
+DEFAULT_COLUMN_CACHE_BYTES = 256 * 2**20
+
+
+@dataclass
+class Precomputation:
+    """The condensed inverse over the contact candidates, and how it was obtained."""
+
+    nodes: NDArray[np.int64]
+    matrix: NDArray[np.float64]
+    seconds: dict[str, float] = field(default_factory=dict)
+    from_cache: bool = False
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.matrix.nbytes)
+
+
+class TissueModel:
+    """Linear tetrahedral tissue with penalty-condensation.
+
+    mesh: the tetrahedral mesh (metres).
+    material: one :class:`Material`, or a map of region id or name -> Material.
+    fixed_nodes: node ids held in place (all three dofs) by penalty springs.
+    penalty: the penalty constant C (N/m) for fixed and contact dofs; default
+        ``penalty_factor`` x the largest diagonal entry of the stiffness.
+    fixed_dofs: extra individual dofs held (node-major ids, 3*node + axis), e.g. rollers.
+    contact_nodes: contact candidates, also the rows of the condensed surface
+        displacement; default every exterior node that is not fixed.
+    """
+
+    def __init__(
+        self,
+        mesh: TetMesh,
+        material: MaterialSpec,
+        fixed_nodes: ArrayLike = (),
+        penalty: float | None = None,
+        *,
+        fixed_dofs: ArrayLike = (),
+        contact_nodes: ArrayLike | None = None,
+        penalty_factor: float = DEFAULT_PENALTY_FACTOR,
+        column_cache_bytes: int = DEFAULT_COLUMN_CACHE_BYTES,
+    ) -> None:
+        self.mesh = mesh
+        self.material = material
+        self._lame = element_lame(mesh.regions, mesh.region_names, material)
+        nodes = _node_ids(fixed_nodes, mesh.n_nodes, "fixed_nodes")
+        extra = _ids(fixed_dofs, 3 * mesh.n_nodes, "fixed_dofs")
+        self.fixed_dofs = np.union1d(node_dofs(nodes), extra)
+        if self.fixed_dofs.size == 0:
+            raise ModelError("no fixed nodes or dofs: the tissue would float freely; fix at least "
+                             "the nodes the vessel is held by (e.g. mesh.node_sets['z0'])")
+        fully_fixed = np.flatnonzero(np.bincount(self.fixed_dofs // 3, minlength=mesh.n_nodes) == 3)
+        if contact_nodes is None:
+            candidates = np.setdiff1d(mesh.surface_nodes, fully_fixed)
+        else:
+            candidates = _node_ids(contact_nodes, mesh.n_nodes, "contact_nodes")
+        if candidates.size == 0:
+            raise ModelError("the model has no contact-candidate nodes (every surface node is fixed)")
+        self.contact_nodes = candidates
+        self._candidate_row = np.full(mesh.n_nodes, -1, dtype=np.int64)
+        self._candidate_row[candidates] = np.arange(len(candidates))
+        self._penalty_factor = penalty_factor
+        self._requested_penalty = penalty
+        self._precomputed: Precomputation | None = None
+        self._columns: OrderedDict[int, NDArray[np.float64]] = OrderedDict()
+        self._column_budget = column_cache_bytes
+        self._column_lock = threading.Lock()
+
+    # -- assembly --------------------------------------------------------------
+    @cached_property
+    def _gradients(self) -> NDArray[np.float64]:
+        return shape_gradients(self.mesh.points, self.mesh.tets)
+
+    @cached_property
+    def _pattern(self) -> SparsityPattern:
+        return SparsityPattern(self.mesh.tets, self.mesh.n_nodes)
+
+    @cached_property
+    def _stiffness(self) -> sp.csr_matrix:
+        lam, mu = self._lame
+        elements = element_stiffness(self._gradients, self.mesh.element_volumes, lam, mu)
+        return self._pattern.assemble(elements)
+
+    def stiffness_matrix(self) -> sp.csr_matrix:
+        """Assembled global stiffness K (N/m) before any penalty; node-major dofs."""
+        return self._stiffness.copy()
+
+    @cached_property
+    def penalty(self) -> float:
+        """The penalty constant C (N/m) on fixed and contact dofs."""
+        if self._requested_penalty is not None:
+            if not (np.isfinite(self._requested_penalty) and self._requested_penalty > 0):
+                raise ModelError(f"penalty must be a positive number of N/m; got {self._requested_penalty}")
+            return float(self._requested_penalty)
+        return float(self._penalty_factor * self._stiffness.diagonal().max())
+
+    def penalised_stiffness(self) -> sp.csc_matrix:
+        """K0 = K + C on the fixed dofs (N/m), SPD when rigid motion is prevented."""
+        springs = np.zeros(self._stiffness.shape[0])
+        springs[self.fixed_dofs] = self.penalty
+        return (self._stiffness + sp.diags(springs)).tocsc()
+
+    @cached_property
+    def _factor(self):
+        return sparse_cholesky(self.penalised_stiffness())
+
+    # -- precomputation ----------------------------------------------------------
+    def cache_key(self) -> str:
+        """Identifies the precomputation: mesh, materials, fixed dofs, candidates, penalty."""
+        return cache.cache_key(
+            self.mesh.content_hash, describe_materials(self.material),
+            _array_hash(self.fixed_dofs), _array_hash(self.contact_nodes), repr(self.penalty),
+        )
+
+    def precompute(self, cache_dir: str | Path | None = None, use_cache: bool = True) -> Precomputation:
+        """Condensed inverse over all contact candidates (the paper's composite matrix, exactly).
+
+        With ``use_cache`` the result is read from / written to ``cache_dir``
+        (default :func:`sim.fem.cache.default_cache_dir`), verified by checksum.
+        """
+        directory = Path(cache_dir) if cache_dir is not None else cache.default_cache_dir()
+        key = self.cache_key()
+        start = time.perf_counter()
+        matrix = cache.load_cached(directory, key) if use_cache else None
+        expected = (3 * len(self.contact_nodes),) * 2
+        if matrix is not None and matrix.shape == expected:
+            result = Precomputation(self.contact_nodes, matrix, {"load": time.perf_counter() - start}, True)
+        else:
+            result = self._compute_condensed()
+            if use_cache:
+                cache.store_cached(directory, key, result.matrix)
+        self._precomputed = result
+        return result
+
+    def _compute_condensed(self) -> Precomputation:
+        timings = {}
+        start = time.perf_counter()
+        matrix = self.penalised_stiffness()
+        timings["assembly"] = time.perf_counter() - start
+        start = time.perf_counter()
+        inverse = condensed_inverse(matrix, node_dofs(self.contact_nodes))
+        timings["condensation"] = time.perf_counter() - start
+        return Precomputation(self.contact_nodes, inverse, timings)
+
+    @property
+    def precomputation(self) -> Precomputation | None:
+        """The precomputed condensed inverse, or ``None`` in on-demand mode."""
+        return self._precomputed
+
+    def composite_matrix(self) -> NDArray[np.float64]:
+        """The paper's composite matrix Phi (3n x 3n over the contact candidates).
+
+        Column block j is (K0 + C E_j E_j^T)^-1 E_j restricted to candidate rows,
+        derived from the condensed inverse by the exact 3x3 Woodbury update
+        Phi_j = G_:j (I + C G_jj)^-1.
+        """
+        g = self._require_precomputed().matrix
+        n = len(self.contact_nodes)
+        diagonal = g.reshape(n, 3, n, 3)[np.arange(n), :, np.arange(n), :]      # (n, 3, 3) G_jj
+        correction = np.linalg.inv(np.eye(3) + self.penalty * diagonal)        # (n, 3, 3)
+        blocks = np.einsum("rjk,jkl->rjl", g.reshape(3 * n, n, 3), correction)
+        return blocks.reshape(3 * n, 3 * n)
+
+    def _require_precomputed(self) -> Precomputation:
+        if self._precomputed is None:
+            raise ModelError("the model is not precomputed; call precompute() first")
+        return self._precomputed
+
+    # -- columns -------------------------------------------------------------------
+    def _candidate_positions(self, nodes: NDArray[np.int64]) -> NDArray[np.int64]:
+        rows = self._candidate_row[nodes]
+        if np.any(rows < 0):
+            bad = nodes[rows < 0][0]
+            raise ModelError(
+                f"node {bad} is not a contact candidate of the precomputed model "
+                f"({len(self.contact_nodes)} candidates); use a surface node or pass contact_nodes"
+            )
+        return rows
+
+    def _node_columns(self, node: int) -> NDArray[np.float64]:
+        """(3N, 3) columns of K0^-1 at one node's dofs, solved on demand and cached."""
+        with self._column_lock:
+            columns = self._columns.get(node)
+            if columns is not None:
+                self._columns.move_to_end(node)
+                return columns
+        rhs = np.zeros((3 * self.mesh.n_nodes, 3), order="F")
+        rhs[3 * node + np.arange(3), np.arange(3)] = 1.0
+        columns = self._factor(rhs)
+        columns.flags.writeable = False
+        with self._column_lock:
+            self._columns[node] = columns
+            while len(self._columns) > 1 and sum(c.nbytes for c in self._columns.values()) > self._column_budget:
+                self._columns.popitem(last=False)
+        return columns
+
+    def prefetch(self, nodes: ArrayLike) -> None:
+        """Solve and cache the on-demand columns of ``nodes`` ahead of contact."""
+        if self._precomputed is None:
+            for node in _node_ids(nodes, self.mesh.n_nodes, "nodes"):
+                self._node_columns(int(node))
+
+    def _contact_columns(self, nodes: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
+        """(G rows x 3k columns, G_JJ block, ids of the rows) for a contact set."""
+        dofs_local = None
+        if self._precomputed is not None:
+            rows = self._candidate_positions(nodes)
+            dofs_local = node_dofs(rows)
+            columns = self._precomputed.matrix[:, dofs_local]
+            block = columns[dofs_local]
+            return columns, block, self.contact_nodes
+        full = np.hstack([self._node_columns(int(n)) for n in nodes])
+        block = full[node_dofs(nodes)]
+        return full[node_dofs(self.contact_nodes)], block, self.contact_nodes
+
+    # -- solving -------------------------------------------------------------------------
+    def contact(self, nodes: ArrayLike) -> ContactHandle:
+        """A per-tick handle for a fixed contact set (e.g. a triangle's 3 nodes)."""
+        ids = _contact_ids(nodes, self.mesh.n_nodes)
+        columns, block, rows = self._contact_columns(ids)
+        return ContactHandle(ids, self.penalty, block, columns, rows)
+
+    def solve(
+        self,
+        contacts: Mapping[int, ArrayLike],
+        *,
+        method: str = "exact",
+        full_field: bool = False,
+        fields: bool = False,
+    ) -> ContactSolution:
+        """Respond to contact nodes driven to intended displacements.
+
+        contacts: node id -> intended displacement (3,) in metres.
+        method: ``"exact"`` solves the multi-point penalty contact through the
+            small capacitance system; ``"superposition"`` adds the single-node
+            solutions as the paper did: each reaction from its own node's solution,
+            displacements summed (ignores how neighbouring contacts interact).
+        full_field: displacement of every node (one sparse solve).
+        fields: also element von Mises stress, principal stretch and volume change.
+        """
+        if method not in ("exact", "superposition"):
+            raise ModelError(f"method must be 'exact' or 'superposition'; got {method!r}")
+        nodes, intended = _parse_contacts(contacts, self.mesh.n_nodes)
+        columns, block, rows = self._contact_columns(nodes)
+        a = intended.reshape(-1)
+        c = self.penalty
+        if method == "exact":
+            reactions = c * np.linalg.solve(np.eye(len(a)) + c * block, a)
+        else:
+            reactions = self._superposed_reactions(block, a)
+        full_field = full_field or fields
+        if full_field:
+            rhs = np.zeros(3 * self.mesh.n_nodes)
+            rhs[node_dofs(nodes)] = reactions
+            displacement = self._factor(rhs).reshape(-1, 3)
+            shown = np.arange(self.mesh.n_nodes)
+        else:
+            displacement = (columns @ reactions).reshape(-1, 3)
+            shown = rows
+        extra = self.element_fields(displacement) if fields else {}
+        return ContactSolution(nodes, intended, reactions.reshape(-1, 3), shown, displacement, **extra)
+
+    def _superposed_reactions(self, block: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray:
+        """The paper's run-time superposition: each node's reaction from its own
+        single-contact solution (R_j = C (I + C G_jj)^-1 a_j), displacements summed."""
+        c = self.penalty
+        k = len(a) // 3
+        diagonal = block.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :]
+        alone = c * np.linalg.solve(np.eye(3) + c * diagonal, a.reshape(k, 3, 1))
+        return alone.reshape(-1)
+
+    def element_fields(self, displacement: NDArray[np.float64]) -> dict[str, object]:
+        """von Mises stress (Pa), largest principal stretch and relative volume change."""
+        grad_u = displacement_gradients(self._gradients, self.mesh.tets, displacement)
+        lam, mu = self._lame
+        deformed = signed_volumes(self.mesh.points + displacement, self.mesh.tets).sum()
+        return {
+            "von_mises": von_mises_stress(small_strain(grad_u), lam, mu),
+            "max_stretch": principal_stretches(grad_u)[:, -1],
+            "volume_change": float(deformed / self.mesh.volume - 1.0),
+        }
+
+    # -- geometry helpers ------------------------------------------------------------
+    @cached_property
+    def _vertex_normals(self) -> NDArray[np.float64]:
+        return vertex_normals(self.mesh.points, self.mesh.surface_triangles)
+
+    def tissue_depth(self, node: int) -> float:
+        """Thickness of tissue (m) under a surface node, along its inward normal."""
+        inward = -self._vertex_normals[node]
+        if not np.any(inward):
+            raise ModelError(f"node {node} is not on the exterior surface")
+        triangles = self.mesh.surface_triangles
+        away = ~np.any(triangles == node, axis=1)
+        distances = ray_triangle_distances(self.mesh.points[node], inward, self.mesh.points[triangles[away]])
+        depth = float(distances.min()) if distances.size else np.inf
+        if not np.isfinite(depth):
+            raise ModelError(f"no opposite surface found under node {node}")
+        return depth
+
+
+def _ids(values: ArrayLike, limit: int, name: str) -> NDArray[np.int64]:
+    array = np.asarray(values).ravel()
+    if array.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if not np.issubdtype(array.dtype, np.integer):
+        raise ModelError(f"{name} must be integer ids; got dtype {array.dtype}")
+    bad = array[(array < 0) | (array >= limit)]
+    if bad.size:
+        raise ModelError(f"{name} contains id {bad[0]} outside 0..{limit - 1}")
+    return np.unique(array.astype(np.int64))
+
+
+def _node_ids(values: ArrayLike, n_nodes: int, name: str) -> NDArray[np.int64]:
+    return _ids(values, n_nodes, name)
+
+
+def _contact_ids(nodes: ArrayLike, n_nodes: int) -> NDArray[np.int64]:
+    array = np.asarray(nodes, dtype=np.int64).ravel()
+    ids = _ids(array, n_nodes, "contact nodes")
+    if len(ids) != len(array):
+        raise ModelError(f"contact nodes must be distinct; got {array.tolist()}")
+    return array
+
+
+def _parse_contacts(contacts: Mapping[int, ArrayLike], n_nodes: int) -> tuple[NDArray, NDArray]:
+    if not contacts:
+        raise ModelError("contacts is empty: give at least one node id -> intended displacement")
+    nodes = _contact_ids(list(contacts), n_nodes)
+    intended = np.array([np.asarray(contacts[k], dtype=np.float64) for k in contacts])
+    if intended.shape != (len(nodes), 3):
+        raise ModelError(f"each intended displacement must be 3 numbers (m); got shape {intended.shape[1:]}")
+    if not np.all(np.isfinite(intended)):
+        raise ModelError("intended displacements must be finite numbers (m)")
+    return nodes, intended
+
+
+def _array_hash(array: NDArray) -> str:
+    import hashlib
+
+    return hashlib.sha256(np.ascontiguousarray(array).tobytes()).hexdigest()
+
+
+def fixed_nodes_of(mesh: TetMesh, names: Sequence[str]) -> NDArray[np.int64]:
+    """Union of named node sets, e.g. ``fixed_nodes_of(mesh, ["end0", "end1"])``."""
+    missing = [n for n in names if n not in mesh.node_sets]
+    if missing:
+        raise ModelError(f"mesh has no node set {missing[0]!r} (sets: {sorted(mesh.node_sets)})")
+    return np.unique(np.concatenate([mesh.node_sets[n] for n in names]))
+
+
+__all__ = ["Material", "Precomputation", "TissueModel", "fixed_nodes_of"]

@@ -1,0 +1,85 @@
+"""Reading and writing tetrahedral meshes through meshio (VTU, Gmsh .msh, and more)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import MeshError
+from sim.mesh.generators import orient_positive
+from sim.mesh.tetmesh import TetMesh
+
+REGION_KEYS = ("region", "gmsh:physical", "CellEntityIds", "medit:ref")
+NODE_SET_PREFIX = "set:"
+
+
+def load_mesh(path: str | Path, reorient: bool = False) -> TetMesh:
+    """Load a linear tetrahedral mesh from any format meshio reads.
+
+    Region labels come from the first cell-data array among ``region``,
+    ``gmsh:physical``, ``CellEntityIds`` and ``medit:ref``; point-data arrays named
+    ``set:<name>`` become node sets. With ``reorient=True`` inverted elements are
+    flipped instead of rejected. Nodes used only by non-tetrahedral cells (e.g. a
+    Gmsh file's boundary lines) are dropped.
+    """
+    import meshio
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"mesh file {path} does not exist")
+    try:
+        raw = meshio.read(path)
+    except Exception as error:  # meshio raises many unrelated types for bad files
+        raise MeshError(f"mesh file {path} could not be read: {error}") from error
+    blocks = [i for i, block in enumerate(raw.cells) if block.type == "tetra"]
+    if not blocks:
+        kinds = sorted({block.type for block in raw.cells})
+        raise MeshError(f"mesh file {path} has no linear tetrahedra (cell types: {', '.join(kinds) or 'none'})")
+    tets = np.vstack([raw.cells[i].data for i in blocks]).astype(np.int64)
+    regions = _regions(raw, blocks, len(tets))
+    used, tets = np.unique(tets, return_inverse=True)
+    tets = tets.reshape(-1, 4)
+    points = np.asarray(raw.points, dtype=np.float64)
+    if points.shape[1] == 2:
+        raise MeshError(f"mesh file {path} is two-dimensional; tetrahedral meshes need 3-D points")
+    points = points[used]
+    node_sets = {
+        name[len(NODE_SET_PREFIX):]: np.flatnonzero(np.asarray(values)[used] != 0)
+        for name, values in raw.point_data.items() if name.startswith(NODE_SET_PREFIX)
+    }
+    if reorient:
+        tets = orient_positive(points, tets)
+    try:
+        return TetMesh(points, tets, regions, node_sets=node_sets)
+    except MeshError as error:
+        raise MeshError(f"mesh file {path}: {error}") from error
+
+
+def _regions(raw, blocks: list[int], n_tets: int) -> np.ndarray:
+    for key in REGION_KEYS:
+        if key in raw.cell_data:
+            return np.concatenate([np.asarray(raw.cell_data[key][i]).ravel() for i in blocks]).astype(np.int32)
+    return np.zeros(n_tets, dtype=np.int32)
+
+
+def save_mesh(mesh: TetMesh, path: str | Path, file_format: str | None = None) -> Path:
+    """Write a mesh (regions as cell data ``region``, node sets as ``set:<name>``)."""
+    import meshio
+
+    path = Path(path)
+    point_data = {}
+    for name, ids in mesh.node_sets.items():
+        flags = np.zeros(mesh.n_nodes, dtype=np.uint8)
+        flags[ids] = 1
+        point_data[NODE_SET_PREFIX + name] = flags
+    cell_data = {"region": [mesh.regions.astype(np.int32)]}
+    if path.suffix == ".msh" and file_format is None:
+        file_format = "gmsh22"
+        cell_data = {"gmsh:physical": [mesh.regions.astype(np.int32)],
+                     "gmsh:geometrical": [mesh.regions.astype(np.int32)]}
+        point_data = {}
+    out = meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data)
+    meshio.write(path, out, file_format=file_format, binary=False) if file_format == "gmsh22" else \
+        meshio.write(path, out, file_format=file_format)
+    return path
