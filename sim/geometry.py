@@ -6,8 +6,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 
-def ray_triangle_distances(origin: NDArray[np.float64], direction: NDArray[np.float64],
-                           triangles: NDArray[np.float64], eps: float = 1e-12) -> NDArray[np.float64]:
+def ray_triangle_distances(
+    origin: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    triangles: NDArray[np.float64],
+    eps: float = 1e-12,
+) -> NDArray[np.float64]:
     """Distance along a ray to each triangle (Moller-Trumbore), ``inf`` where it misses.
 
     origin, direction: (3,) ray start (m) and direction (need not be unit; the

@@ -1,11 +1,16 @@
 """Linear tetrahedral FEM with penalty-condensation and the biphase model."""
 
+from sim.fem.biphase import BiphaseContact, BiphaseParameters, BiphaseSolution, BiphaseTissue
 from sim.fem.material import STABLE_POISSON_LIMIT, Material, PoissonRatioWarning
 from sim.fem.model import Precomputation, TissueModel, fixed_nodes_of
 from sim.fem.solution import ContactHandle, ContactSolution
 
 __all__ = [
     "STABLE_POISSON_LIMIT",
+    "BiphaseContact",
+    "BiphaseParameters",
+    "BiphaseSolution",
+    "BiphaseTissue",
     "ContactHandle",
     "ContactSolution",
     "Material",

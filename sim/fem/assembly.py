@@ -12,16 +12,20 @@ from numpy.typing import NDArray
 
 def shape_gradients(points: NDArray[np.float64], tets: NDArray[np.int64]) -> NDArray[np.float64]:
     """(M, 4, 3) gradients of the four linear shape functions of every element (1/m)."""
-    edges = points[tets[:, 1:]] - points[tets[:, :1]]          # rows are p1-p0, p2-p0, p3-p0
-    inverse = np.linalg.inv(edges)                               # columns are grad N1..N3
+    edges = points[tets[:, 1:]] - points[tets[:, :1]]  # rows are p1-p0, p2-p0, p3-p0
+    inverse = np.linalg.inv(edges)  # columns are grad N1..N3
     gradients = np.empty((len(tets), 4, 3))
     gradients[:, 1:, :] = np.swapaxes(inverse, 1, 2)
     gradients[:, 0, :] = -gradients[:, 1:, :].sum(axis=1)
     return gradients
 
 
-def element_stiffness(gradients: NDArray[np.float64], volumes: NDArray[np.float64],
-                      lame_lambda: NDArray[np.float64], shear_modulus: NDArray[np.float64]) -> NDArray[np.float64]:
+def element_stiffness(
+    gradients: NDArray[np.float64],
+    volumes: NDArray[np.float64],
+    lame_lambda: NDArray[np.float64],
+    shear_modulus: NDArray[np.float64],
+) -> NDArray[np.float64]:
     """(M, 12, 12) element stiffness matrices (N/m).
 
     K[a i, b j] = V (lambda g_ai g_bj + mu g_aj g_bi + mu delta_ij g_a . g_b),
@@ -62,8 +66,9 @@ class SparsityPattern:
         return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=self.shape)
 
 
-def displacement_gradients(gradients: NDArray[np.float64], tets: NDArray[np.int64],
-                           displacement: NDArray[np.float64]) -> NDArray[np.float64]:
+def displacement_gradients(
+    gradients: NDArray[np.float64], tets: NDArray[np.int64], displacement: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """(M, 3, 3) displacement gradient du_i/dx_j per element."""
     return np.einsum("mai,maj->mij", displacement[tets], gradients)
 
@@ -73,14 +78,26 @@ def small_strain(grad_u: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
 
 
-def von_mises_stress(strain: NDArray[np.float64], lame_lambda: NDArray[np.float64],
-                     shear_modulus: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(M,) von Mises equivalent stress (Pa) of the linear-elastic stress of each element."""
-    trace = np.trace(strain, axis1=1, axis2=2)
+def stress_tensor(
+    strain: NDArray[np.float64], lame_lambda: NDArray[np.float64], shear_modulus: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(M, 3, 3) linear-elastic Cauchy stress (Pa): lambda tr(eps) I + 2 mu eps."""
     stress = 2 * shear_modulus[:, None, None] * strain
-    stress += (lame_lambda * trace)[:, None, None] * np.eye(3)
+    stress += (lame_lambda * np.trace(strain, axis1=1, axis2=2))[:, None, None] * np.eye(3)
+    return stress
+
+
+def von_mises_of_stress(stress: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(M,) von Mises equivalent stress (Pa): sqrt(3/2 s:s) of the deviator s."""
     deviator = stress - (np.trace(stress, axis1=1, axis2=2) / 3)[:, None, None] * np.eye(3)
     return np.sqrt(1.5 * np.einsum("mij,mij->m", deviator, deviator))
+
+
+def von_mises_stress(
+    strain: NDArray[np.float64], lame_lambda: NDArray[np.float64], shear_modulus: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(M,) von Mises equivalent stress (Pa) of the linear-elastic stress of each element."""
+    return von_mises_of_stress(stress_tensor(strain, lame_lambda, shear_modulus))
 
 
 def principal_stretches(grad_u: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -75,8 +75,13 @@ def store_cached(directory: Path, key: str, array: NDArray[np.float64]) -> Path:
         np.save(handle, array, allow_pickle=False)
         handle.flush()
         os.fsync(handle.fileno())
-    meta = {"key": key, "shape": list(array.shape), "dtype": str(array.dtype),
-            "sha256": _array_digest(array), "format": CACHE_FORMAT_VERSION}
+    meta = {
+        "key": key,
+        "shape": list(array.shape),
+        "dtype": str(array.dtype),
+        "sha256": _array_digest(array),
+        "format": CACHE_FORMAT_VERSION,
+    }
     tmp_meta = meta_path.with_suffix(f".json.tmp{os.getpid()}")
     tmp_meta.write_text(json.dumps(meta))
     os.replace(tmp_data, data_path)

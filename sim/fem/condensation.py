@@ -45,9 +45,9 @@ def solve_blocks(factor, rhs: sp.spmatrix | NDArray[np.float64]) -> NDArray[np.f
     n_cols = rhs.shape[1]
     out = np.empty((rhs.shape[0], n_cols), order="F")
     for start in range(0, n_cols, SOLVE_BLOCK_COLUMNS):
-        block = rhs[:, start:start + SOLVE_BLOCK_COLUMNS]
+        block = rhs[:, start : start + SOLVE_BLOCK_COLUMNS]
         block = block.toarray() if sp.issparse(block) else np.asarray(block)
-        out[:, start:start + block.shape[1]] = factor(np.asfortranarray(block))
+        out[:, start : start + block.shape[1]] = factor(np.asfortranarray(block))
     return out
 
 
@@ -104,11 +104,17 @@ def trailing_cholesky(matrix: sp.csc_matrix, kept: NDArray[np.int64]) -> NDArray
     try:
         lower = cholesky(permuted, ordering_method="natural", mode="supernodal").L()
     except CholmodNotPositiveDefiniteError as error:
-        raise SolverError(f"the penalised stiffness is not positive definite ({error}); fix enough "
-                          "nodes to stop rigid-body motion and check the materials") from error
+        raise SolverError(
+            f"the penalised stiffness is not positive definite ({error}); fix enough "
+            "nodes to stop rigid-body motion and check the materials"
+        ) from error
     start = lower.indptr[eliminated.size]
     trailing = sp.csc_matrix(
-        (lower.data[start:], lower.indices[start:] - eliminated.size, lower.indptr[eliminated.size:] - start),
+        (
+            lower.data[start:],
+            lower.indices[start:] - eliminated.size,
+            lower.indptr[eliminated.size :] - start,
+        ),
         shape=(len(kept), len(kept)),
     )
     return trailing.toarray(order="F")
@@ -148,8 +154,8 @@ def condensed_inverse_multi_rhs(matrix: sp.csc_matrix, kept: NDArray[np.int64]) 
     selector = sp.csc_matrix((np.ones(len(kept)), (kept, np.arange(len(kept)))), shape=(n, len(kept)))
     out = np.empty((len(kept), len(kept)))
     for start in range(0, len(kept), SOLVE_BLOCK_COLUMNS):
-        block = selector[:, start:start + SOLVE_BLOCK_COLUMNS].toarray()
-        out[:, start:start + block.shape[1]] = factor(np.asfortranarray(block))[kept]
+        block = selector[:, start : start + SOLVE_BLOCK_COLUMNS].toarray()
+        out[:, start : start + block.shape[1]] = factor(np.asfortranarray(block))[kept]
     return out
 
 

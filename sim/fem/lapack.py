@@ -39,6 +39,11 @@ def potri_lower(factor: NDArray[np.float64]) -> tuple[NDArray[np.float64], int]:
         return inverse, int(info)
     n = ctypes.c_int(factor.shape[0])
     info = ctypes.c_int(0)
-    library.dpotri_(ctypes.byref(ctypes.c_char(b"L")), ctypes.byref(n),
-                    factor.ctypes.data_as(ctypes.c_void_p), ctypes.byref(n), ctypes.byref(info))
+    library.dpotri_(
+        ctypes.byref(ctypes.c_char(b"L")),
+        ctypes.byref(n),
+        factor.ctypes.data_as(ctypes.c_void_p),
+        ctypes.byref(n),
+        ctypes.byref(info),
+    )
     return factor, info.value

@@ -41,7 +41,10 @@ class Material:
         if nu > STABLE_POISSON_LIMIT:
             warnings.warn(
                 f"poisson_ratio {nu} is above {STABLE_POISSON_LIMIT}, where the paper's penalised "
-                "model became unstable", PoissonRatioWarning, stacklevel=3)
+                "model became unstable",
+                PoissonRatioWarning,
+                stacklevel=3,
+            )
 
     @property
     def lame_lambda(self) -> float:
@@ -62,8 +65,9 @@ class Material:
 MaterialSpec = Material | Mapping[int | str, Material]
 
 
-def element_lame(regions: NDArray[np.int32], region_names: Mapping[int, str],
-                 materials: MaterialSpec) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def element_lame(
+    regions: NDArray[np.int32], region_names: Mapping[int, str], materials: MaterialSpec
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per-element (lambda, mu) from one material or a map of region id/name -> material."""
     if isinstance(materials, Material):
         n = len(regions)
@@ -79,18 +83,23 @@ def element_lame(regions: NDArray[np.int32], region_names: Mapping[int, str],
     return lam, mu
 
 
-def resolve_region_materials(regions: NDArray[np.int32], region_names: Mapping[int, str],
-                             materials: Mapping[int | str, Material]) -> dict[int, Material]:
+def resolve_region_materials(
+    regions: NDArray[np.int32], region_names: Mapping[int, str], materials: Mapping[int | str, Material]
+) -> dict[int, Material]:
     """Map every region present in the mesh to its material; name the missing ones."""
     ids_by_name = {name: rid for rid, name in region_names.items()}
     resolved: dict[int, Material] = {}
     for key, material in materials.items():
         if not isinstance(material, Material):
-            raise MaterialError(f"material for region {key!r} must be a Material; got {type(material).__name__}")
+            raise MaterialError(
+                f"material for region {key!r} must be a Material; got {type(material).__name__}"
+            )
         if isinstance(key, str):
             if key not in ids_by_name:
-                raise MaterialError(f"material given for region {key!r}, which the mesh does not have "
-                                    f"(regions: {sorted(ids_by_name)})")
+                raise MaterialError(
+                    f"material given for region {key!r}, which the mesh does not have "
+                    f"(regions: {sorted(ids_by_name)})"
+                )
             key = ids_by_name[key]
         resolved[int(key)] = material
     missing = [int(r) for r in np.unique(regions) if int(r) not in resolved]

@@ -97,8 +97,11 @@ class TissueModel:
         extra = _ids(fixed_dofs, 3 * mesh.n_nodes, "fixed_dofs")
         self.fixed_dofs = np.union1d(node_dofs(nodes), extra)
         if self.fixed_dofs.size == 0:
-            raise ModelError("no fixed nodes or dofs: the tissue would float freely; fix at least "
-                             "the nodes the vessel is held by (e.g. mesh.node_sets['z0'])")
+            raise ModelError(
+                "no fixed nodes or dofs: the tissue would float freely; fix at least "
+                "the nodes the vessel is held by (e.g. mesh.node_sets['z0'])"
+            )
+        _check_rigid_motion_fixed(mesh.points, self.fixed_dofs)
         fully_fixed = np.flatnonzero(np.bincount(self.fixed_dofs // 3, minlength=mesh.n_nodes) == 3)
         if contact_nodes is None:
             candidates = np.setdiff1d(mesh.surface_nodes, fully_fixed)
@@ -158,8 +161,11 @@ class TissueModel:
     def cache_key(self) -> str:
         """Identifies the precomputation: mesh, materials, fixed dofs, candidates, penalty."""
         return cache.cache_key(
-            self.mesh.content_hash, describe_materials(self.material),
-            _array_hash(self.fixed_dofs), _array_hash(self.contact_nodes), repr(self.penalty),
+            self.mesh.content_hash,
+            describe_materials(self.material),
+            _array_hash(self.fixed_dofs),
+            _array_hash(self.contact_nodes),
+            repr(self.penalty),
         )
 
     def precompute(self, cache_dir: str | Path | None = None, use_cache: bool = True) -> Precomputation:
@@ -206,8 +212,8 @@ class TissueModel:
         """
         g = self._require_precomputed().matrix
         n = len(self.contact_nodes)
-        diagonal = g.reshape(n, 3, n, 3)[np.arange(n), :, np.arange(n), :]      # (n, 3, 3) G_jj
-        correction = np.linalg.inv(np.eye(3) + self.penalty * diagonal)        # (n, 3, 3)
+        diagonal = g.reshape(n, 3, n, 3)[np.arange(n), :, np.arange(n), :]  # (n, 3, 3) G_jj
+        correction = np.linalg.inv(np.eye(3) + self.penalty * diagonal)  # (n, 3, 3)
         blocks = np.einsum("rjk,jkl->rjl", g.reshape(3 * n, n, 3), correction)
         return blocks.reshape(3 * n, 3 * n)
 
@@ -240,7 +246,9 @@ class TissueModel:
         columns.flags.writeable = False
         with self._column_lock:
             self._columns[node] = columns
-            while len(self._columns) > 1 and sum(c.nbytes for c in self._columns.values()) > self._column_budget:
+            while (
+                len(self._columns) > 1 and sum(c.nbytes for c in self._columns.values()) > self._column_budget
+            ):
                 self._columns.popitem(last=False)
         return columns
 
@@ -347,6 +355,23 @@ class TissueModel:
         if not np.isfinite(depth):
             raise ModelError(f"no opposite surface found under node {node}")
         return depth
+
+
+def _check_rigid_motion_fixed(points: NDArray[np.float64], fixed_dofs: NDArray[np.int64]) -> None:
+    """Raise unless the fixed dofs stop all six rigid-body modes (else K0 is singular)."""
+    nodes, axes = fixed_dofs // 3, fixed_dofs % 3
+    centred = points[nodes] - points[nodes].mean(axis=0)
+    scale = max(float(np.abs(centred).max()), 1e-300)
+    modes = np.zeros((len(fixed_dofs), 6))
+    modes[np.arange(len(fixed_dofs)), axes] = 1.0
+    for k in range(3):  # rotation about axis k: (e_k x x) at each fixed dof
+        modes[:, 3 + k] = np.cross(np.eye(3)[k], centred / scale)[np.arange(len(fixed_dofs)), axes]
+    rank = np.linalg.matrix_rank(modes, tol=1e-8 * max(1.0, np.sqrt(len(fixed_dofs))))
+    if rank < 6:
+        raise ModelError(
+            f"the fixed nodes/dofs leave {6 - rank} rigid-body mode(s) free, so the tissue can move "
+            "without deforming; fix at least three non-collinear nodes (e.g. a face or the vessel ends)"
+        )
 
 
 def _ids(values: ArrayLike, limit: int, name: str) -> NDArray[np.int64]:

@@ -44,8 +44,10 @@ class ContactSolution:
         position = np.clip(position, 0, len(self.displacement_nodes) - 1)
         if np.any(self.displacement_nodes[position] != nodes):
             missing = np.asarray(nodes)[self.displacement_nodes[position] != nodes]
-            raise KeyError(f"node(s) {missing.tolist()} have no displacement in this solution; "
-                           "solve with full_field=True")
+            raise KeyError(
+                f"node(s) {missing.tolist()} have no displacement in this solution; "
+                "solve with full_field=True"
+            )
         return self.displacement[position]
 
 
@@ -59,8 +61,14 @@ class ContactHandle:
 
     __slots__ = ("_columns", "_stiffness", "nodes", "penalty", "surface_nodes")
 
-    def __init__(self, nodes: NDArray[np.int64], penalty: float, contact_block: NDArray[np.float64],
-                 columns: NDArray[np.float64], surface_nodes: NDArray[np.int64]) -> None:
+    def __init__(
+        self,
+        nodes: NDArray[np.int64],
+        penalty: float,
+        contact_block: NDArray[np.float64],
+        columns: NDArray[np.float64],
+        surface_nodes: NDArray[np.int64],
+    ) -> None:
         self.nodes = nodes
         self.penalty = penalty
         k = len(nodes)

@@ -127,8 +127,15 @@ def vessel_mesh(
     surface), ``end0``/``end1`` (the cut ends), ``side0``/``side1`` (patch edges),
     and with a wound ``wound_a``/``wound_b`` (the two edges of the incision).
     """
-    _check_vessel_args(inner_radius, wall_thickness, length, arc_deg,
-                       circumferential_divisions, radial_divisions, axial_divisions)
+    _check_vessel_args(
+        inner_radius,
+        wall_thickness,
+        length,
+        arc_deg,
+        circumferential_divisions,
+        radial_divisions,
+        axial_divisions,
+    )
     full_tube = math.isclose(arc_deg, 360.0)
     n_theta, n_r, n_z = circumferential_divisions, radial_divisions, axial_divisions
     theta_nodes = n_theta if full_tube else n_theta + 1
@@ -155,8 +162,17 @@ def vessel_mesh(
     region_ids = {name: i for i, name in enumerate(dict.fromkeys(names))}
     regions = np.array([region_ids[names[layer]] for layer in cell_layer], dtype=np.int32)
     if calcification is not None:
-        regions = _calcify(regions, region_ids, calcification, cell_theta, cell_layer, cell_z,
-                           arc / n_theta, 0.0 if full_tube else -arc / 2, length / n_z)
+        regions = _calcify(
+            regions,
+            region_ids,
+            calcification,
+            cell_theta,
+            cell_layer,
+            cell_z,
+            arc / n_theta,
+            0.0 if full_tube else -arc / 2,
+            length / n_z,
+        )
 
     node_sets = {
         "inner": np.flatnonzero(grid[:, 1] == 0),
@@ -168,16 +184,27 @@ def vessel_mesh(
         node_sets["side0"] = np.flatnonzero(grid[:, 0] == 0)
         node_sets["side1"] = np.flatnonzero(grid[:, 0] == n_theta)
     if wound is not None:
-        points, tets, node_sets = _cut_wound(points, tets, node_sets, grid, cell_theta, wound,
-                                             full_tube, arc, n_theta, length, n_z)
+        points, tets, node_sets = _cut_wound(
+            points, tets, node_sets, grid, cell_theta, wound, full_tube, arc, n_theta, length, n_z
+        )
     tets = orient_positive(points, tets)
     return TetMesh(points, tets, regions, {i: n for n, i in region_ids.items()}, node_sets)
 
 
-def _check_vessel_args(inner_radius: float, wall_thickness: float, length: float, arc_deg: float,
-                       n_theta: int, n_r: int, n_z: int) -> None:
-    for name, value in (("inner_radius", inner_radius), ("wall_thickness", wall_thickness),
-                        ("length", length)):
+def _check_vessel_args(
+    inner_radius: float,
+    wall_thickness: float,
+    length: float,
+    arc_deg: float,
+    n_theta: int,
+    n_r: int,
+    n_z: int,
+) -> None:
+    for name, value in (
+        ("inner_radius", inner_radius),
+        ("wall_thickness", wall_thickness),
+        ("length", length),
+    ):
         if not (math.isfinite(value) and value > 0):
             raise MeshError(f"vessel {name} must be positive and finite (m); got {value}")
     if not 0 < arc_deg <= 360:
@@ -190,16 +217,25 @@ def _check_vessel_args(inner_radius: float, wall_thickness: float, length: float
         )
 
 
-def _calcify(regions: NDArray[np.int32], region_ids: dict[str, int], plaque: Calcification,
-             cell_theta: NDArray, cell_layer: NDArray, cell_z: NDArray,
-             dtheta: float, theta0: float, dz: float) -> NDArray[np.int32]:
+def _calcify(
+    regions: NDArray[np.int32],
+    region_ids: dict[str, int],
+    plaque: Calcification,
+    cell_theta: NDArray,
+    cell_layer: NDArray,
+    cell_z: NDArray,
+    dtheta: float,
+    theta0: float,
+    dz: float,
+) -> NDArray[np.int32]:
     region_ids.setdefault("calcified", len(region_ids))
     angle = np.degrees(theta0 + (cell_theta + 0.5) * dtheta)
     z_mid = (cell_z + 0.5) * dz
     lo, hi = plaque.angle_range_deg
     z_lo, z_hi = plaque.z_range
-    inside = ((angle >= lo) & (angle <= hi) & (z_mid >= z_lo) & (z_mid <= z_hi)
-              & np.isin(cell_layer, plaque.layers))
+    inside = (
+        (angle >= lo) & (angle <= hi) & (z_mid >= z_lo) & (z_mid <= z_hi) & np.isin(cell_layer, plaque.layers)
+    )
     if not inside.any():
         raise MeshError(f"calcification {plaque} selects no element; widen its ranges")
     regions = regions.copy()
@@ -207,9 +243,19 @@ def _calcify(regions: NDArray[np.int32], region_ids: dict[str, int], plaque: Cal
     return regions
 
 
-def _cut_wound(points: NDArray, tets: NDArray, node_sets: dict[str, NDArray], grid: NDArray,
-               cell_theta: NDArray, wound: Wound, full_tube: bool, arc: float, n_theta: int,
-               length: float, n_z: int) -> tuple[NDArray, NDArray, dict[str, NDArray]]:
+def _cut_wound(
+    points: NDArray,
+    tets: NDArray,
+    node_sets: dict[str, NDArray],
+    grid: NDArray,
+    cell_theta: NDArray,
+    wound: Wound,
+    full_tube: bool,
+    arc: float,
+    n_theta: int,
+    length: float,
+    n_z: int,
+) -> tuple[NDArray, NDArray, dict[str, NDArray]]:
     """Duplicate the nodes on the incision so its two edges become separate surfaces."""
     theta0 = 0.0 if full_tube else -arc / 2
     column = round((math.radians(wound.angle_deg) - theta0) / (arc / n_theta))
@@ -246,8 +292,9 @@ def _cut_wound(points: NDArray, tets: NDArray, node_sets: dict[str, NDArray], gr
     return points, tets, node_sets
 
 
-def _open_wound(points: NDArray, side_a: NDArray, side_b: NDArray, wound: Wound,
-                dtheta: float, length: float) -> NDArray:
+def _open_wound(
+    points: NDArray, side_a: NDArray, side_b: NDArray, wound: Wound, dtheta: float, length: float
+) -> NDArray:
     z = points[side_a, 2]
     closed_tips = [tip for tip in (wound.z_start, wound.z_end) if 0 < tip < length]
     half_span = 0.5 * (wound.z_end - wound.z_start)

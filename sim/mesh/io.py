@@ -30,12 +30,15 @@ def load_mesh(path: str | Path, reorient: bool = False) -> TetMesh:
         raise MeshError(f"mesh file {path} does not exist")
     try:
         raw = meshio.read(path)
-    except Exception as error:  # meshio raises many unrelated types for bad files
-        raise MeshError(f"mesh file {path} could not be read: {error}") from error
+    except (Exception, SystemExit) as error:  # meshio raises many types, and exits on unknown content
+        reason = str(error) if not isinstance(error, SystemExit) else "not a readable mesh of this format"
+        raise MeshError(f"mesh file {path} could not be read: {reason}") from error
     blocks = [i for i, block in enumerate(raw.cells) if block.type == "tetra"]
     if not blocks:
         kinds = sorted({block.type for block in raw.cells})
-        raise MeshError(f"mesh file {path} has no linear tetrahedra (cell types: {', '.join(kinds) or 'none'})")
+        raise MeshError(
+            f"mesh file {path} has no linear tetrahedra (cell types: {', '.join(kinds) or 'none'})"
+        )
     tets = np.vstack([raw.cells[i].data for i in blocks]).astype(np.int64)
     regions = _regions(raw, blocks, len(tets))
     used, tets = np.unique(tets, return_inverse=True)
@@ -45,8 +48,9 @@ def load_mesh(path: str | Path, reorient: bool = False) -> TetMesh:
         raise MeshError(f"mesh file {path} is two-dimensional; tetrahedral meshes need 3-D points")
     points = points[used]
     node_sets = {
-        name[len(NODE_SET_PREFIX):]: np.flatnonzero(np.asarray(values)[used] != 0)
-        for name, values in raw.point_data.items() if name.startswith(NODE_SET_PREFIX)
+        name[len(NODE_SET_PREFIX) :]: np.flatnonzero(np.asarray(values)[used] != 0)
+        for name, values in raw.point_data.items()
+        if name.startswith(NODE_SET_PREFIX)
     }
     if reorient:
         tets = orient_positive(points, tets)
@@ -59,7 +63,9 @@ def load_mesh(path: str | Path, reorient: bool = False) -> TetMesh:
 def _regions(raw, blocks: list[int], n_tets: int) -> np.ndarray:
     for key in REGION_KEYS:
         if key in raw.cell_data:
-            return np.concatenate([np.asarray(raw.cell_data[key][i]).ravel() for i in blocks]).astype(np.int32)
+            return np.concatenate([np.asarray(raw.cell_data[key][i]).ravel() for i in blocks]).astype(
+                np.int32
+            )
     return np.zeros(n_tets, dtype=np.int32)
 
 
@@ -76,10 +82,13 @@ def save_mesh(mesh: TetMesh, path: str | Path, file_format: str | None = None) -
     cell_data = {"region": [mesh.regions.astype(np.int32)]}
     if path.suffix == ".msh" and file_format is None:
         file_format = "gmsh22"
-        cell_data = {"gmsh:physical": [mesh.regions.astype(np.int32)],
-                     "gmsh:geometrical": [mesh.regions.astype(np.int32)]}
+        cell_data = {
+            "gmsh:physical": [mesh.regions.astype(np.int32)],
+            "gmsh:geometrical": [mesh.regions.astype(np.int32)],
+        }
         point_data = {}
     out = meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data)
-    meshio.write(path, out, file_format=file_format, binary=False) if file_format == "gmsh22" else \
-        meshio.write(path, out, file_format=file_format)
+    meshio.write(
+        path, out, file_format=file_format, binary=False
+    ) if file_format == "gmsh22" else meshio.write(path, out, file_format=file_format)
     return path

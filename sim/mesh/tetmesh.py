@@ -177,7 +177,9 @@ def _check_shapes(points: NDArray, tets: NDArray, regions: NDArray) -> None:
     if len(tets) == 0:
         raise MeshError("mesh has no elements")
     if regions.shape != (len(tets),):
-        raise MeshError(f"mesh regions must have one label per element ({len(tets)}); got shape {regions.shape}")
+        raise MeshError(
+            f"mesh regions must have one label per element ({len(tets)}); got shape {regions.shape}"
+        )
 
 
 def _check_finite(points: NDArray) -> None:

@@ -1,0 +1,35 @@
+"""Shared fixtures: small meshes and models used across the sim tests."""
+
+import numpy as np
+import pytest
+
+from sim.fem import Material, TissueModel
+from sim.mesh import box_mesh
+
+
+@pytest.fixture(scope="session")
+def cube():
+    """The paper's test cube: 10 mm side, 729 nodes, 3072 elements."""
+    return box_mesh(0.01, 8)
+
+
+@pytest.fixture(scope="session")
+def small_box():
+    return box_mesh((0.004, 0.005, 0.003), (4, 5, 3))
+
+
+@pytest.fixture(scope="session")
+def cube_model(cube, tmp_path_factory):
+    model = TissueModel(cube, Material(20e3, 0.45), cube.node_sets["z0"])
+    model.precompute(cache_dir=tmp_path_factory.mktemp("cache"))
+    return model
+
+
+def top_centre_triangle(mesh):
+    """An exterior triangle on the top face touching the node nearest the face centre."""
+    top = mesh.node_sets["z1"]
+    centre = mesh.points[top].mean(axis=0)
+    node = top[np.argmin(np.linalg.norm(mesh.points[top] - centre, axis=1))]
+    normals = mesh.surface_normals
+    candidates = np.flatnonzero(np.any(mesh.surface_triangles == node, axis=1) & (normals[:, 2] > 0.99))
+    return mesh.surface_triangles[candidates[0]]
