@@ -43,27 +43,49 @@ def element_stiffness(
 class SparsityPattern:
     """The CSR structure of the global stiffness, computed once per mesh.
 
-    ``assemble`` sums element matrices into it with one ``bincount``, so a
-    material change re-assembles without re-sorting indices.
+    The structure is found on node pairs (16 per element, 9x fewer than dof
+    pairs) and expanded to 3x3 dof blocks; ``assemble`` then sums element
+    matrices into it with one ``bincount``, so a material change re-assembles
+    without re-sorting indices.
     """
 
     def __init__(self, tets: NDArray[np.int64], n_nodes: int) -> None:
-        dofs = (3 * tets[:, :, None] + np.arange(3)).reshape(len(tets), 12)
-        rows = np.repeat(dofs, 12, axis=1).ravel()
-        cols = np.tile(dofs, (1, 12)).ravel()
-        n = 3 * n_nodes
-        linear = rows.astype(np.int64) * n + cols
-        unique, inverse = np.unique(linear, return_inverse=True)
-        self.shape = (n, n)
-        self._slot = inverse.astype(np.int32 if len(unique) < 2**31 else np.int64)
-        self._n_slots = len(unique)
-        self.indices = (unique % n).astype(np.int32)
-        self.indptr = np.searchsorted(unique // n, np.arange(n + 1)).astype(np.int32)
+        rows = np.repeat(tets, 4, axis=1).ravel()  # (M*16,) node a of each (a, b) pair
+        cols = np.tile(tets, (1, 4)).ravel()  # node b
+        unique, inverse = np.unique(rows * n_nodes + cols, return_inverse=True)
+        node_ptr = np.searchsorted(unique // n_nodes, np.arange(n_nodes + 1))
+        degree = np.diff(node_ptr)
+        position = inverse - node_ptr[rows]  # index of b within node row a
+        base = (9 * node_ptr[rows] + 3 * position).reshape(len(tets), 4, 1, 4, 1)
+        row_step = (3 * degree[rows]).reshape(len(tets), 4, 1, 4, 1)
+        axis = np.arange(3)
+        slots = base + axis[None, None, :, None, None] * row_step + axis[None, None, None, None, :]
+        self.shape = (3 * n_nodes, 3 * n_nodes)
+        self._n_slots = 9 * len(unique)
+        self._slot = slots.ravel().astype(np.int32 if self._n_slots < 2**31 else np.int64)
+        dof_degree = np.repeat(3 * degree, 3)
+        self.indptr = np.concatenate([[0], np.cumsum(dof_degree)]).astype(np.int64)
+        # Column ids: dof row 3a+i holds the dofs 3b+j of every neighbour b of a, in order.
+        block_cols = (3 * (unique % n_nodes)[:, None] + axis).ravel()
+        self.indices = _expand_rows(block_cols, node_ptr, degree).astype(np.int32)
 
     def assemble(self, element_matrices: NDArray[np.float64]) -> sp.csr_matrix:
         """Sum (M, 12, 12) element matrices into a CSR matrix of this pattern."""
         data = np.bincount(self._slot, weights=element_matrices.ravel(), minlength=self._n_slots)
         return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=self.shape)
+
+
+def _expand_rows(
+    block_cols: NDArray[np.int64], node_ptr: NDArray[np.int64], degree: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Repeat each node row's 3*degree column ids three times (one per dof of the row node)."""
+    offset_in_row = np.arange(len(block_cols)) - np.repeat(3 * node_ptr[:-1], 3 * degree)
+    dof_row_start = np.repeat(9 * node_ptr[:-1], 3 * degree)
+    width = np.repeat(3 * degree, 3 * degree)
+    out = np.empty(3 * len(block_cols), dtype=np.int64)
+    for axis in range(3):
+        out[dof_row_start + axis * width + offset_in_row] = block_cols
+    return out
 
 
 def displacement_gradients(

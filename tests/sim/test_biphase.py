@@ -1,0 +1,106 @@
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sim.errors import ModelError
+from sim.fem import BiphaseParameters, BiphaseTissue
+from tests.conftest import top_centre_triangle
+
+
+@pytest.fixture(scope="module")
+def biphase(cube, tmp_path_factory):
+    tissue = BiphaseTissue.build(cube, cube.node_sets["z0"])
+    tissue.precompute(cache_dir=tmp_path_factory.mktemp("cache"))
+    return tissue
+
+
+def press(tissue, triangle, strain, speed=0.0, weights=(0.5, 0.3, 0.2), **options):
+    depth = 0.01
+    d = np.array([0.0, 0.0, -strain * depth])
+    contacts = {int(n): w * d for n, w in zip(triangle, weights, strict=True)}
+    return tissue.solve(contacts, tool_displacement=d, depth=depth, needle_speed=speed, **options)
+
+
+def test_soft_phase_below_the_limit(biphase, cube):
+    tri = top_centre_triangle(cube)
+    below = press(biphase, tri, 0.1)
+    assert not below.stiff_phase
+    soft_only = biphase.soft.solve(dict(zip(below.contact_nodes.tolist(), below.soft.intended, strict=True)))
+    np.testing.assert_allclose(below.reaction_forces, soft_only.reaction_forces, rtol=1e-12)
+    assert below.stretch_ratio == pytest.approx(1.1)
+
+
+def test_continuous_at_the_limit_and_stiffer_above(biphase, cube):
+    tri = top_centre_triangle(cube)
+    eps = 1e-9
+    at = press(biphase, tri, 0.2).net_force[2]
+    just_above = press(biphase, tri, 0.2 + eps).net_force[2]
+    assert abs(just_above - at) < 1e-6 * abs(at)
+    slope_soft = press(biphase, tri, 0.1).net_force[2] / 0.1
+    slope_above = (press(biphase, tri, 0.4).net_force[2] - at) / 0.2
+    # Above the limit the increment is answered by the stiff phase: E2/E1 = 2 times steeper.
+    assert slope_above / slope_soft == pytest.approx(2.0, rel=1e-9)
+    displaced = press(biphase, tri, 0.2 + eps, full_field=True).displacement
+    np.testing.assert_allclose(displaced, press(biphase, tri, 0.2, full_field=True).displacement, atol=1e-12)
+
+
+def test_speed_lowers_the_limit_and_stiffens_sooner(biphase, cube):
+    tri = top_centre_triangle(cube)
+    p = biphase.parameters
+    assert p.strain_limit_at(0.0) == pytest.approx(0.2)
+    assert p.strain_limit_at(p.critical_speed) == pytest.approx(0.2 * p.limit_floor)
+    assert p.strain_limit_at(10 * p.critical_speed) == pytest.approx(0.2 * p.limit_floor)
+    slow = press(biphase, tri, 0.15, speed=0.0)
+    fast = press(biphase, tri, 0.15, speed=p.critical_speed)
+    assert not slow.stiff_phase and fast.stiff_phase
+    assert abs(fast.net_force[2]) > abs(slow.net_force[2])
+
+
+@given(st.floats(0, 0.05), st.floats(0, 0.05))
+def test_limit_never_rises_with_speed(a, b):
+    p = BiphaseParameters()
+    slow, fast = sorted((a, b))
+    assert p.strain_limit_at(fast) <= p.strain_limit_at(slow) + 1e-15
+    assert p.limit_floor * p.strain_limit <= p.strain_limit_at(fast) <= p.strain_limit
+
+
+def test_per_tick_contact_matches_solve(biphase, cube):
+    tri = top_centre_triangle(cube)
+    handle = biphase.contact(tri)
+    for strain, speed in ((0.05, 0.0), (0.3, 0.0), (0.1, 0.008)):
+        d = np.array([1e-4, 0.0, -strain * handle.depth])
+        intended = np.outer([0.5, 0.3, 0.2], d)
+        contacts = {int(n): a for n, a in zip(tri, intended, strict=True)}
+        expected = biphase.solve(contacts, tool_displacement=d, needle_speed=speed).reaction_forces
+        np.testing.assert_allclose(handle.reaction_forces(intended, d, speed), expected, rtol=1e-10)
+
+
+def test_fields_superimpose_both_phases(biphase, cube):
+    tri = top_centre_triangle(cube)
+    solution = press(biphase, tri, 0.3, fields=True)
+    assert solution.volume_change is not None and solution.von_mises.shape == (cube.n_elements,)
+    assert solution.von_mises.max() > press(biphase, tri, 0.3 * 0.999, fields=True).von_mises.max() * 0.99
+
+
+def test_depth_by_ray_cast(biphase, cube):
+    assert biphase.depth_under(top_centre_triangle(cube)) == pytest.approx(0.01, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"strain_limit": 1.5}, r"strain_limit must be in \(0, 1\)"),
+        ({"critical_speed": 0.0}, "critical_speed must be positive"),
+        ({"limit_floor": 0.0}, "limit_floor"),
+        ({"soft_modulus": 50e3}, "stiff_modulus .* must be at least soft_modulus"),
+    ],
+)
+def test_parameter_validation(options, message):
+    with pytest.raises(ModelError, match=message):
+        BiphaseParameters(**options)
+
+
+def test_negative_speed_rejected():
+    with pytest.raises(ModelError, match="needle_speed must be a non-negative"):
+        BiphaseParameters().strain_limit_at(-1.0)
