@@ -49,7 +49,7 @@ def _vessel(name: str, n_theta: int, n_axial: int) -> Scenario:
         circumferential_divisions=n_theta,
         radial_divisions=4,
         axial_divisions=n_axial,
-        wound=Wound(angle_deg=90.0, z_start=0.3 * length, z_end=0.7 * length, gap=2e-4),
+        wound=Wound(angle_deg=90.0, z_start=0.3 * length, z_end=0.7 * length, gap=1e-4),
     )
     fixed = np.union1d(mesh.node_sets["end0"], mesh.node_sets["end1"])
     touchable = np.concatenate([mesh.node_sets[s] for s in ("outer", "wound_a", "wound_b")])

@@ -194,7 +194,7 @@ class TissueModel:
         matrix = self.penalised_stiffness()
         timings["assembly"] = time.perf_counter() - start
         start = time.perf_counter()
-        inverse = condensed_inverse(matrix, node_dofs(self.contact_nodes))
+        inverse = condensed_inverse(matrix, node_dofs(self.contact_nodes), timings)
         timings["condensation"] = time.perf_counter() - start
         return Precomputation(self.contact_nodes, inverse, timings)
 
@@ -233,41 +233,47 @@ class TissueModel:
             )
         return rows
 
-    def _node_columns(self, node: int) -> NDArray[np.float64]:
-        """(3N, 3) columns of K0^-1 at one node's dofs, solved on demand and cached."""
+    def _nodes_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
+        """(3N, 3k) columns of K0^-1 at the nodes' dofs: cached ones reused, the rest
+        solved together in one multi-right-hand-side solve (on-demand mode)."""
         with self._column_lock:
-            columns = self._columns.get(node)
-            if columns is not None:
-                self._columns.move_to_end(node)
-                return columns
-        rhs = np.zeros((3 * self.mesh.n_nodes, 3), order="F")
-        rhs[3 * node + np.arange(3), np.arange(3)] = 1.0
-        columns = self._factor(rhs)
-        columns.flags.writeable = False
-        with self._column_lock:
-            self._columns[node] = columns
-            while (
-                len(self._columns) > 1 and sum(c.nbytes for c in self._columns.values()) > self._column_budget
-            ):
-                self._columns.popitem(last=False)
-        return columns
+            known = {int(n): self._columns[int(n)] for n in nodes if int(n) in self._columns}
+            for n in known:
+                self._columns.move_to_end(n)
+        missing = [int(n) for n in nodes if int(n) not in known]
+        if missing:
+            rhs = np.zeros((3 * self.mesh.n_nodes, 3 * len(missing)), order="F")
+            rhs[node_dofs(np.array(missing)), np.arange(3 * len(missing))] = 1.0
+            solved = self._factor(rhs)
+            with self._column_lock:
+                for i, node in enumerate(missing):
+                    columns = np.ascontiguousarray(solved[:, 3 * i : 3 * i + 3])
+                    columns.flags.writeable = False
+                    known[node] = self._columns[node] = columns
+                self._evict_columns()
+        return np.hstack([known[int(n)] for n in nodes])
+
+    def _evict_columns(self) -> None:
+        """Drop least recently used columns beyond the memory budget (lock held)."""
+        used = sum(c.nbytes for c in self._columns.values())
+        while len(self._columns) > 1 and used > self._column_budget:
+            _, dropped = self._columns.popitem(last=False)
+            used -= dropped.nbytes
 
     def prefetch(self, nodes: ArrayLike) -> None:
         """Solve and cache the on-demand columns of ``nodes`` ahead of contact."""
         if self._precomputed is None:
-            for node in _node_ids(nodes, self.mesh.n_nodes, "nodes"):
-                self._node_columns(int(node))
+            self._nodes_columns(_node_ids(nodes, self.mesh.n_nodes, "nodes"))
 
     def _contact_columns(self, nodes: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
         """(G rows x 3k columns, G_JJ block, ids of the rows) for a contact set."""
-        dofs_local = None
         if self._precomputed is not None:
             rows = self._candidate_positions(nodes)
             dofs_local = node_dofs(rows)
             columns = self._precomputed.matrix[:, dofs_local]
             block = columns[dofs_local]
             return columns, block, self.contact_nodes
-        full = np.hstack([self._node_columns(int(n)) for n in nodes])
+        full = self._nodes_columns(nodes)
         block = full[node_dofs(nodes)]
         return full[node_dofs(self.contact_nodes)], block, self.contact_nodes
 

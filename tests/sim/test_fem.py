@@ -265,6 +265,27 @@ def test_fast_composite_equals_papers_per_node_inversion(small_box):
         )
 
 
+def test_trailing_factor_is_the_schur_complement(small_box):
+    from sim.fem.condensation import condensed_inverse, condensed_inverse_multi_rhs, trailing_cholesky
+
+    model = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"])
+    k0 = model.penalised_stiffness()
+    kept = node_dofs(model.contact_nodes)
+    dense = k0.toarray()
+    inner = np.setdiff1d(np.arange(dense.shape[0]), kept)
+    schur = dense[np.ix_(kept, kept)] - dense[np.ix_(kept, inner)] @ np.linalg.solve(
+        dense[np.ix_(inner, inner)], dense[np.ix_(inner, kept)]
+    )
+    lower = trailing_cholesky(k0, kept)
+    np.testing.assert_allclose(lower @ lower.T, schur, rtol=1e-10, atol=1e-10 * np.abs(schur).max())
+    np.testing.assert_allclose(
+        condensed_inverse(k0, kept),
+        condensed_inverse_multi_rhs(k0, kept),
+        rtol=1e-9,
+        atol=1e-12 * np.abs(np.linalg.inv(schur)).max(),
+    )
+
+
 def test_superposition_matches_exact_only_for_independent_contacts(cube, cube_model):
     sets = contact_sets(cube)
     single = sets["single"]
