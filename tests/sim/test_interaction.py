@@ -89,7 +89,7 @@ def test_grazing_entry_slides_without_piercing(wall):
     def trajectory(t):
         pose = down_then_up(min(t, 0.6))
         back = max(t - 0.6, 0.0) * 0.004
-        return Pose([*pose.position, 0, 0, back], pose.rotation)
+        return Pose(pose.position + np.array([0.0, 0.0, back]), pose.rotation)
 
     events, forces = run(interaction, trajectory, 1.5)
     assert "contact_start" in kinds(events) and "pierce" not in kinds(events)
@@ -130,7 +130,7 @@ def test_release_and_regrab_while_pierced(wall):
             return approach(t)
         parked = approach(release_at)
         if t < regrab_at:
-            return Pose([*parked.position, 0.0, 0.0, 0.01 * (t - release_at)], parked.rotation)
+            return Pose(parked.position + np.array([0.0, 0.0, 0.01 * (t - release_at)]), parked.rotation)
         return parked  # back where the needle was left
 
     events, _ = run(interaction, trajectory, 1.2, grip=lambda t: not (release_at < t < regrab_at))
