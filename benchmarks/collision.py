@@ -44,16 +44,20 @@ def main() -> None:
     needle = Needle.curved(segments=16)
     pose = pressing_pose(needle)
     for n_theta, n_axial in ((64, 40), (160, 156)):
-        mesh = vessel_mesh(circumferential_divisions=n_theta, radial_divisions=1, axial_divisions=n_axial,
-                           length=0.03)
+        mesh = vessel_mesh(
+            circumferential_divisions=n_theta, radial_divisions=1, axial_divisions=n_axial, length=0.03
+        )
         collision = CollisionMesh(mesh)
         vertices = needle.world_vertices(pose)
         hits = collision.query(vertices)
         frame_ms = 1e3 * per_call(lambda c=collision, v=vertices: c.query(v), 50)
         lifted = mesh.node_sets["outer"][:200]
         update_ms = 1e3 * per_call(lambda c=collision, n=lifted: c.deform(n, np.array([0, 0, 1e-4])), 5)
-        print(f"triangles={len(collision.triangles)}  segments={needle.segment_count}  hits={len(hits)}  "
-              f"global_cd_frame_ms={frame_ms:.3f}  collision_mesh_update_ms={update_ms:.2f}", flush=True)
+        print(
+            f"triangles={len(collision.triangles)}  segments={needle.segment_count}  hits={len(hits)}  "
+            f"global_cd_frame_ms={frame_ms:.3f}  collision_mesh_update_ms={update_ms:.2f}",
+            flush=True,
+        )
 
     mesh = vessel_mesh(circumferential_divisions=64, radial_divisions=3, axial_divisions=40, length=0.03)
     fixed = np.union1d(mesh.node_sets["end0"], mesh.node_sets["end1"])
@@ -74,8 +78,11 @@ def main() -> None:
     local_us = 1e6 * per_call(local_cd, 20000)
     interaction.fem_step(0.0)
     step_us = 1e6 * per_call(lambda: interaction.fem_step(0.0), 5000)
-    print(f"local_cd_tick_us={local_us:.2f}  fem_contact_step_us={step_us:.2f} (local CD + force, "
-          f"{mesh.n_nodes}-node artery, precomputed)", flush=True)
+    print(
+        f"local_cd_tick_us={local_us:.2f}  fem_contact_step_us={step_us:.2f} (local CD + force, "
+        f"{mesh.n_nodes}-node artery, precomputed)",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

@@ -146,6 +146,7 @@ class NeedleInteraction:
         self._pending: list[NeedleEvent] = []
         self._previous_tip: NDArray[np.float64] | None = None
         self._previous_time = 0.0
+        self.tip_velocity = np.zeros(3)
         self.tip_speed = 0.0
 
     # -- haptic rate ----------------------------------------------------------------
@@ -175,7 +176,8 @@ class NeedleInteraction:
     def _track_tip(self, time: float) -> None:
         tip = self.needle_vertices()[0]
         if self._previous_tip is not None and time > self._previous_time:
-            self.tip_speed = float(np.linalg.norm(tip - self._previous_tip) / (time - self._previous_time))
+            self.tip_velocity = (tip - self._previous_tip) / (time - self._previous_time)
+            self.tip_speed = float(np.linalg.norm(self.tip_velocity))
         self._previous_tip, self._previous_time = tip, time
 
     # -- graphics rate ----------------------------------------------------------------
@@ -187,6 +189,8 @@ class NeedleInteraction:
         self._pending = []
         if self.state == "free":
             events += self._promote(time, vertices, hits)
+        elif self.state == "contact":
+            events += self._check_contact(time, hits)
         elif self.state in ("pierced", "exited"):
             events += self._track_passage(time, vertices, hits)
         return events
@@ -217,6 +221,18 @@ class NeedleInteraction:
         tangent = self.needle.tip_tangent(self.needle_pose)
         return [
             self._event("contact_start", time, hits, 0, "", entry_angle_deg(tangent, self.contacts[0].normal))
+        ]
+
+    def _check_contact(self, time: float, hits) -> list[NeedleEvent]:
+        """While in contact, flag crossings of triangles away from the nominated one."""
+        nominated = self.contacts[0].nodes
+        away = [
+            k
+            for k in range(len(hits))
+            if not np.isin(self.collision.triangles[hits.triangle[k]], nominated).any()
+        ]
+        return [
+            self._event("implausible_hit", time, hits, k, "needle touches the tissue elsewhere") for k in away
         ]
 
     def _track_passage(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:

@@ -322,6 +322,9 @@ class TissueModel:
             displacement = (columns @ reactions).reshape(-1, 3)
             shown = rows
         extra = self.element_fields(displacement) if fields else {}
+        if fields:
+            largest = float(np.linalg.norm(intended, axis=1).max())
+            extra["stretch_ratio"] = 1.0 + largest / self.tissue_depth(int(nodes[0]))
         return ContactSolution(nodes, intended, reactions.reshape(-1, 3), shown, displacement, **extra)
 
     def _superposed_reactions(self, block: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray:
@@ -334,12 +337,14 @@ class TissueModel:
         return alone.reshape(-1)
 
     def element_fields(self, displacement: NDArray[np.float64]) -> dict[str, object]:
-        """von Mises stress (Pa), largest principal stretch and relative volume change."""
+        """Element strain, von Mises stress (Pa), largest principal stretch, relative volume change."""
         grad_u = displacement_gradients(self._gradients, self.mesh.tets, displacement)
         lam, mu = self._lame
         deformed = signed_volumes(self.mesh.points + displacement, self.mesh.tets).sum()
+        strain = small_strain(grad_u)
         return {
-            "von_mises": von_mises_stress(small_strain(grad_u), lam, mu),
+            "element_strain": strain,
+            "von_mises": von_mises_stress(strain, lam, mu),
             "max_stretch": principal_stretches(grad_u)[:, -1],
             "volume_change": float(deformed / self.mesh.volume - 1.0),
         }

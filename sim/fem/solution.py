@@ -21,7 +21,10 @@ class ContactSolution:
         full field was requested, else the condensed surface nodes.
     von_mises, max_stretch: (M,) per-element von Mises stress (Pa) and largest
         principal stretch ratio, when fields were requested.
+    element_strain: (M, 3, 3) small-strain tensor per element, when requested.
     volume_change: relative change of the deformed mesh volume, when requested.
+    stretch_ratio: the paper's stretch statistic lambda = 1 + |a|max / h (h: tissue
+        depth under the first contact node), when requested.
     """
 
     contact_nodes: NDArray[np.int64]
@@ -32,6 +35,8 @@ class ContactSolution:
     von_mises: NDArray[np.float64] | None = None
     max_stretch: NDArray[np.float64] | None = None
     volume_change: float | None = None
+    element_strain: NDArray[np.float64] | None = None
+    stretch_ratio: float | None = None
 
     @property
     def net_force(self) -> NDArray[np.float64]:

@@ -223,6 +223,13 @@ def test_condensation_equals_direct_sparse_solve(cube, cube_model, case, mode):
     assert relative_error(solution.displacement, u_direct[solution.displacement_nodes]) < 1e-10
     full = model.solve(contacts, full_field=True)
     assert relative_error(full.displacement, u_direct) < 1e-10
+    if case == "single" and mode == "precomputed":
+        fields = model.solve(contacts, fields=True)
+        ((node, intended),) = contacts.items()
+        assert cube.points[node, 2] == 0.01  # on the top face: 10 mm of tissue below
+        assert fields.stretch_ratio == pytest.approx(1 + np.linalg.norm(intended) / 0.01)
+        assert fields.element_strain.shape == (cube.n_elements, 3, 3)
+        np.testing.assert_allclose(fields.element_strain, np.swapaxes(fields.element_strain, 1, 2))
 
 
 def test_condensation_on_vessel_wall_with_wound():

@@ -79,6 +79,34 @@ def test_perpendicular_entry_pierces_then_exits_the_far_wall_and_pulls_through(w
     assert forces[:, 2].max() >= PiercingRules().puncture_stress * needle.wire_area
 
 
+def test_radial_pass_through_an_artery_wall_exits_into_the_lumen():
+    from sim.mesh import vessel_mesh
+
+    mesh = vessel_mesh(
+        inner_radius=0.004,
+        wall_thickness=0.0015,
+        length=0.01,
+        arc_deg=90,
+        circumferential_divisions=12,
+        radial_divisions=3,
+        axial_divisions=10,
+    )
+    fixed = np.concatenate([mesh.node_sets[s] for s in ("end0", "end1", "side0", "side1")])
+    model = TissueModel(mesh, Material(20e3, 0.45), fixed)
+    needle = Needle.straight(0.01)
+    rotation = rotation_aligning([1, 0, 0], [-1, 0, 0])  # tip pointing at the axis
+    tip_start = np.array([0.0065, 0.0001, 0.0051])  # 1 mm outside the adventitia at angle ~0
+
+    def trajectory(t):
+        return Pose(tip_start - rotation @ needle.vertices[0] + [-0.004 * t, 0, 0], rotation)
+
+    events, _ = run(NeedleInteraction(model, needle), trajectory, 1.5)
+    assert kinds(events)[:3] == ["contact_start", "pierce", "exit"]
+    triangles = mesh.surface_triangles
+    assert set(triangles[events[0].triangle]) <= set(mesh.node_sets["outer"])
+    assert set(triangles[events[2].triangle]) <= set(mesh.node_sets["inner"])
+
+
 def test_grazing_entry_slides_without_piercing(wall):
     needle = Needle.straight(0.01)
     interaction = NeedleInteraction(wall, needle)
