@@ -143,7 +143,7 @@ class NeedleInteraction:
         self.contacts: list[TriangleContact] = []  # nominated triangles (entry, then exit)
         self._handle = None
         self._handle_nodes: tuple[int, ...] = ()
-        self._pending: list[NeedleEvent] = []
+        self._implausible_active: set[tuple[str, int]] = set()
         self._previous_tip: NDArray[np.float64] | None = None
         self._previous_time = 0.0
         self.tip_velocity = np.zeros(3)
@@ -185,15 +185,25 @@ class NeedleInteraction:
         """Global CD of the whole needle; promotes, exits, completes passages, flags implausible hits."""
         vertices = self.needle_vertices()
         hits = self.collision.query(vertices)
-        events = self._pending
-        self._pending = []
+        events: list[NeedleEvent] = []
         if self.state == "free":
             events += self._promote(time, vertices, hits)
         elif self.state == "contact":
-            events += self._check_contact(time, hits)
+            events += self._check_contact(time, vertices, hits)
         elif self.state in ("pierced", "exited"):
             events += self._track_passage(time, vertices, hits)
-        return events
+        return self._new_implausible_only(events)
+
+    def _new_implausible_only(self, events: list[NeedleEvent]) -> list[NeedleEvent]:
+        """Report an implausible condition when it starts, not on every frame it lasts."""
+        current = {(e.detail, e.triangle) for e in events if e.kind == "implausible_hit"}
+        fresh = [
+            e
+            for e in events
+            if e.kind != "implausible_hit" or (e.detail, e.triangle) not in self._implausible_active
+        ]
+        self._implausible_active = current
+        return fresh
 
     def _promote(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
         if len(hits) == 0:
@@ -223,22 +233,32 @@ class NeedleInteraction:
             self._event("contact_start", time, hits, 0, "", entry_angle_deg(tangent, self.contacts[0].normal))
         ]
 
-    def _check_contact(self, time: float, hits) -> list[NeedleEvent]:
-        """While in contact, flag crossings of triangles away from the nominated one."""
-        nominated = self.contacts[0].nodes
-        away = [
-            k
-            for k in range(len(hits))
-            if not np.isin(self.collision.triangles[hits.triangle[k]], nominated).any()
-        ]
+    def _check_contact(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
+        """While in contact, flag crossings well away from the contact point.
+
+        Near the contact the needle's body dips below the undeformed surface as the
+        tip presses in (the collision mesh ignores the needle's own deformation), so
+        only crossings farther than the contact triangle's size plus 2 mm count.
+        """
+        contact = self.contacts[0]
+        corners = self.collision.corners[contact.triangle]
+        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 2e-3
+        points = hits.points(*segment_ends(vertices))
+        away = np.flatnonzero(np.linalg.norm(points - contact.point, axis=1) > reach)
         return [
-            self._event("implausible_hit", time, hits, k, "needle touches the tissue elsewhere") for k in away
+            self._event("implausible_hit", time, hits, int(k), "needle touches the tissue elsewhere")
+            for k in away[:1]
         ]
 
     def _track_passage(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
         entry = self.contacts[0]
         through_entry = np.flatnonzero(hits.triangle == entry.triangle)
-        if through_entry.size == 0 and not self._crosses_plane_near(vertices, entry):
+        still_held = [
+            c
+            for c in self.contacts
+            if np.any(hits.triangle == c.triangle) or self._crosses_plane_near(vertices, c)
+        ]
+        if not still_held:
             self.state, self.contacts, self._handle = "free", [], None
             return [
                 NeedleEvent(
@@ -247,7 +267,7 @@ class NeedleInteraction:
                     entry.triangle,
                     tuple(entry.barycentric),
                     tip_speed=self.tip_speed,
-                    detail="needle pulled clear of the entry point",
+                    detail="needle pulled clear of the wall",
                 )
             ]
         events = []

@@ -33,6 +33,12 @@ class Needle:
     vertices: NDArray[np.float64] = field(repr=False)
     wire_diameter: float
     name: str
+    tip_direction: NDArray[np.float64] = field(repr=False, default=None)  # unit, holder frame
+
+    def __post_init__(self) -> None:
+        if self.tip_direction is None:
+            chord = self.vertices[0] - self.vertices[1]
+            object.__setattr__(self, "tip_direction", _frozen(chord / np.linalg.norm(chord)))
 
     @classmethod
     def curved(
@@ -60,7 +66,10 @@ class Needle:
         angles = np.linspace(full, 0.0, segments + 1)  # tip first
         arc = radius * np.column_stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)])
         grip = radius * np.array([math.cos(grip_fraction * full), math.sin(grip_fraction * full), 0.0])
-        return cls(_frozen(arc - grip), wire_diameter, f"{arc_fraction:g}-circle r={radius * 1e3:g} mm")
+        tangent = _frozen(np.array([-math.sin(full), math.cos(full), 0.0]))  # exact, not the last chord
+        return cls(
+            _frozen(arc - grip), wire_diameter, f"{arc_fraction:g}-circle r={radius * 1e3:g} mm", tangent
+        )
 
     @classmethod
     def straight(
@@ -98,9 +107,8 @@ class Needle:
         return pose.position + self.vertices @ pose.rotation.T
 
     def tip_tangent(self, pose: Pose) -> NDArray[np.float64]:
-        """Unit direction the tip points (from the vertex behind it to the tip), world frame."""
-        local = self.vertices[0] - self.vertices[1]
-        return pose.rotation @ (local / np.linalg.norm(local))
+        """Unit direction the tip points (the curve's tangent at the tip), world frame."""
+        return pose.rotation @ self.tip_direction
 
     def arc_position(self, segment: NDArray[np.int64], t: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance from the tip (m) of points given as (segment, t along it)."""

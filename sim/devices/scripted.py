@@ -1,0 +1,361 @@
+"""Devices without hardware: scripted trajectories (functions, files, a suturing pass) and replays."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sim.devices.base import SCRIPTED_LIMITS, DeviceError, DeviceIdentity, DeviceLimits, DeviceSample
+from sim.needle import Needle, Pose, rotation_about
+
+Trajectory = Callable[[float], tuple[Pose, bool]]
+VELOCITY_STEP = 1e-3  # s, for the finite-difference velocity of a trajectory
+
+
+class ForceLog:
+    """Forces commanded to a device, in a growing preallocated buffer (time, fx, fy, fz)."""
+
+    def __init__(self, capacity: int = 65536) -> None:
+        self._data = np.empty((capacity, 4))
+        self._count = 0
+
+    def append(self, time: float, force: NDArray[np.float64]) -> None:
+        if self._count == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        self._data[self._count, 0] = time
+        self._data[self._count, 1:] = force
+        self._count += 1
+
+    @property
+    def array(self) -> NDArray[np.float64]:
+        return self._data[: self._count]
+
+
+class ScriptedDevice:
+    """A device driven by a trajectory ``t -> (holder pose, grip closed)``; logs the forces it is sent.
+
+    Button 0 reports the grip. Works under both clocks: ``read(time)`` evaluates the
+    trajectory at the time it is given.
+    """
+
+    def __init__(
+        self,
+        trajectory: Trajectory,
+        limits: DeviceLimits = SCRIPTED_LIMITS,
+        identity: DeviceIdentity | None = None,
+    ) -> None:
+        self.trajectory = trajectory
+        self.limits = limits
+        self.identity = identity or DeviceIdentity("scripted", "scripted trajectory")
+        self.forces = ForceLog()
+        self._now = 0.0
+
+    def read(self, time: float) -> DeviceSample:
+        self._now = time
+        pose, grip = self.trajectory(time)
+        before, _ = self.trajectory(time - VELOCITY_STEP)
+        velocity = (pose.position - before.position) / VELOCITY_STEP
+        return DeviceSample(time, pose.position, pose.rotation, velocity, int(grip))
+
+    def write_force(self, force: NDArray[np.float64]) -> None:
+        self.forces.append(self._now, force)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    @classmethod
+    def from_samples(
+        cls,
+        times: ArrayLike,
+        positions: ArrayLike,
+        quaternions: ArrayLike,
+        grips: ArrayLike | None = None,
+        identity: DeviceIdentity | None = None,
+    ) -> ScriptedDevice:
+        """Play back sampled poses: positions (n, 3) m, quaternions (n, 4) w-x-y-z, grips (n,)."""
+        return cls(sampled_trajectory(times, positions, quaternions, grips), identity=identity)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> ScriptedDevice:
+        """A CSV or Parquet file with columns time, x, y, z, qw, qx, qy, qz and optionally grip."""
+        path = Path(path)
+        columns = _read_table(path)
+        missing = [c for c in ("time", "x", "y", "z", "qw", "qx", "qy", "qz") if c not in columns]
+        if missing:
+            raise DeviceError(f"trajectory file {path} lacks column(s) {', '.join(missing)}")
+        positions = np.column_stack([columns[c] for c in "xyz"])
+        quaternions = np.column_stack([columns[c] for c in ("qw", "qx", "qy", "qz")])
+        identity = DeviceIdentity("scripted", f"trajectory file {path.name}")
+        return cls.from_samples(columns["time"], positions, quaternions, columns.get("grip"), identity)
+
+
+class ReplayDevice(ScriptedDevice):
+    """A recorded session played back through the same loop (samples given as arrays)."""
+
+    def __init__(
+        self,
+        times: ArrayLike,
+        positions: ArrayLike,
+        quaternions: ArrayLike,
+        grips: ArrayLike | None = None,
+        session: str = "",
+    ) -> None:
+        super().__init__(
+            sampled_trajectory(times, positions, quaternions, grips),
+            identity=DeviceIdentity("replay", f"replay of session {session}".strip()),
+        )
+
+
+def _read_table(path: Path) -> dict[str, NDArray]:
+    if not path.is_file():
+        raise DeviceError(f"trajectory file {path} does not exist")
+    if path.suffix == ".parquet":
+        import pyarrow.parquet as pq
+
+        table = pq.read_table(path)
+        return {name: table.column(name).to_numpy() for name in table.column_names}
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except ValueError as error:
+        raise DeviceError(f"trajectory file {path} is not a readable CSV: {error}") from error
+    if data.dtype.names is None or data.size == 0:
+        raise DeviceError(f"trajectory file {path} has no header row or no samples")
+    return {name: np.atleast_1d(data[name]) for name in data.dtype.names}
+
+
+def sampled_trajectory(
+    times: ArrayLike, positions: ArrayLike, quaternions: ArrayLike, grips: ArrayLike | None = None
+) -> Trajectory:
+    """Linear interpolation of positions and normalised-linear interpolation of quaternions."""
+    t = np.asarray(times, dtype=np.float64)
+    p = np.asarray(positions, dtype=np.float64)
+    q = np.asarray(quaternions, dtype=np.float64)
+    g = np.ones(len(t), dtype=bool) if grips is None else np.asarray(grips) > 0.5
+    if len(t) < 1 or p.shape != (len(t), 3) or q.shape != (len(t), 4):
+        raise DeviceError(
+            f"trajectory needs times (n,), positions (n, 3), quaternions (n, 4); "
+            f"got {t.shape}, {p.shape}, {q.shape}"
+        )
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+        raise DeviceError("trajectory samples must be finite numbers")
+    if np.any(np.diff(t) <= 0):
+        bad = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise DeviceError(
+            f"trajectory times must increase; sample {bad + 1} ({t[bad + 1]:.6g} s) is not after "
+            f"sample {bad} ({t[bad]:.6g} s)"
+        )
+    flips = np.cumprod(np.where(np.einsum("ij,ij->i", q[1:], q[:-1]) < 0, -1.0, 1.0))
+    q = np.vstack([q[:1], q[1:] * flips[:, None]])  # keep consecutive quaternions in one hemisphere
+
+    def trajectory(time: float) -> tuple[Pose, bool]:
+        k = int(np.clip(np.searchsorted(t, time, side="right") - 1, 0, len(t) - 1))
+        if k == len(t) - 1 or time <= t[0]:
+            return Pose(p[k], quaternion_matrix(q[k])), bool(g[k])
+        w = (time - t[k]) / (t[k + 1] - t[k])
+        quaternion = (1 - w) * q[k] + w * q[k + 1]
+        return Pose((1 - w) * p[k] + w * p[k + 1], quaternion_matrix(quaternion)), bool(g[k])
+
+    return trajectory
+
+
+def quaternion_matrix(quaternion: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation matrix of a (w, x, y, z) quaternion (normalised here)."""
+    w, x, y, z = quaternion / np.linalg.norm(quaternion)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def matrix_quaternion(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(w, x, y, z) quaternion of a rotation matrix (w >= 0)."""
+    m = rotation
+    trace = np.trace(m)
+    if trace > 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
+        q = [0.0] * 4
+        q[0] = (m[k, j] - m[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (m[j, i] + m[i, j]) / s
+        q[1 + k] = (m[k, i] + m[i, k]) / s
+    q = np.array(q)
+    return q if q[0] >= 0 else -q
+
+
+@dataclass(frozen=True)
+class SuturingPassParameters:
+    """Skill parameters of a scripted suturing pass with a curved needle.
+
+    entry_angle_deg: tilt of the needle tip from the inward normal at entry (0 = perpendicular).
+    insertion_speed: needle-tip speed along its arc (m/s).
+    wrist_rotation: 1 = the wrist turns the needle about its own centre (it follows its
+        curve); 0 = the hand pushes it straight along the entry direction (levering).
+    insertion_arc_deg: how far the needle is turned before it is released (the tip should
+        then be through the wall).
+    hesitations: number of pauses during insertion, each ``hesitation_time`` s long.
+    tremor_amplitude (m) and tremor_frequency (Hz): hand tremor added to the holder.
+    approach_time (s), approach_distance (m): the needle descends onto the entry point.
+    regrab_time (s): jaws travel from the grip to the needle's tip and close on it.
+    pull_arc_deg: the needle is then turned on along its own curve, so its body follows the
+        tip's path through the wall, until this much further.
+    seed: for the tremor's phases (a pass is reproducible).
+    """
+
+    entry_angle_deg: float = 0.0
+    insertion_speed: float = 0.004
+    wrist_rotation: float = 1.0
+    insertion_arc_deg: float = 70.0
+    hesitations: int = 0
+    hesitation_time: float = 0.4
+    tremor_amplitude: float = 0.0
+    tremor_frequency: float = 9.0
+    approach_time: float = 0.8
+    approach_distance: float = 0.004
+    regrab_time: float = 0.6
+    pull_arc_deg: float = 170.0
+    seed: int = 0
+
+
+class SuturingPass:
+    """A whole stitch: approach, insertion by wrist rotation, release, re-grab at the tip, pull-through.
+
+    entry: entry point on the tissue surface (m); normal: outward surface normal there;
+    bite_direction: along the surface towards the exit. The needle's circle lies in
+    the plane of the normal and the bite direction; its tip reaches the entry point
+    at the end of the approach with the parameters' entry angle (tilted away from
+    the bite). ``pose_and_grip(t)`` is a trajectory for :class:`ScriptedDevice`.
+    """
+
+    def __init__(
+        self,
+        needle: Needle,
+        entry: ArrayLike,
+        normal: ArrayLike,
+        bite_direction: ArrayLike,
+        parameters: SuturingPassParameters | None = None,
+    ) -> None:
+        self.needle = needle
+        self.p = parameters or SuturingPassParameters()
+        n = _unit(normal)
+        s = np.asarray(bite_direction, dtype=np.float64)
+        s = _unit(s - (s @ n) * n)
+        tilt = math.radians(self.p.entry_angle_deg)
+        tangent = math.cos(tilt) * -n - math.sin(tilt) * s  # tip direction at entry
+        to_centre = _unit(s - (s @ tangent) * tangent)
+        centre_local, full, self.radius = _needle_circle(needle)
+        tip_local = needle.vertices[0]
+        local = np.column_stack(
+            [
+                (centre_local - tip_local) / self.radius,
+                [-math.sin(full), math.cos(full), 0.0],
+                [0.0, 0.0, 1.0],
+            ]
+        )
+        self.axis = -np.cross(to_centre, tangent)  # turning about it drives the tip along its curve
+        world = np.column_stack([to_centre, tangent, self.axis])
+        self._rest = world @ local.T
+        self._centre_local = centre_local
+        self.entry = np.asarray(entry, dtype=np.float64)
+        self.centre = self.entry + self.radius * to_centre
+        self.normal, self.tangent = n, tangent
+        self._tremor_phase = np.random.default_rng(self.p.seed).uniform(0, 2 * math.pi, size=3)
+        self._omega = self.p.insertion_speed / self.radius
+        self._insert_time = (
+            math.radians(self.p.insertion_arc_deg) / self._omega + self.p.hesitations * self.p.hesitation_time
+        )
+        self._pull_time = math.radians(self.p.pull_arc_deg) / self._omega
+        self.duration = self.p.approach_time + self._insert_time + self.p.regrab_time + self._pull_time
+
+    @property
+    def phases(self) -> dict[str, tuple[float, float]]:
+        """Start and end (s) of the approach, insertion, regrab and pull phases."""
+        a = self.p.approach_time
+        b = a + self._insert_time
+        c = b + self.p.regrab_time
+        return {"approach": (0.0, a), "insertion": (a, b), "regrab": (b, c), "pull": (c, self.duration)}
+
+    def turned(self, angle: float) -> Pose:
+        """Holder (= needle) pose with the needle turned by ``angle`` (rad) about its centre from entry."""
+        rotation = rotation_about(self.axis, angle) @ self._rest
+        return Pose(self.centre - rotation @ self._centre_local, rotation)
+
+    def _insertion_angle(self, t: float) -> float:
+        """Angle turned after ``t`` s of insertion, with pauses spread evenly through it."""
+        moving = t
+        if self.p.hesitations:
+            span = self._insert_time / (self.p.hesitations + 1)
+            for k in range(1, self.p.hesitations + 1):
+                start = k * span - self.p.hesitation_time / 2
+                moving -= float(np.clip(t - start, 0.0, self.p.hesitation_time))
+        return min(self._omega * max(moving, 0.0), math.radians(self.p.insertion_arc_deg))
+
+    def _tremor(self, t: float) -> NDArray[np.float64]:
+        if self.p.tremor_amplitude == 0:
+            return np.zeros(3)
+        frequencies = self.p.tremor_frequency * np.array([1.0, 1.13, 0.87])
+        return self.p.tremor_amplitude * np.sin(2 * math.pi * frequencies * t + self._tremor_phase)
+
+    def pose_and_grip(self, t: float) -> tuple[Pose, bool]:
+        phases = self.phases
+        if t < phases["insertion"][0]:
+            pose = self.turned(0.0)
+            lift = (1.0 - max(t, 0.0) / self.p.approach_time) * self.p.approach_distance
+            pose, grip = Pose(pose.position + lift * self.normal, pose.rotation), True
+        elif t < phases["regrab"][0]:
+            angle = self._insertion_angle(t - phases["insertion"][0])
+            turned = self.turned(self.p.wrist_rotation * angle)
+            push = (1.0 - self.p.wrist_rotation) * self.radius * angle * self.tangent
+            pose, grip = Pose(turned.position + push, turned.rotation), True
+        else:
+            pose, grip = self._regrab_and_pull(t, *phases["regrab"])
+        return Pose(pose.position + self._tremor(t), pose.rotation), grip
+
+    def _regrab_and_pull(self, t: float, start: float, stop: float) -> tuple[Pose, bool]:
+        inserted = math.radians(self.p.insertion_arc_deg)
+        released = self.turned(self.p.wrist_rotation * inserted)
+        released = Pose(
+            released.position + (1 - self.p.wrist_rotation) * self.radius * inserted * self.tangent,
+            released.rotation,
+        )
+        tip = self.needle.world_vertices(released)[0]
+        if t < stop:  # jaws open, travel from the grip point to the needle's tip, close on arrival
+            w = (t - start) / (stop - start)
+            return Pose((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
+        turn = rotation_about(self.axis, self._omega * (t - stop))
+        return Pose(self.centre + turn @ (tip - self.centre), turn @ released.rotation), True
+
+
+def _unit(v: ArrayLike) -> NDArray[np.float64]:
+    v = np.asarray(v, dtype=np.float64)
+    norm = np.linalg.norm(v)
+    if not norm > 0:
+        raise DeviceError("direction vectors of a suturing pass must be non-zero")
+    return v / norm
+
+
+def _needle_circle(needle: Needle) -> tuple[NDArray[np.float64], float, float]:
+    """(centre in the holder frame, arc angle swage -> tip (rad), radius) of a curved needle."""
+    a, b, c = needle.vertices[0], needle.vertices[len(needle.vertices) // 2], needle.vertices[-1]
+    ab, ac = b - a, c - a
+    normal = np.cross(ab, ac)
+    if np.linalg.norm(normal) < 1e-15:
+        raise DeviceError("a suturing pass needs a curved needle")
+    centre = a + (np.dot(ac, ac) * np.cross(normal, ab) + np.dot(ab, ab) * np.cross(ac, normal)) / (
+        2 * np.dot(normal, normal)
+    )
+    tip, swage = a - centre, c - centre
+    angle = (math.atan2(tip[1], tip[0]) - math.atan2(swage[1], swage[0])) % (2 * math.pi)
+    return centre, angle, float(np.linalg.norm(tip))
