@@ -147,6 +147,8 @@ class NeedleInteraction:
         self._previous_tip: NDArray[np.float64] | None = None
         self._previous_time = 0.0
         self.tip_velocity = np.zeros(3)
+        self._vertices_pose: Pose | None = None
+        self._vertices = np.zeros((0, 3))
         self.tip_speed = 0.0
 
     # -- haptic rate ----------------------------------------------------------------
@@ -171,7 +173,12 @@ class NeedleInteraction:
         return events
 
     def needle_vertices(self) -> NDArray[np.float64]:
-        return self.needle.world_vertices(self.needle_pose)
+        """World vertices of the needle (tip first), computed once per pose."""
+        if self._vertices_pose is not self.needle_pose:
+            self._vertices = self.needle.world_vertices(self.needle_pose)
+            self._vertices.flags.writeable = False
+            self._vertices_pose = self.needle_pose
+        return self._vertices
 
     def _track_tip(self, time: float) -> None:
         tip = self.needle_vertices()[0]
@@ -184,7 +191,10 @@ class NeedleInteraction:
     def graphics_step(self, time: float) -> list[NeedleEvent]:
         """Global CD of the whole needle; promotes, exits, completes passages, flags implausible hits."""
         vertices = self.needle_vertices()
-        hits = self.collision.query(vertices)
+        return self.apply_global(time, vertices, self.collision.query(vertices))
+
+    def apply_global(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
+        """Act on global-CD hits computed elsewhere (the graphics thread) for these needle vertices."""
         events: list[NeedleEvent] = []
         if self.state == "free":
             events += self._promote(time, vertices, hits)

@@ -127,16 +127,20 @@ class Pose:
     def __post_init__(self) -> None:
         position = np.asarray(self.position, dtype=np.float64)
         rotation = np.asarray(self.rotation, dtype=np.float64)
-        if position.shape != (3,) or not np.all(np.isfinite(position)):
+        if position.shape != (3,) or not np.isfinite(position).all():
             raise NeedleError(f"pose position must be 3 finite numbers (m); got {position}")
-        if (
-            rotation.shape != (3, 3)
-            or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6)
-            or np.linalg.det(rotation) <= 0
-        ):
+        if rotation.shape != (3, 3) or not _is_rotation(rotation):
             raise NeedleError("pose rotation must be a proper 3x3 rotation matrix")
         object.__setattr__(self, "position", position)
         object.__setattr__(self, "rotation", rotation)
+
+    @classmethod
+    def unchecked(cls, position: NDArray[np.float64], rotation: NDArray[np.float64]) -> Pose:
+        """A pose from arrays already known to be valid (compositions of valid poses)."""
+        pose = object.__new__(cls)
+        object.__setattr__(pose, "position", position)
+        object.__setattr__(pose, "rotation", rotation)
+        return pose
 
     @classmethod
     def identity(cls) -> Pose:
@@ -144,18 +148,38 @@ class Pose:
 
     def compose(self, other: Pose) -> Pose:
         """self * other: apply ``other`` in this pose's frame."""
-        return Pose(self.position + self.rotation @ other.position, self.rotation @ other.rotation)
+        return Pose.unchecked(self.position + self.rotation @ other.position, self.rotation @ other.rotation)
 
     def inverse(self) -> Pose:
-        return Pose(-self.rotation.T @ self.position, self.rotation.T)
+        return Pose.unchecked(-self.rotation.T @ self.position, self.rotation.T)
+
+
+def _is_rotation(r: NDArray[np.float64]) -> bool:
+    """Orthonormal with determinant +1, to 1e-6 (plain floats: cheap enough for every haptic tick)."""
+    rows = r.tolist()
+    for i in range(3):
+        for j in range(i, 3):
+            dot = rows[i][0] * rows[j][0] + rows[i][1] * rows[j][1] + rows[i][2] * rows[j][2]
+            if not abs(dot - (1.0 if i == j else 0.0)) <= 1e-6:  # also rejects NaN
+                return False
+    (a, b, c), (d, e, f), (g, h, i) = rows
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0
 
 
 def rotation_about(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
-    """Rotation matrix about a unit axis by an angle (Rodrigues)."""
-    k = np.asarray(axis, dtype=np.float64)
-    k = k / np.linalg.norm(k)
-    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(angle_rad) * cross + (1 - math.cos(angle_rad)) * cross @ cross
+    """Rotation matrix about an axis (need not be unit) by an angle (Rodrigues), in plain floats."""
+    x, y, z = (float(v) for v in axis)
+    norm = math.sqrt(x * x + y * y + z * z)
+    x, y, z = x / norm, y / norm, z / norm
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    t = 1.0 - c
+    return np.array(
+        [
+            [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+            [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+            [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
+        ]
+    )
 
 
 def rotation_aligning(source: ArrayLike, target: ArrayLike) -> NDArray[np.float64]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -54,12 +55,18 @@ class ScriptedDevice:
         self.identity = identity or DeviceIdentity("scripted", "scripted trajectory")
         self.forces = ForceLog()
         self._now = 0.0
+        self._previous: tuple[float, NDArray[np.float64]] | None = None
 
     def read(self, time: float) -> DeviceSample:
+        """The trajectory at ``time``; velocity from the previous reading when it is recent."""
         self._now = time
         pose, grip = self.trajectory(time)
-        before, _ = self.trajectory(time - VELOCITY_STEP)
-        velocity = (pose.position - before.position) / VELOCITY_STEP
+        if self._previous is not None and 0 < time - self._previous[0] <= 10 * VELOCITY_STEP:
+            velocity = (pose.position - self._previous[1]) / (time - self._previous[0])
+        else:
+            before, _ = self.trajectory(time - VELOCITY_STEP)
+            velocity = (pose.position - before.position) / VELOCITY_STEP
+        self._previous = (time, pose.position)
         return DeviceSample(time, pose.position, pose.rotation, velocity, int(grip))
 
     def write_force(self, force: NDArray[np.float64]) -> None:
@@ -290,7 +297,7 @@ class SuturingPass:
     def turned(self, angle: float) -> Pose:
         """Holder (= needle) pose with the needle turned by ``angle`` (rad) about its centre from entry."""
         rotation = rotation_about(self.axis, angle) @ self._rest
-        return Pose(self.centre - rotation @ self._centre_local, rotation)
+        return Pose.unchecked(self.centre - rotation @ self._centre_local, rotation)
 
     def _insertion_angle(self, t: float) -> float:
         """Angle turned after ``t`` s of insertion, with pauses spread evenly through it."""
@@ -313,29 +320,32 @@ class SuturingPass:
         if t < phases["insertion"][0]:
             pose = self.turned(0.0)
             lift = (1.0 - max(t, 0.0) / self.p.approach_time) * self.p.approach_distance
-            pose, grip = Pose(pose.position + lift * self.normal, pose.rotation), True
+            pose, grip = Pose.unchecked(pose.position + lift * self.normal, pose.rotation), True
         elif t < phases["regrab"][0]:
             angle = self._insertion_angle(t - phases["insertion"][0])
             turned = self.turned(self.p.wrist_rotation * angle)
             push = (1.0 - self.p.wrist_rotation) * self.radius * angle * self.tangent
-            pose, grip = Pose(turned.position + push, turned.rotation), True
+            pose, grip = Pose.unchecked(turned.position + push, turned.rotation), True
         else:
             pose, grip = self._regrab_and_pull(t, *phases["regrab"])
-        return Pose(pose.position + self._tremor(t), pose.rotation), grip
+        return Pose.unchecked(pose.position + self._tremor(t), pose.rotation), grip
 
-    def _regrab_and_pull(self, t: float, start: float, stop: float) -> tuple[Pose, bool]:
+    @functools.cached_property
+    def _release(self) -> tuple[Pose, NDArray[np.float64]]:
+        """Holder pose when the needle is released, and where its tip is then."""
         inserted = math.radians(self.p.insertion_arc_deg)
         released = self.turned(self.p.wrist_rotation * inserted)
-        released = Pose(
-            released.position + (1 - self.p.wrist_rotation) * self.radius * inserted * self.tangent,
-            released.rotation,
-        )
-        tip = self.needle.world_vertices(released)[0]
+        push = (1 - self.p.wrist_rotation) * self.radius * inserted * self.tangent
+        released = Pose.unchecked(released.position + push, released.rotation)
+        return released, self.needle.world_vertices(released)[0]
+
+    def _regrab_and_pull(self, t: float, start: float, stop: float) -> tuple[Pose, bool]:
+        released, tip = self._release
         if t < stop:  # jaws open, travel from the grip point to the needle's tip, close on arrival
             w = (t - start) / (stop - start)
-            return Pose((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
+            return Pose.unchecked((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
         turn = rotation_about(self.axis, self._omega * (t - stop))
-        return Pose(self.centre + turn @ (tip - self.centre), turn @ released.rotation), True
+        return Pose.unchecked(self.centre + turn @ (tip - self.centre), turn @ released.rotation), True
 
 
 def _unit(v: ArrayLike) -> NDArray[np.float64]:

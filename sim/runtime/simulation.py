@@ -1,0 +1,384 @@
+"""The layered multi-rate simulator (PAPER.md section 7) over one set of step functions.
+
+Layers and their default rates: haptics 1000 Hz (device in, safe force out),
+FEM 500 Hz (200-1000; needle follows the holder, local CD, contact forces,
+piercing), graphics 30 Hz (global CD of the whole needle), display 30 Hz (renders
+the previous graphics frame: one video frame of delay, as in the paper).
+
+State crosses layers only as immutable snapshots in :class:`Mailbox` slots; the
+graphics layer's global-CD results are queued and applied by the FEM layer at
+the start of its next step, so each mutable object has exactly one owner. The
+haptic layer interpolates the FEM layer's force history at ``now - force_delay``
+(one video frame by default) and passes it through :class:`ForceSafety`.
+
+Two clocks drive the same steps: :meth:`Simulation.run_simulated` (deterministic,
+as fast as the machine allows) and :meth:`Simulation.run_realtime` (threads).
+"""
+
+from __future__ import annotations
+
+import bisect
+import collections
+import heapq
+import time as wallclock
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.devices.base import Device, DeviceLostError
+from sim.errors import VascsimError
+from sim.fem import BiphaseTissue, TissueModel
+from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
+from sim.needle import Needle, Pose
+from sim.runtime.safety import ForceSafety, SafetySettings
+from sim.runtime.telemetry import LayerSummary, LoopTelemetry
+
+LAYERS = ("haptic", "fem", "graphics", "display")
+
+
+class RuntimeError_(VascsimError, RuntimeError):
+    """A runtime setting is out of range."""
+
+
+@dataclass(frozen=True)
+class RuntimeSettings:
+    """Layer rates (Hz), the force display delay (s) and the safety settings."""
+
+    haptic_rate: float = 1000.0
+    fem_rate: float = 500.0
+    graphics_rate: float = 30.0
+    display_rate: float = 30.0
+    force_delay: float = 1.0 / 30.0
+    safety: SafetySettings = field(default_factory=SafetySettings)
+
+    def __post_init__(self) -> None:
+        if not 200.0 <= self.fem_rate <= 1000.0:
+            raise RuntimeError_(f"fem_rate must be 200-1000 Hz (PAPER.md section 7); got {self.fem_rate}")
+        if self.haptic_rate < self.fem_rate:
+            raise RuntimeError_(
+                f"haptic_rate ({self.haptic_rate} Hz) must be at least fem_rate ({self.fem_rate} Hz)"
+            )
+        for name in ("graphics_rate", "display_rate"):
+            if not 1.0 <= getattr(self, name) <= 240.0:
+                raise RuntimeError_(f"{name} must be 1-240 Hz; got {getattr(self, name)}")
+        if not 0.0 <= self.force_delay <= 0.2:
+            raise RuntimeError_(f"force_delay must be 0-0.2 s; got {self.force_delay}")
+
+    def period(self, layer: str) -> float:
+        return 1.0 / getattr(self, f"{layer}_rate")
+
+
+@dataclass(frozen=True)
+class HolderSnapshot:
+    time: float
+    pose: Pose
+    velocity: NDArray[np.float64]
+    grip: bool
+
+
+@dataclass(frozen=True)
+class FemSnapshot:
+    time: float
+    needle_force: NDArray[np.float64]
+    needle_vertices: NDArray[np.float64]
+    state: str
+    contact_nodes: NDArray[np.int64]
+    reaction_forces: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class GraphicsSnapshot:
+    time: float
+    needle_vertices: NDArray[np.float64]
+    state: str
+    hits: object
+
+
+@dataclass(frozen=True)
+class RuntimeEvent:
+    """A runtime-level event: safety actions, device loss, a layer's failure, the stop."""
+
+    kind: str
+    time: float
+    layer: str
+    detail: str = ""
+
+
+class Mailbox:
+    """A slot holding the latest immutable snapshot; replacing the reference is atomic."""
+
+    __slots__ = ("_value",)
+
+    def __init__(self, value: object = None) -> None:
+        self._value = value
+
+    def put(self, value: object) -> None:
+        self._value = value
+
+    def get(self) -> object:
+        return self._value
+
+
+class ForceHistory:
+    """The FEM layer's recent (time, force) outputs, interpolated by the haptic layer.
+
+    Plain lists with bisection: pushes arrive in time order, the oldest are
+    dropped beyond ``capacity``; both sides touch it in microseconds.
+    """
+
+    def __init__(self, capacity: int = 256) -> None:
+        self._times: list[float] = []
+        self._forces: list[tuple[float, float, float]] = []
+        self._capacity = capacity
+
+    def push(self, time: float, force: NDArray[np.float64]) -> None:
+        times, forces = self._times, self._forces
+        fx, fy, fz = force.tolist()
+        times.append(time)
+        forces.append((fx, fy, fz))
+        if len(times) > 2 * self._capacity:
+            del times[: self._capacity], forces[: self._capacity]
+
+    @property
+    def latest_time(self) -> float | None:
+        return self._times[-1] if self._times else None
+
+    def at(self, time: float) -> NDArray[np.float64]:
+        """Force at ``time``: linear between the two outputs around it, held at the ends."""
+        times, forces = self._times, self._forces
+        if not times:
+            return np.zeros(3)
+        k = bisect.bisect_right(times, time)
+        if k == 0:
+            return np.array(forces[0])
+        if k == len(times):
+            return np.array(forces[-1])
+        w = (time - times[k - 1]) / (times[k] - times[k - 1])
+        a, b = forces[k - 1], forces[k]
+        return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
+
+
+class HapticLog:
+    """Every haptic tick: time, holder position, grip, force sent, in growing preallocated arrays."""
+
+    def __init__(self, capacity: int = 1 << 16) -> None:
+        self._data = np.empty((capacity, 8))
+        self.count = 0
+
+    def append(self, time: float, position: NDArray, grip: bool, force: NDArray) -> None:
+        if self.count == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        row = self._data[self.count]
+        row[0], row[1:4], row[4], row[5:8] = time, position, float(grip), force
+        self.count += 1
+
+    @property
+    def time(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 0]
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 1:4]
+
+    @property
+    def grip(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 4]
+
+    @property
+    def force(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 5:8]
+
+
+@dataclass
+class RunResult:
+    """How a run ended and what it produced."""
+
+    stop_reason: str
+    end_time: float
+    events: list[NeedleEvent | RuntimeEvent]
+    telemetry: dict[str, LayerSummary]
+    haptic: HapticLog
+    error: str | None = None
+    error_layer: str | None = None
+    wall_seconds: float = 0.0
+
+    @property
+    def completed(self) -> bool:
+        return self.stop_reason == "completed"
+
+
+class Simulation:
+    """One needle, one tissue, one device, run by layers at their rates."""
+
+    def __init__(
+        self,
+        tissue: TissueModel | BiphaseTissue,
+        needle: Needle,
+        device: Device,
+        settings: RuntimeSettings | None = None,
+        rules: PiercingRules | None = None,
+        renderer: Callable[[GraphicsSnapshot], None] | None = None,
+        on_event: Callable[[NeedleEvent | RuntimeEvent], None] | None = None,
+    ) -> None:
+        self.settings = settings or RuntimeSettings()
+        self.device = device
+        self.interaction = NeedleInteraction(tissue, needle, rules)
+        self.safety = ForceSafety(device.limits, self.settings.safety, tick=self.settings.period("haptic"))
+        self.holder = Mailbox()
+        self.fem = Mailbox()
+        self.graphics = Mailbox()
+        self.forces = ForceHistory()
+        self.haptic_log = HapticLog()
+        self.global_queue: collections.deque = collections.deque()
+        self.events: list[NeedleEvent | RuntimeEvent] = []
+        self.telemetry = {layer: LoopTelemetry(layer, self.settings.period(layer)) for layer in LAYERS}
+        self.renderer = renderer
+        self.on_event = on_event
+        self.stop_reason: str | None = None
+        self.error: str | None = None
+        self.error_layer: str | None = None
+        self._previous_frame: GraphicsSnapshot | None = None
+        self._safety_seen = 0
+
+    # -- the four steps ----------------------------------------------------------------
+    def haptic_step(self, now: float) -> None:
+        try:
+            sample = self.device.read(now)
+        except DeviceLostError as error:
+            self._emit(RuntimeEvent("device_lost", now, "haptic", str(error)))
+            self.stop("device_lost", now)
+            return
+        self.holder.put(
+            HolderSnapshot(now, Pose(sample.position, sample.rotation), sample.velocity, sample.pressed(0))
+        )
+        target = self.forces.at(now - self.settings.force_delay)
+        force = self.safety.filter(now, target, self.forces.latest_time)
+        self._flush_safety_events()
+        try:
+            self.device.write_force(force)
+        except DeviceLostError as error:
+            self._emit(RuntimeEvent("device_lost", now, "haptic", str(error)))
+            self.stop("device_lost", now)
+            return
+        self.haptic_log.append(now, sample.position, sample.pressed(0), force)
+
+    def fem_step(self, now: float) -> None:
+        holder = self.holder.get()
+        if holder is None:
+            return
+        for event in self.interaction.hold(holder.time, holder.pose, holder.grip):
+            self._emit(event)
+        while self.global_queue:
+            frame_time, vertices, hits = self.global_queue.popleft()
+            for event in self.interaction.apply_global(frame_time, vertices, hits):
+                self._emit(event)
+        step = self.interaction.fem_step(now)
+        for event in step.events:
+            self._emit(event)
+        self.forces.push(now, step.needle_force)
+        self.fem.put(
+            FemSnapshot(
+                now,
+                step.needle_force,
+                self.interaction.needle_vertices(),
+                self.interaction.state,
+                step.contact_nodes,
+                step.reaction_forces,
+            )
+        )
+
+    def graphics_step(self, now: float) -> None:
+        fem = self.fem.get()
+        if fem is None:
+            return
+        hits = self.interaction.collision.query(fem.needle_vertices)
+        self.global_queue.append((now, fem.needle_vertices, hits))
+        self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits))
+
+    def display_step(self, now: float) -> None:
+        frame, self._previous_frame = self._previous_frame, self.graphics.get()
+        if frame is not None and self.renderer is not None:
+            self.renderer(frame)  # one video frame late, as in the paper
+
+    # -- events and stopping -----------------------------------------------------------------
+    def _emit(self, event: NeedleEvent | RuntimeEvent) -> None:
+        self.events.append(event)
+        if self.on_event is not None:
+            self.on_event(event)
+
+    def _flush_safety_events(self) -> None:
+        while self._safety_seen < len(self.safety.events):
+            when, kind, detail = self.safety.events[self._safety_seen]
+            self._safety_seen += 1
+            self._emit(RuntimeEvent(kind, when, "haptic", detail))
+
+    def stop(self, reason: str, now: float) -> None:
+        if self.stop_reason is None:
+            self.stop_reason = reason
+
+    def fail(self, layer: str, now: float, error: BaseException) -> None:
+        """A layer raised: record it with its layer and stop."""
+        self.error = f"{type(error).__name__}: {error}"
+        self.error_layer = layer
+        self._emit(
+            RuntimeEvent("layer_failed", now, layer, self.error + "\n" + traceback.format_exc(limit=3))
+        )
+        self.stop(f"{layer}_failed", now)
+
+    def _wind_down(self, now: float) -> None:
+        """Force to zero within the rate limit, unless the device is gone."""
+        if self.stop_reason == "device_lost":
+            return
+        for when, force in self.safety.stop_sequence(now, self.settings.period("haptic")):
+            try:
+                self.device.write_force(force)
+            except DeviceLostError:
+                return
+            self.haptic_log.append(
+                when, self.haptic_log.position[-1] if self.haptic_log.count else np.zeros(3), False, force
+            )
+        self._emit(RuntimeEvent("stopped", now, "runtime", self.stop_reason or ""))
+
+    def _result(self, end: float, wall: float) -> RunResult:
+        return RunResult(
+            self.stop_reason or "completed",
+            end,
+            self.events,
+            {k: v.summary() for k, v in self.telemetry.items()},
+            self.haptic_log,
+            self.error,
+            self.error_layer,
+            wall,
+        )
+
+    # -- clocks ------------------------------------------------------------------------------------
+    def run_simulated(self, duration: float) -> RunResult:
+        """Deterministic simulated time: every step at its exact scheduled time, in time order."""
+        periods = {layer: self.settings.period(layer) for layer in LAYERS}
+        steps = {
+            "haptic": self.haptic_step,
+            "fem": self.fem_step,
+            "graphics": self.graphics_step,
+            "display": self.display_step,
+        }
+        # (scheduled time, layer order, step count, layer): times are count * period, exact.
+        queue = [(0.0, i, 0, layer) for i, layer in enumerate(LAYERS)]
+        heapq.heapify(queue)
+        start_wall = wallclock.perf_counter()
+        now = 0.0
+        while self.stop_reason is None:
+            now, rank, count, layer = queue[0]
+            if now > duration:
+                break
+            began = wallclock.perf_counter()
+            try:
+                steps[layer](now)
+            except Exception as error:  # any layer's failure stops the session cleanly
+                self.fail(layer, now, error)
+            self.telemetry[layer].record(now, wallclock.perf_counter() - began)
+            heapq.heapreplace(queue, ((count + 1) * periods[layer], rank, count + 1, layer))
+        self._wind_down(now)
+        return self._result(min(now, duration), wallclock.perf_counter() - start_wall)

@@ -1,0 +1,216 @@
+"""The layered runtime in simulated time, with faults injected into real components."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sim.devices import DeviceLostError, ScriptedDevice, SuturingPass
+from sim.devices.base import DeviceLimits
+from sim.fem import BiphaseTissue
+from sim.mesh import box_mesh
+from sim.needle import Needle, Pose
+from sim.runtime import RunResult, RuntimeSettings, SafetySettings, Simulation
+from sim.runtime.safety import ForceSafety
+
+LIMITS = DeviceLimits(max_force=0.02, max_force_rate=2.0)  # tight, so the pass exercises the limits
+
+
+@pytest.fixture(scope="module")
+def tissue():
+    mesh = box_mesh((0.012, 0.01, 0.0015), (12, 10, 3))
+    fixed = np.concatenate([mesh.node_sets[k] for k in ("x0", "y0", "y1")])
+    model = BiphaseTissue.build(mesh, fixed)
+    model.precompute(use_cache=False)
+    return model
+
+
+def make(tissue, device_wrapper=None, limits=LIMITS, **settings):
+    needle = Needle.curved()
+    suturing = SuturingPass(needle, [0.0105, 0.0051, 0.0015], [0, 0, 1], [1, 0, 0])
+    device = ScriptedDevice(suturing.pose_and_grip, limits=limits)
+    if device_wrapper is not None:
+        device = device_wrapper(device)
+    simulation = Simulation(tissue, needle, device, RuntimeSettings(**settings))
+    return simulation, suturing, device
+
+
+def assert_forces_safe(result: RunResult, limits: DeviceLimits, tick: float = 1e-3):
+    forces = result.haptic.force
+    assert np.all(np.isfinite(forces))
+    assert np.linalg.norm(forces, axis=1).max() <= limits.max_force * (1 + 1e-12)
+    steps = np.linalg.norm(np.diff(np.vstack([np.zeros(3), forces]), axis=0), axis=1)
+    assert steps.max() <= limits.max_force_rate * tick * (1 + 1e-9)
+
+
+def kinds(result):
+    return [e.kind for e in result.events]
+
+
+def test_simulated_run_is_deterministic_and_complete(tissue):
+    first, suturing, device = make(tissue)
+    result = first.run_simulated(suturing.duration)
+    second, _, _ = make(tissue)
+    again = second.run_simulated(suturing.duration)
+    assert result.completed
+    np.testing.assert_array_equal(result.haptic.force, again.haptic.force)
+    assert [(e.kind, e.time) for e in result.events] == [(e.kind, e.time) for e in again.events]
+    for kind in ("contact_start", "pierce", "exit", "release", "regrab", "pull_through"):
+        assert kind in kinds(result)
+    assert result.telemetry["haptic"].rate_hz == pytest.approx(1000.0)
+    assert result.telemetry["fem"].rate_hz == pytest.approx(500.0)
+    assert result.telemetry["graphics"].rate_hz == pytest.approx(30.0)
+    assert result.haptic.count >= round(suturing.duration * 1000)
+    assert_forces_safe(result, LIMITS)
+    assert np.abs(result.haptic.force).max() > 0  # the tissue was felt
+    np.testing.assert_array_equal(device.forces.array[:, 1:], result.haptic.force)  # every force was sent
+    assert np.all(result.haptic.force[-1] == 0)  # ended at exactly zero
+
+
+def test_force_display_is_delayed_by_one_video_frame(tissue):
+    simulation, suturing, _ = make(tissue, limits=DeviceLimits(10.0, 1e6))
+    simulation.run_simulated(2.0)
+    history = simulation.forces
+    t = 1.5
+    expected = history.at(t - 1 / 30)
+    index = int(round(t * 1000))
+    np.testing.assert_allclose(simulation.haptic_log.force[index], expected, rtol=1e-12)
+
+
+def test_fem_stall_triggers_the_watchdog_and_recovers(tissue):
+    simulation, suturing, _ = make(tissue)
+    real_step = simulation.fem_step
+    stall = (1.1, 1.4)  # s, while the needle is in the wall
+
+    def stalling(now):
+        if not stall[0] <= now < stall[1]:
+            real_step(now)
+
+    simulation.fem_step = stalling
+    result = simulation.run_simulated(suturing.duration)
+    assert result.completed
+    watchdog = [e for e in result.events if e.kind == "watchdog"]
+    recovered = [e for e in result.events if e.kind == "watchdog_recovered"]
+    assert len(watchdog) == 1 and len(recovered) == 1
+    assert watchdog[0].time == pytest.approx(stall[0] + 0.05, abs=3e-3)  # last FEM output just before
+    assert recovered[0].time == pytest.approx(stall[1], abs=2e-3)
+    ramp_end = int(round((watchdog[0].time + 0.1) * 1000)) + 1
+    assert np.all(result.haptic.force[ramp_end : int(stall[1] * 1000) - 1] == 0)
+    assert_forces_safe(result, LIMITS)
+
+
+def test_nan_from_the_solver_never_reaches_the_device(tissue):
+    simulation, suturing, _ = make(tissue)
+    real_step = simulation.interaction.fem_step
+
+    def poisoned(now):
+        step = real_step(now)
+        if 1.2 <= now < 1.3:
+            step.needle_force[:] = np.nan
+        return step
+
+    simulation.interaction.fem_step = poisoned
+    result = simulation.run_simulated(suturing.duration)
+    assert "nonfinite_force" in kinds(result)
+    assert_forces_safe(result, LIMITS)
+
+
+def test_exception_in_graphics_stops_cleanly_with_data_kept(tissue):
+    simulation, suturing, device = make(tissue)
+    real_step = simulation.graphics_step
+
+    def failing(now):
+        if now > 1.25:
+            raise ValueError("injected rendering failure")
+        real_step(now)
+
+    simulation.graphics_step = failing
+    result = simulation.run_simulated(suturing.duration)
+    assert result.stop_reason == "graphics_failed" and result.error_layer == "graphics"
+    assert "injected rendering failure" in result.error
+    assert "pierce" in kinds(result)  # events before the failure are kept
+    assert result.haptic.count > 1000
+    assert np.all(device.forces.array[-1, 1:] == 0)  # force brought to zero first
+    assert kinds(result)[-1] == "stopped"
+    assert_forces_safe(result, LIMITS)
+
+
+class UnpluggedAt:
+    """Wraps a real device; from ``when`` on, reads fail as an unplugged USB device's do."""
+
+    def __init__(self, device, when):
+        self.device, self.when = device, when
+        self.identity, self.limits = device.identity, device.limits
+
+    def read(self, time):
+        if time >= self.when:
+            raise DeviceLostError(f"{self.identity} unplugged (injected at {self.when} s)")
+        return self.device.read(time)
+
+    def write_force(self, force):
+        self.device.write_force(force)
+
+    def close(self):
+        self.device.close()
+
+
+def test_device_unplugged_mid_session_ends_with_data(tissue):
+    simulation, suturing, device = make(tissue, device_wrapper=lambda d: UnpluggedAt(d, 1.3))
+    result = simulation.run_simulated(suturing.duration)
+    assert result.stop_reason == "device_lost"
+    assert result.end_time == pytest.approx(1.3, abs=1e-3)
+    assert "device_lost" in kinds(result) and "pierce" in kinds(result)
+    assert result.haptic.count == 1300
+    assert_forces_safe(result, LIMITS)
+
+
+def test_clock_jump_does_not_license_a_force_jump():
+    limits = DeviceLimits(max_force=1.0, max_force_rate=10.0)
+    safety = ForceSafety(limits, SafetySettings(stall_timeout=10.0), tick=1e-3)
+    sent = [safety.filter(t, np.array([0.5, 0, 0]), fem_time=t) for t in (0.0, 0.001, 0.002)]
+    jumped = safety.filter(5.0, np.array([0.5, 0, 0]), fem_time=5.0)  # clock leapt 5 s
+    backwards = safety.filter(4.0, np.array([0.5, 0, 0]), fem_time=4.0)
+    steps = np.diff(np.array([*sent, jumped, backwards])[:, 0])
+    assert steps.max() <= 10.0 * 1e-3 + 1e-15
+    assert backwards[0] == jumped[0]  # time going backwards allows no change
+
+
+def test_clamp_and_stop_sequence():
+    limits = DeviceLimits(max_force=0.5, max_force_rate=100.0)
+    safety = ForceSafety(limits, tick=1e-3)
+    forces = [safety.filter(k * 1e-3, np.array([3.0, 4.0, 0.0]), fem_time=k * 1e-3) for k in range(50)]
+    assert np.linalg.norm(forces[-1]) == pytest.approx(0.5)
+    assert [e[1] for e in safety.events] == ["force_clamped"]
+    stop = safety.stop_sequence(0.05, 1e-3)
+    assert np.all(stop[-1][1] == 0)
+    magnitudes = [np.linalg.norm(f) for _, f in stop]
+    assert np.all(np.diff([0.5, *magnitudes]) >= -100.0 * 1e-3 - 1e-12)
+
+
+def test_settings_validation():
+    from sim.runtime.simulation import RuntimeError_
+
+    with pytest.raises(RuntimeError_, match="fem_rate must be 200-1000 Hz"):
+        RuntimeSettings(fem_rate=100)
+    with pytest.raises(RuntimeError_, match="haptic_rate"):
+        RuntimeSettings(haptic_rate=400, fem_rate=500)
+    assert math.isclose(RuntimeSettings().period("graphics"), 1 / 30)
+
+
+def test_holder_snapshot_pose_is_validated(tissue):
+    def bad_device(device):
+        class Corrupt(UnpluggedAt):
+            def read(self, time):
+                sample = self.device.read(time)
+                if time > 0.5:
+                    sample = type(sample)(time, sample.position, sample.rotation * 2, sample.velocity, 1)
+                return sample
+
+        return Corrupt(device, when=1e9)
+
+    simulation, suturing, _ = make(tissue, device_wrapper=bad_device)
+    result = simulation.run_simulated(suturing.duration)
+    assert result.stop_reason == "haptic_failed"
+    assert "rotation must be a proper" in result.error
+    assert_forces_safe(result, LIMITS)
+    assert isinstance(Pose.identity(), Pose)
