@@ -113,3 +113,31 @@ def _print_curve(curve: Any) -> None:
         f"precompute (both phases, 915 condensed dofs each): {curve.precompute_seconds:.3f} s "
         "(the paper: 9 min for its smallest model)"
     )
+
+
+@main.command()
+@click.option("--json", "as_json", is_flag=True, help="Print the list as JSON.")
+@user_errors
+def devices(as_json: bool) -> None:
+    """List connected devices and the driver that serves each.
+
+    Looks for 3Dconnexion SpaceMice through hidapi and for known haptic and input
+    devices (3D Systems Touch/Phantom, Novint Falcon, Force Dimension, 3Dconnexion)
+    on the USB bus through pyusb; reports whether the OpenHaptics driver can be
+    used; the scripted and replay devices are always available.
+    """
+    from sim.devices.discovery import list_devices
+
+    reports = list_devices()
+    if as_json:
+        click.echo(json.dumps([r.as_dict() for r in reports], indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="Devices")
+    for header in ("device", "driver", "connection", "status"):
+        table.add_column(header)
+    for r in reports:
+        table.add_row(r.name, r.driver, r.connection, r.status)
+    Console().print(table)

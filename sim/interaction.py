@@ -141,6 +141,7 @@ class NeedleInteraction:
         self.needle_pose = Pose.identity()
         self.holder_pose = Pose.identity()
         self.contacts: list[TriangleContact] = []  # nominated triangles (entry, then exit)
+        self.last_contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # nodes, intended
         self._handle = None
         self._handle_nodes: tuple[int, ...] = ()
         self._implausible_active: set[tuple[str, int]] = set()
@@ -350,6 +351,7 @@ class NeedleInteraction:
     def fem_step(self, time: float) -> FemStep:
         """Local CD against the nominated triangle(s), forces, and the piercing decision."""
         if self.state == "free" or not self.contacts:
+            self.last_contact = None
             return FemStep(np.zeros(3), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
         vertices = self.needle_vertices()
         tip = vertices[0]
@@ -415,6 +417,7 @@ class NeedleInteraction:
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
 
     def _reactions(self, nodes: NDArray[np.int64], intended: NDArray, tool_displacement: NDArray) -> NDArray:
+        self.last_contact = (nodes, intended)
         key = tuple(int(n) for n in nodes)
         if self._handle is None or key != self._handle_nodes:
             self._handle = self.tissue.contact(nodes)

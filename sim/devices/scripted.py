@@ -330,6 +330,15 @@ class SuturingPass:
             pose, grip = self._regrab_and_pull(t, *phases["regrab"])
         return Pose.unchecked(pose.position + self._tremor(t), pose.rotation), grip
 
+    @property
+    def final_needle_pose(self) -> Pose:
+        """Where the needle is at the end of the pull (the holder's frame at the original grip)."""
+        released, _ = self._release
+        turn = rotation_about(self.axis, self._omega * (self.duration - self.phases["pull"][0]))
+        return Pose.unchecked(
+            self.centre + turn @ (released.position - self.centre), turn @ released.rotation
+        )
+
     @functools.cached_property
     def _release(self) -> tuple[Pose, NDArray[np.float64]]:
         """Holder pose when the needle is released, and where its tip is then."""
@@ -369,3 +378,29 @@ def _needle_circle(needle: Needle) -> tuple[NDArray[np.float64], float, float]:
     tip, swage = a - centre, c - centre
     angle = (math.atan2(tip[1], tip[0]) - math.atan2(swage[1], swage[0])) % (2 * math.pi)
     return centre, angle, float(np.linalg.norm(tip))
+
+
+def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Trajectory, float]:
+    """Several stitches one after another: a trajectory and its total duration (s).
+
+    In the ``gap`` between two passes the jaws open, go to the needle's original
+    grip point and close on it again (so the next pass holds the needle as the
+    first did), then the next approach begins.
+    """
+    if not passes:
+        raise DeviceError("sequence_of_passes needs at least one pass")
+    starts = np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]])
+    total = float(starts[-1] + passes[-1].duration)
+
+    def trajectory(t: float) -> tuple[Pose, bool]:
+        k = int(np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(passes) - 1))
+        local = t - starts[k]
+        current = passes[k]
+        if local <= current.duration:
+            return current.pose_and_grip(local)
+        waited = local - current.duration
+        if waited < 0.2 * gap:
+            return current.pose_and_grip(current.duration)[0], False  # open the jaws
+        return current.final_needle_pose, waited >= 0.4 * gap  # at the grip point, then close
+
+    return trajectory, total

@@ -20,6 +20,7 @@ from __future__ import annotations
 import bisect
 import collections
 import heapq
+import threading
 import time as wallclock
 import traceback
 from collections.abc import Callable
@@ -45,7 +46,12 @@ class RuntimeError_(VascsimError, RuntimeError):
 
 @dataclass(frozen=True)
 class RuntimeSettings:
-    """Layer rates (Hz), the force display delay (s) and the safety settings."""
+    """Layer rates (Hz), the force display delay (s), safety, and the on-demand prefetch radius (m).
+
+    prefetch_radius: in on-demand mode the graphics layer asks a background worker to
+    solve the contact columns of surface nodes within this distance of the needle tip,
+    so a contact change rarely waits for a solve.
+    """
 
     haptic_rate: float = 1000.0
     fem_rate: float = 500.0
@@ -53,6 +59,7 @@ class RuntimeSettings:
     display_rate: float = 30.0
     force_delay: float = 1.0 / 30.0
     safety: SafetySettings = field(default_factory=SafetySettings)
+    prefetch_radius: float = 0.004
 
     def __post_init__(self) -> None:
         if not 200.0 <= self.fem_rate <= 1000.0:
@@ -87,6 +94,7 @@ class FemSnapshot:
     state: str
     contact_nodes: NDArray[np.int64]
     reaction_forces: NDArray[np.float64]
+    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
 
 
 @dataclass(frozen=True)
@@ -95,6 +103,7 @@ class GraphicsSnapshot:
     needle_vertices: NDArray[np.float64]
     state: str
     hits: object
+    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # driven nodes, intended (m)
 
 
 @dataclass(frozen=True)
@@ -210,6 +219,51 @@ class RunResult:
         return self.stop_reason == "completed"
 
 
+def _on_demand(tissue: TissueModel | BiphaseTissue) -> bool:
+    models = (tissue.soft, tissue.stiff) if isinstance(tissue, BiphaseTissue) else (tissue,)
+    return any(model.precomputation is None for model in models)
+
+
+class Prefetcher:
+    """A background worker solving on-demand contact columns for nodes the needle approaches."""
+
+    def __init__(self, tissue: TissueModel | BiphaseTissue) -> None:
+        self.models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
+        mesh = tissue.mesh
+        self._nodes = np.intersect1d(mesh.surface_nodes, self.models[0].contact_nodes)
+        self._points = mesh.points[self._nodes]
+        self._requested: set[int] = set()
+        self._queue: collections.deque = collections.deque()
+        self._wake = threading.Event()
+        self._closed = False
+        self._thread = threading.Thread(target=self._work, name="vascsim-prefetch", daemon=True)
+        self._thread.start()
+
+    def near(self, point: NDArray[np.float64], radius: float) -> None:
+        """Queue the surface nodes within ``radius`` of ``point`` that were not requested yet."""
+        close = self._nodes[
+            np.einsum("ij,ij->i", self._points - point, self._points - point) <= radius * radius
+        ]
+        fresh = [int(n) for n in close if int(n) not in self._requested]
+        if fresh:
+            self._requested.update(fresh)
+            self._queue.append(np.array(fresh))
+            self._wake.set()
+
+    def _work(self) -> None:
+        while not self._closed:
+            self._wake.wait(0.1)
+            self._wake.clear()
+            while self._queue and not self._closed:
+                nodes = self._queue.popleft()
+                for model in self.models:
+                    model.prefetch(nodes)
+
+    def close(self) -> None:
+        self._closed = True
+        self._wake.set()
+
+
 class Simulation:
     """One needle, one tissue, one device, run by layers at their rates."""
 
@@ -242,6 +296,8 @@ class Simulation:
         self.error_layer: str | None = None
         self._previous_frame: GraphicsSnapshot | None = None
         self._safety_seen = 0
+        self.contact_latencies: list[float] = []  # s, graphics frame -> first force for a new contact
+        self._prefetcher = Prefetcher(tissue) if _on_demand(tissue) else None
 
     # -- the four steps ----------------------------------------------------------------
     def haptic_step(self, now: float) -> None:
@@ -271,22 +327,32 @@ class Simulation:
             return
         for event in self.interaction.hold(holder.time, holder.pose, holder.grip):
             self._emit(event)
+        new_contact_since = None
         while self.global_queue:
-            frame_time, vertices, hits = self.global_queue.popleft()
+            frame_time, vertices, hits, posted = self.global_queue.popleft()
             for event in self.interaction.apply_global(frame_time, vertices, hits):
                 self._emit(event)
+                if event.kind == "contact_start":
+                    new_contact_since = posted
         step = self.interaction.fem_step(now)
+        if new_contact_since is not None:
+            self.contact_latencies.append(wallclock.perf_counter() - new_contact_since)
         for event in step.events:
             self._emit(event)
         self.forces.push(now, step.needle_force)
+        contact = self.interaction.last_contact
+        if contact is not None:
+            contact = (contact[0].copy(), contact[1].copy())
+        vertices = self.interaction.needle_vertices()
         self.fem.put(
             FemSnapshot(
                 now,
                 step.needle_force,
-                self.interaction.needle_vertices(),
+                vertices,
                 self.interaction.state,
                 step.contact_nodes,
                 step.reaction_forces,
+                contact,
             )
         )
 
@@ -294,9 +360,12 @@ class Simulation:
         fem = self.fem.get()
         if fem is None:
             return
+        posted = wallclock.perf_counter()
         hits = self.interaction.collision.query(fem.needle_vertices)
-        self.global_queue.append((now, fem.needle_vertices, hits))
-        self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits))
+        self.global_queue.append((now, fem.needle_vertices, hits, posted))
+        if self._prefetcher is not None:
+            self._prefetcher.near(fem.needle_vertices[0], self.settings.prefetch_radius)
+        self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
 
     def display_step(self, now: float) -> None:
         frame, self._previous_frame = self._previous_frame, self.graphics.get()
@@ -342,6 +411,11 @@ class Simulation:
             )
         self._emit(RuntimeEvent("stopped", now, "runtime", self.stop_reason or ""))
 
+    def close(self) -> None:
+        """Stop the background prefetch worker."""
+        if self._prefetcher is not None:
+            self._prefetcher.close()
+
     def _result(self, end: float, wall: float) -> RunResult:
         return RunResult(
             self.stop_reason or "completed",
@@ -382,3 +456,9 @@ class Simulation:
             heapq.heapreplace(queue, ((count + 1) * periods[layer], rank, count + 1, layer))
         self._wind_down(now)
         return self._result(min(now, duration), wallclock.perf_counter() - start_wall)
+
+    def run_realtime(self, duration: float, pin_cpus: bool = True) -> RunResult:
+        """Wall-clock time: the haptic layer in its own process, the others in threads."""
+        from sim.runtime.realtime import run_realtime
+
+        return run_realtime(self, duration, pin_cpus)

@@ -56,3 +56,14 @@ def test_help_explains_commands():
     assert "demo" in result.output
     demo_help = CliRunner().invoke(main, ["demo", "--help"])
     assert "729 nodes" in demo_help.output and "--max-strain" in demo_help.output
+
+
+def test_devices_lists_the_always_available_drivers():
+    result = CliRunner().invoke(main, ["devices", "--json"])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)
+    drivers = {row["driver"]: row["status"] for row in rows}
+    assert drivers["scripted"] == "ready" and drivers["replay"] == "ready"
+    assert drivers["openhaptics"].startswith("not installed")
+    table = CliRunner().invoke(main, ["devices"])
+    assert "scripted" in table.output

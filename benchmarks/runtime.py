@@ -1,0 +1,145 @@
+"""Runtime figures of issue 4: real-time loop rates and latencies, simulated-time throughput.
+
+Run:  .venv/bin/python benchmarks/runtime.py [--seconds 60] [--no-render] [--size 640x480]
+
+1. Simulated time: one suturing pass on the paper's test cube (biphase,
+   precomputed), all layers, no rendering: simulated seconds per wall second.
+2. Real time, test cube: repeated stitches for --seconds, FEM at 500 Hz, global
+   CD at 30 Hz, the display layer rendering offscreen (EGL) at 30 Hz.
+3. Real time, ~10k-node artery in on-demand mode (columns solved when needed,
+   prefetched by the graphics layer): the same loop, plus the contact-change
+   latency (graphics frame that found the contact -> first exact force).
+For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from sim.devices import ScriptedDevice
+from sim.devices.scripted import SuturingPass, sequence_of_passes
+from sim.experiments import paper_cube
+from sim.fem import BiphaseTissue
+from sim.needle import Needle
+from sim.runtime import RuntimeSettings, Simulation
+from sim.scenarios import scenario
+
+
+def cube_passes(needle: Needle, count: int) -> list[SuturingPass]:
+    spots = [(0.003 + 0.002 * (k % 3), 0.003 + 0.002 * ((k // 3) % 3)) for k in range(count)]
+    return [SuturingPass(needle, [x, y, 0.01], [0, 0, 1], [1, 0, 0]) for x, y in spots]
+
+
+def artery_passes(needle: Needle, mesh, count: int) -> list[SuturingPass]:
+    outer_radius = np.hypot(mesh.points[:, 0], mesh.points[:, 1]).max()
+    passes = []
+    for k in range(count):
+        angle = math.radians(200 + 25 * (k % 6))
+        z = 0.008 + 0.003 * (k % 5)
+        normal = np.array([math.cos(angle), math.sin(angle), 0.0])
+        passes.append(SuturingPass(needle, outer_radius * normal + [0, 0, z], normal, [0, 0, 1]))
+    return passes
+
+
+def report(name: str, simulation: Simulation, result) -> None:
+    h = result.telemetry["haptic"]
+    print(f"[{name}] stop={result.stop_reason} wall={result.wall_seconds:.1f}s", flush=True)
+    print(
+        f"[{name}]   haptic: rate={h.rate_hz:.1f} Hz period p50={1e3 * h.period_p50:.3f} ms "
+        f"p99={1e3 * h.period_p99:.3f} ms max={1e3 * h.period_max:.3f} ms >2ms={h.periods_over_2ms} "
+        f">3ms={h.periods_over_3ms} compute p99={1e6 * h.compute_p99:.0f} us",
+        flush=True,
+    )
+    for layer in ("fem", "graphics", "display"):
+        s = result.telemetry[layer]
+        print(
+            f"[{name}]   {layer}: rate={s.rate_hz:.1f} Hz compute p50={1e3 * s.compute_p50:.2f} ms "
+            f"p99={1e3 * s.compute_p99:.2f} ms",
+            flush=True,
+        )
+    latencies = np.array(simulation.contact_latencies)
+    if latencies.size:
+        p50, p99, worst = (
+            1e3 * np.percentile(latencies, 50),
+            1e3 * np.percentile(latencies, 99),
+            1e3 * latencies.max(),
+        )
+        print(
+            f"[{name}]   contact-change latency: n={latencies.size} p50={p50:.2f} ms p99={p99:.2f} ms "
+            f"max={worst:.2f} ms",
+            flush=True,
+        )
+    kinds = [e.kind for e in result.events]
+    print(f"[{name}]   events: " + ", ".join(f"{k}={kinds.count(k)}" for k in sorted(set(kinds))), flush=True)
+
+
+def renderer_for(tissue, size, enabled):
+    if not enabled:
+        return None
+    from sim.render import TissueRenderer
+    from sim.runtime.display import DisplayScene
+
+    return DisplayScene(tissue, TissueRenderer(tissue.mesh, size=size, offscreen=True))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--no-render", action="store_true")
+    parser.add_argument("--size", default="640x480")
+    args = parser.parse_args()
+    size = tuple(int(v) for v in args.size.split("x"))
+    needle = Needle.curved()
+
+    mesh, fixed = paper_cube()
+    cube = BiphaseTissue.build(mesh, fixed)
+    cube.precompute(use_cache=False)
+    one = cube_passes(needle, 1)[0]
+    ratios = []
+    for _ in range(3):
+        simulation = Simulation(cube, needle, ScriptedDevice(one.pose_and_grip))
+        result = simulation.run_simulated(one.duration)
+        ratios.append(one.duration / result.wall_seconds)
+    print(
+        f"[simulated, test cube] one pass of {one.duration:.2f} s simulated: median "
+        f"{np.median(ratios):.1f}x real time (runs: {', '.join(f'{r:.1f}' for r in ratios)})",
+        flush=True,
+    )
+
+    trajectory, total = sequence_of_passes(cube_passes(needle, 20))
+    duration = min(args.seconds, total)
+    simulation = Simulation(
+        cube,
+        needle,
+        ScriptedDevice(trajectory),
+        RuntimeSettings(fem_rate=500.0),
+        renderer=renderer_for(cube, size, not args.no_render),
+    )
+    report(f"real time, test cube, {duration:.0f} s", simulation, simulation.run_realtime(duration))
+
+    case = scenario("vessel_10k")
+    artery = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
+    trajectory, total = sequence_of_passes(artery_passes(needle, case.mesh, 20))
+    duration = min(args.seconds, total)
+    simulation = Simulation(
+        artery,
+        needle,
+        ScriptedDevice(trajectory),
+        RuntimeSettings(fem_rate=500.0),
+        renderer=renderer_for(artery, size, not args.no_render),
+    )
+    report(
+        f"real time, {case.mesh.n_nodes}-node artery on demand, {duration:.0f} s",
+        simulation,
+        simulation.run_realtime(duration),
+    )
+    simulation.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,171 @@
+"""The PyVista scene: tissue with a von Mises colour map, the needle, the contact point, a ghost path.
+
+On screen where a display exists, offscreen through EGL otherwise. VTK and
+PyVista are imported only when a renderer is made, so the core imports without
+them. After moving points in place the meshes are marked modified and rendered
+before pixels are read, otherwise frames silently repeat.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.errors import VascsimError
+from sim.mesh import TetMesh
+
+STRESS_RANGE_PA = (0.0, 5e3)
+
+
+class RenderError(VascsimError):
+    """The scene could not be rendered or written."""
+
+
+@dataclass(frozen=True)
+class RenderFrame:
+    """What one frame shows.
+
+    points: (N, 3) current node positions of the mesh (m).
+    triangle_stress: (F,) von Mises stress (Pa) of the element under each exterior triangle.
+    needle: (S+1, 3) needle vertices, tip first; contact: insertion/contact point or None;
+    ghost: (P, 3) path to draw as a ghost (e.g. the expert's needle-tip path) or None.
+    """
+
+    points: NDArray[np.float64]
+    triangle_stress: NDArray[np.float64]
+    needle: NDArray[np.float64]
+    contact: NDArray[np.float64] | None = None
+    ghost: NDArray[np.float64] | None = None
+
+
+def headless() -> bool:
+    return not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")
+
+
+class TissueRenderer:
+    """Renders :class:`RenderFrame` objects of one mesh to RGB arrays (H, W, 3) uint8."""
+
+    def __init__(
+        self,
+        mesh: TetMesh,
+        size: tuple[int, int] = (640, 480),
+        offscreen: bool | None = None,
+        stress_range: tuple[float, float] = STRESS_RANGE_PA,
+    ) -> None:
+        offscreen = headless() if offscreen is None else offscreen
+        if offscreen:
+            os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+        import pyvista as pv
+
+        self._pv = pv
+        self.mesh = mesh
+        faces = np.hstack([np.full((len(mesh.surface_triangles), 1), 3), mesh.surface_triangles]).ravel()
+        self.surface = pv.PolyData(mesh.points.copy(), faces)
+        self.surface.cell_data["von Mises (Pa)"] = np.zeros(len(mesh.surface_triangles))
+        self.plotter = pv.Plotter(off_screen=offscreen, window_size=size)
+        self.plotter.set_background("white")
+        self.plotter.add_mesh(
+            self.surface,
+            scalars="von Mises (Pa)",
+            cmap="inferno",
+            clim=stress_range,
+            show_edges=False,
+            smooth_shading=False,
+            scalar_bar_args={
+                "title": "von Mises (Pa)",
+                "color": "black",
+                "fmt": "%.0f",
+                "vertical": True,
+                "position_x": 0.84,
+                "position_y": 0.1,
+                "width": 0.1,
+                "height": 0.8,
+            },
+        )
+        self.needle = pv.PolyData(np.zeros((2, 3)), lines=np.array([2, 0, 1]))
+        self.plotter.add_mesh(self.needle, color="silver", line_width=5, render_lines_as_tubes=True)
+        self.marker = pv.PolyData(np.zeros((1, 3)))
+        self._marker_actor = self.plotter.add_mesh(
+            self.marker, color="deepskyblue", point_size=14, render_points_as_spheres=True
+        )
+        self.ghost = pv.PolyData(np.zeros((2, 3)), lines=np.array([2, 0, 1]))
+        self._ghost_actor = self.plotter.add_mesh(self.ghost, color="limegreen", opacity=0.6, line_width=3)
+        self._camera_set = False
+
+    def render(self, frame: RenderFrame) -> NDArray[np.uint8]:
+        """Draw a frame and return its pixels."""
+        self.surface.points[:] = frame.points
+        self.surface.cell_data["von Mises (Pa)"][:] = frame.triangle_stress
+        self.surface.Modified()
+        _set_polyline(self.needle, frame.needle)
+        self._marker_actor.SetVisibility(frame.contact is not None)
+        if frame.contact is not None:
+            self.marker.points[:] = frame.contact
+            self.marker.Modified()
+        self._ghost_actor.SetVisibility(frame.ghost is not None and len(frame.ghost) > 1)
+        if frame.ghost is not None and len(frame.ghost) > 1:
+            _set_polyline(self.ghost, frame.ghost)
+        if not self._camera_set:
+            self.plotter.camera_position = "iso"
+            self.plotter.reset_camera()
+            self._camera_set = True
+        self.plotter.render()
+        return np.asarray(self.plotter.screenshot(return_img=True))
+
+    def close(self) -> None:
+        self.plotter.close()
+
+
+def _set_polyline(poly, vertices: NDArray[np.float64]) -> None:
+    n = len(vertices)
+    if poly.n_points != n:
+        poly.points = vertices.copy()
+        poly.lines = np.concatenate([[n], np.arange(n)])
+    else:
+        poly.points[:] = vertices
+    poly.Modified()
+
+
+def surface_stress(mesh: TetMesh, von_mises: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(F,) stress of the element each exterior triangle belongs to."""
+    return von_mises[mesh.surface_elements]
+
+
+def write_image(path: str | Path, pixels: NDArray, float_data: NDArray[np.float32] | None = None) -> Path:
+    """Write an image through OpenImageIO: PNG/JPEG from uint8 pixels, or EXR from float data."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    data = pixels if float_data is None else float_data
+    data = np.ascontiguousarray(data)
+    if data.ndim == 2:
+        data = data[:, :, None]
+    height, width, channels = data.shape
+    fmt = oiio.UINT8 if data.dtype == np.uint8 else oiio.FLOAT
+    output = oiio.ImageOutput.create(str(path))
+    if output is None:
+        raise RenderError(f"cannot write {path}: {oiio.geterror()}")
+    if not output.open(str(path), oiio.ImageSpec(width, height, channels, fmt)):
+        raise RenderError(f"cannot write {path}: {output.geterror()}")
+    ok = output.write_image(data)
+    output.close()
+    if not ok:
+        raise RenderError(f"writing {path} failed: {output.geterror()}")
+    return path
+
+
+def compare_images(
+    path_a: str | Path, path_b: str | Path, fail_threshold: float = 0.1, warn_threshold: float = 0.02
+) -> tuple[int, float, float]:
+    """OpenImageIO's compare: (number of pixels over the fail threshold, mean error, max error)."""
+    import OpenImageIO as oiio
+
+    a, b = oiio.ImageBuf(str(path_a)), oiio.ImageBuf(str(path_b))
+    if a.has_error or b.has_error:
+        raise RenderError(f"cannot read images for comparison: {a.geterror()} {b.geterror()}")
+    result = oiio.ImageBufAlgo.compare(a, b, fail_threshold, warn_threshold)
+    return int(result.nfail), float(result.meanerror), float(result.maxerror)

@@ -1,0 +1,38 @@
+"""The display layer's scene: the tissue as the needle deforms it, coloured by von Mises stress."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.fem import BiphaseTissue, TissueModel
+from sim.render import RenderFrame, TissueRenderer, surface_stress
+
+
+class DisplayScene:
+    """Turns graphics snapshots into rendered frames (a ``Simulation`` renderer callback).
+
+    The deformation shown is the soft phase's full-field response to the current
+    contact (exact for a linear model; for the biphase model the displacement is
+    the same when the phases differ only in stiffness). ``frames`` counts renders.
+    """
+
+    def __init__(self, tissue: TissueModel | BiphaseTissue, renderer: TissueRenderer) -> None:
+        self.model = tissue.soft if isinstance(tissue, BiphaseTissue) else tissue
+        self.renderer = renderer
+        self.mesh = self.model.mesh
+        self._rest_stress = np.zeros(len(self.mesh.surface_triangles))
+        self.frames = 0
+        self.last_image: np.ndarray | None = None
+
+    def __call__(self, snapshot) -> None:
+        points, stress, marker = self.mesh.points, self._rest_stress, None
+        if snapshot.contact is not None and len(snapshot.contact[0]):
+            nodes, intended = snapshot.contact
+            solution = self.model.solve(
+                {int(n): a for n, a in zip(nodes, intended, strict=True)}, fields=True
+            )
+            points = self.mesh.points + solution.displacement
+            stress = surface_stress(self.mesh, solution.von_mises)
+            marker = points[nodes].mean(axis=0)
+        self.last_image = self.renderer.render(RenderFrame(points, stress, snapshot.needle_vertices, marker))
+        self.frames += 1

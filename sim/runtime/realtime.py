@@ -1,0 +1,307 @@
+"""The real-time clock: the haptic layer in its own process, the others in threads.
+
+Measured on these 2-core machines, a 1 kHz Python thread sharing the interpreter
+with a graphics thread falls to ~720 Hz; in its own process, with BLAS limited to
+one thread, it holds ~999 Hz. So :func:`run_realtime` forks a haptic process
+(pinned to the last core where the OS allows) that runs the same
+``Simulation.haptic_step`` against shared-memory channels
+(:mod:`sim.runtime.shared`), while the FEM, graphics and display layers run as
+threads in this process. Deadlines are absolute (start + k * period): the haptic
+process sleeps to just before each one and spins the rest, and a late step never
+causes a burst of catch-up steps.
+
+Linux (fork) only. The device must be usable in the forked child: scripted and
+replay devices are; a live HID/USB device should be opened in the child (pass a
+device whose handle is opened lazily on first read).
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import threading
+import time as clock
+from collections.abc import Callable
+
+import numpy as np
+
+from sim.runtime.shared import (
+    Arena,
+    ControlBlock,
+    SharedEvents,
+    SharedForceHistory,
+    SharedHapticLog,
+    SharedHolder,
+    SharedTelemetry,
+)
+from sim.runtime.simulation import LAYERS, HapticLog, RunResult, RuntimeEvent, Simulation
+from sim.runtime.telemetry import LoopTelemetry
+
+SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
+START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
+
+
+def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True) -> RunResult:
+    """Run ``simulation`` for ``duration`` seconds of wall time (see the module docstring)."""
+    settings = simulation.settings
+    capacity = int(duration * settings.haptic_rate * 1.2) + 2000
+    arena = Arena(18 + 512 * 4 + 1 + capacity * 8 + 1 + capacity * 2 + 1 + 4096 * 2 + 1 + 4 + 64)
+    simulation.holder = SharedHolder(arena)
+    simulation.forces = SharedForceHistory(arena)
+    shared_log = SharedHapticLog(arena, capacity)
+    simulation.haptic_log = shared_log
+    telemetry = SharedTelemetry(arena, capacity)
+    events = SharedEvents(arena)
+    control = ControlBlock(arena)
+    errors_read, errors_write = os.pipe()
+    control.start = clock.perf_counter() + START_DELAY
+    started = clock.perf_counter()
+    pid = os.fork()
+    if pid == 0:  # the haptic process
+        os.close(errors_read)
+        status = 0
+        try:
+            _haptic_process(simulation, duration, control, telemetry, events, errors_write, pin_cpus)
+        except BaseException:
+            status = 1
+        finally:
+            os._exit(status)
+    os.close(errors_write)
+    previous_affinity = _leave_last_core_to_haptics(pin_cpus)
+    try:
+        _run_other_layers(simulation, duration, control)
+    finally:
+        control.request_stop()
+        _wait_for(pid, timeout=5.0)
+        if previous_affinity is not None:
+            _set_all_threads(previous_affinity)
+    child_error = _read_all(errors_read)
+    return _collect(
+        simulation, shared_log, telemetry, events, control, child_error, clock.perf_counter() - started
+    )
+
+
+def _leave_last_core_to_haptics(pin_cpus: bool) -> set[int] | None:
+    """Move every thread of this process (BLAS pools and GL workers included) off the haptic core.
+
+    Returns the previous affinity, or None when nothing was changed.
+    """
+    if not pin_cpus or not hasattr(os, "sched_setaffinity"):
+        return None
+    cpus = os.sched_getaffinity(0)
+    if len(cpus) < 2:
+        return None
+    _set_all_threads(set(sorted(cpus)[:-1]))
+    return cpus
+
+
+def _set_all_threads(cpus: set[int]) -> None:
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), cpus)
+        except OSError:  # a thread that just ended
+            continue
+
+
+def _haptic_process(
+    simulation: Simulation,
+    duration: float,
+    control: ControlBlock,
+    telemetry: SharedTelemetry,
+    events: SharedEvents,
+    errors: int,
+    pin_cpus: bool,
+) -> None:
+    from threadpoolctl import threadpool_limits
+
+    if pin_cpus and hasattr(os, "sched_setaffinity"):
+        cpus = sorted(os.sched_getaffinity(0))
+        if len(cpus) > 1:
+            os.sched_setaffinity(0, {cpus[-1]})
+    threadpool_limits(1)
+    _try_realtime_priority()
+    # The child inherits the whole heap: a full garbage collection would walk it for
+    # milliseconds. Freeze what exists and collect nothing during the loop (the loop's
+    # own garbage is freed by reference counting).
+    gc.freeze()
+    gc.disable()
+    period = 1.0 / simulation.settings.haptic_rate
+    simulation.device.read(0.0)  # warm caches and lazy imports before the first deadline
+    simulation.forces.at(0.0)
+    start = control.start
+    step = 0
+    now = 0.0
+    reported = 0
+    try:
+        while True:
+            deadline = start + step * period
+            _sleep_until(deadline)
+            now = clock.perf_counter() - start
+            if control.stop_requested or now > duration:
+                break
+            began = clock.perf_counter()
+            simulation.haptic_step(now)
+            telemetry.record(now, clock.perf_counter() - began)
+            for when, kind, _detail in simulation.safety.events[reported:]:
+                events.add(when, kind)
+            reported = len(simulation.safety.events)
+            if simulation.stop_reason == "device_lost":
+                events.add(now, "device_lost")
+                control.haptic_state = ControlBlock.DEVICE_LOST
+                return
+            step += 1
+            late = clock.perf_counter() - (start + step * period)
+            if late > period:  # skip deadlines already missed instead of bursting
+                step += int(late / period)
+    except Exception as error:  # report with its layer, then wind down
+        os.write(errors, f"haptic: {type(error).__name__}: {error}".encode())
+        events.add(now, "layer_failed")
+        control.haptic_state = ControlBlock.FAILED
+    _paced_wind_down(simulation, now, period)
+    if control.haptic_state == ControlBlock.RUNNING:
+        control.haptic_state = ControlBlock.FINISHED
+
+
+def _try_realtime_priority() -> bool:
+    """SCHED_FIFO for the haptic process where permitted (root or CAP_SYS_NICE).
+
+    With both cores busy, the kernel balances other processes onto the haptic core
+    and preempts the 1 kHz loop for milliseconds; a real-time class stops that. The
+    loop sleeps most of each period, so the kernel's RT throttling never engages.
+    """
+    if not hasattr(os, "sched_setscheduler"):
+        return False
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+    except (PermissionError, OSError):
+        return False
+    return True
+
+
+def _paced_wind_down(simulation: Simulation, now: float, period: float) -> None:
+    """Bring the device force to zero within the rate limit, one tick at a time."""
+    for when, force in simulation.safety.stop_sequence(now, period):
+        _sleep_until(clock.perf_counter() + period)
+        simulation.device.write_force(force)
+        simulation.haptic_log.append(when, np.zeros(3), False, force)
+
+
+def _sleep_until(deadline: float) -> None:
+    remaining = deadline - clock.perf_counter()
+    if remaining > SPIN_MARGIN:
+        clock.sleep(remaining - SPIN_MARGIN)
+    while clock.perf_counter() < deadline:
+        pass
+
+
+def _run_other_layers(simulation: Simulation, duration: float, control: ControlBlock) -> None:
+    from threadpoolctl import threadpool_limits
+
+    steps: dict[str, Callable[[float], None]] = {
+        "fem": simulation.fem_step,
+        "graphics": simulation.graphics_step,
+        "display": simulation.display_step,
+    }
+    with threadpool_limits(1):
+        threads = [
+            threading.Thread(
+                target=_layer_loop,
+                args=(simulation, layer, steps[layer], duration, control),
+                name=f"vascsim-{layer}",
+                daemon=True,
+            )
+            for layer in steps
+        ]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(duration + 10.0)
+
+
+def _layer_loop(
+    simulation: Simulation, layer: str, step: Callable[[float], None], duration: float, control: ControlBlock
+) -> None:
+    period = simulation.settings.period(layer)
+    start = control.start
+    record = simulation.telemetry[layer].record
+    k = 0
+    while True:
+        deadline = start + k * period
+        wait = deadline - clock.perf_counter()
+        if wait > 0:
+            clock.sleep(wait)
+        now = clock.perf_counter() - start
+        if (
+            now > duration
+            or control.stop_requested
+            or simulation.stop_reason is not None
+            or control.haptic_state != ControlBlock.RUNNING
+        ):
+            return
+        began = clock.perf_counter()
+        try:
+            step(now)
+        except Exception as error:  # any layer's failure stops the session cleanly
+            simulation.fail(layer, now, error)
+            control.request_stop()
+            return
+        record(now, clock.perf_counter() - began)
+        k += 1
+        late = clock.perf_counter() - (start + k * period)
+        if late > period:
+            k += int(late / period)
+
+
+def _wait_for(pid: int, timeout: float) -> None:
+    deadline = clock.monotonic() + timeout
+    while clock.monotonic() < deadline:
+        done, _ = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return
+        clock.sleep(0.01)
+    os.kill(pid, 9)
+    os.waitpid(pid, 0)
+
+
+def _read_all(fd: int) -> str:
+    chunks = []
+    while chunk := os.read(fd, 4096):
+        chunks.append(chunk)
+    os.close(fd)
+    return b"".join(chunks).decode(errors="replace")
+
+
+def _collect(
+    simulation: Simulation,
+    shared_log: SharedHapticLog,
+    telemetry: SharedTelemetry,
+    events: SharedEvents,
+    control: ControlBlock,
+    child_error: str,
+    wall: float,
+) -> RunResult:
+    log = HapticLog(max(shared_log.count, 1))
+    for t, p, g, f in zip(
+        shared_log.time, shared_log.position, shared_log.grip, shared_log.force, strict=True
+    ):
+        log.append(float(t), p, bool(g), f)
+    haptic = LoopTelemetry("haptic", simulation.settings.period("haptic"), max(len(telemetry.starts), 1))
+    for start, compute in zip(telemetry.starts, telemetry.computes, strict=True):
+        haptic.record(float(start), float(compute))
+    simulation.telemetry["haptic"] = haptic
+    for when, kind in events.read():
+        simulation.events.append(
+            RuntimeEvent(kind, when, "haptic", child_error if kind == "layer_failed" else "")
+        )
+    simulation.events.sort(key=lambda event: event.time)
+    if control.haptic_state == ControlBlock.DEVICE_LOST:
+        simulation.stop("device_lost", 0.0)
+    elif control.haptic_state == ControlBlock.FAILED:
+        simulation.error, simulation.error_layer = child_error, "haptic"
+        simulation.stop("haptic_failed", 0.0)
+    simulation.haptic_log = log
+    end = float(log.time[-1]) if log.count else 0.0
+    simulation.events.append(RuntimeEvent("stopped", end, "runtime", simulation.stop_reason or "completed"))
+    result = simulation._result(end, wall)
+    result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in LAYERS}
+    return result

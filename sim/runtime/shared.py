@@ -1,0 +1,234 @@
+"""Shared-memory channels between the haptic process and the rest of the simulator.
+
+An anonymous shared mapping created before ``fork`` is visible to both
+processes. Each channel has one writer:
+
+- :class:`SharedHolder` (haptic -> FEM): the latest holder pose, seqlock-protected;
+- :class:`SharedForceHistory` (FEM -> haptic): a ring of (time, force), published
+  entry first, counter second;
+- :class:`SharedHapticLog` (haptic -> main): every tick's time, position, grip, force;
+- :class:`SharedTelemetry`, :class:`SharedEvents` and :class:`ControlBlock`.
+
+They offer the same methods as the in-process versions, so the haptic layer's
+step function runs unchanged on either side.
+"""
+
+from __future__ import annotations
+
+import bisect
+import mmap
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.needle import Pose
+
+
+class Arena:
+    """Carves float64 arrays out of one anonymous shared mapping."""
+
+    def __init__(self, doubles: int) -> None:
+        self._map = mmap.mmap(-1, 8 * doubles)
+        self._all = np.frombuffer(self._map, dtype=np.float64)
+        self._used = 0
+
+    def take(self, *shape: int) -> NDArray[np.float64]:
+        size = int(np.prod(shape))
+        if self._used + size > len(self._all):
+            raise MemoryError("shared arena too small")
+        out = self._all[self._used : self._used + size].reshape(shape)
+        out[...] = 0.0
+        self._used += size
+        return out
+
+
+class SharedHolder:
+    """Latest holder snapshot: [seq, time, position 3, rotation 9, velocity 3, grip]."""
+
+    def __init__(self, arena: Arena) -> None:
+        self._slot = arena.take(18)
+
+    def put(self, snapshot) -> None:
+        slot = self._slot
+        slot[0] += 1  # odd: writing
+        slot[1] = snapshot.time
+        slot[2:5] = snapshot.pose.position
+        slot[5:14] = snapshot.pose.rotation.ravel()
+        slot[14:17] = snapshot.velocity
+        slot[17] = float(snapshot.grip)
+        slot[0] += 1  # even: consistent
+
+    def get(self):
+        from sim.runtime.simulation import HolderSnapshot
+
+        slot = self._slot
+        for _ in range(1000):
+            before = slot[0]
+            copy = slot.copy()
+            if before == slot[0] and before % 2 == 0:
+                break
+        if copy[0] == 0:
+            return None
+        return HolderSnapshot(
+            float(copy[1]), Pose.unchecked(copy[2:5], copy[5:14].reshape(3, 3)), copy[14:17], bool(copy[17])
+        )
+
+
+class SharedForceHistory:
+    """The FEM layer's (time, force) outputs in a shared ring, interpolated by the haptic process."""
+
+    def __init__(self, arena: Arena, capacity: int = 512) -> None:
+        self._ring = arena.take(capacity, 4)
+        self._counter = arena.take(1)
+        self._capacity = capacity
+
+    def push(self, time: float, force: NDArray[np.float64]) -> None:
+        count = int(self._counter[0])
+        row = self._ring[count % self._capacity]
+        row[1:] = force
+        row[0] = time
+        self._counter[0] = count + 1  # publish after the entry is complete
+
+    def _recent(self, entries: int = 64) -> tuple[list[float], list[tuple[float, float, float]]]:
+        count = int(self._counter[0])
+        n = min(count, entries, self._capacity - 1)
+        rows = self._ring[[(count - n + k) % self._capacity for k in range(n)]].tolist()
+        rows = [r for r in rows if np.isfinite(r[0])]
+        rows.sort(key=lambda r: r[0])
+        return [r[0] for r in rows], [(r[1], r[2], r[3]) for r in rows]
+
+    @property
+    def latest_time(self) -> float | None:
+        count = int(self._counter[0])
+        return None if count == 0 else float(self._ring[(count - 1) % self._capacity, 0])
+
+    def at(self, time: float) -> NDArray[np.float64]:
+        times, forces = self._recent()
+        if not times:
+            return np.zeros(3)
+        k = bisect.bisect_right(times, time)
+        if k == 0:
+            return np.array(forces[0])
+        if k == len(times):
+            return np.array(forces[-1])
+        w = (time - times[k - 1]) / (times[k] - times[k - 1])
+        a, b = forces[k - 1], forces[k]
+        return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
+
+
+class SharedHapticLog:
+    """The haptic log in shared memory: [time, position 3, grip, force 3] per tick."""
+
+    def __init__(self, arena: Arena, capacity: int) -> None:
+        self._data = arena.take(capacity, 8)
+        self._count = arena.take(1)
+
+    @property
+    def count(self) -> int:
+        return int(self._count[0])
+
+    def append(self, time: float, position: NDArray, grip: bool, force: NDArray) -> None:
+        index = self.count
+        if index >= len(self._data):
+            return  # full: the run outlived its planned duration; later ticks are not logged
+        row = self._data[index]
+        row[0], row[1:4], row[4], row[5:8] = time, position, float(grip), force
+        self._count[0] = index + 1
+
+    @property
+    def time(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 0]
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 1:4]
+
+    @property
+    def grip(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 4]
+
+    @property
+    def force(self) -> NDArray[np.float64]:
+        return self._data[: self.count, 5:8]
+
+
+class SharedTelemetry:
+    """Start and compute times of the haptic process's steps."""
+
+    def __init__(self, arena: Arena, capacity: int) -> None:
+        self._data = arena.take(capacity, 2)
+        self._count = arena.take(1)
+
+    def record(self, start: float, compute: float) -> None:
+        index = int(self._count[0])
+        if index < len(self._data):
+            self._data[index] = (start, compute)
+            self._count[0] = index + 1
+
+    @property
+    def starts(self) -> NDArray[np.float64]:
+        return self._data[: int(self._count[0]), 0]
+
+    @property
+    def computes(self) -> NDArray[np.float64]:
+        return self._data[: int(self._count[0]), 1]
+
+
+EVENT_CODES = (
+    "watchdog",
+    "watchdog_recovered",
+    "force_clamped",
+    "nonfinite_force",
+    "device_lost",
+    "layer_failed",
+)
+
+
+class SharedEvents:
+    """Runtime events raised in the haptic process: (time, code) pairs."""
+
+    def __init__(self, arena: Arena, capacity: int = 4096) -> None:
+        self._data = arena.take(capacity, 2)
+        self._count = arena.take(1)
+
+    def add(self, time: float, kind: str) -> None:
+        index = int(self._count[0])
+        if index < len(self._data):
+            self._data[index] = (time, EVENT_CODES.index(kind))
+            self._count[0] = index + 1
+
+    def read(self, start: int = 0) -> list[tuple[float, str]]:
+        end = int(self._count[0])
+        return [(float(t), EVENT_CODES[int(c)]) for t, c in self._data[start:end]]
+
+
+class ControlBlock:
+    """[stop requested, haptic state, start time]: 0 running, 1 finished, 2 device lost, 3 failed."""
+
+    RUNNING, FINISHED, DEVICE_LOST, FAILED = 0.0, 1.0, 2.0, 3.0
+
+    def __init__(self, arena: Arena) -> None:
+        self._data = arena.take(4)
+
+    @property
+    def stop_requested(self) -> bool:
+        return self._data[0] != 0.0
+
+    def request_stop(self) -> None:
+        self._data[0] = 1.0
+
+    @property
+    def haptic_state(self) -> float:
+        return float(self._data[1])
+
+    @haptic_state.setter
+    def haptic_state(self, value: float) -> None:
+        self._data[1] = value
+
+    @property
+    def start(self) -> float:
+        return float(self._data[2])
+
+    @start.setter
+    def start(self, value: float) -> None:
+        self._data[2] = value

@@ -1,0 +1,74 @@
+"""Offscreen rendering through VTK/EGL, compared with a reference image by OpenImageIO."""
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.experiments import paper_cube, top_contact_triangle
+from sim.fem import Material, TissueModel
+from sim.needle import Needle, Pose, rotation_aligning
+from sim.render import RenderFrame, TissueRenderer, compare_images, surface_stress, write_image
+
+GOLDEN = Path(__file__).parents[1] / "data" / "golden" / "cube_press.png"
+
+
+def pressed_cube_frame():
+    mesh, fixed = paper_cube()
+    model = TissueModel(mesh, Material(20e3, 0.45), fixed)
+    model.precompute(use_cache=False)
+    triangle = top_contact_triangle(mesh)
+    weights = np.array([0.5, 0.3, 0.2])
+    press = np.array([0.0, 0.0, -0.002])
+    solution = model.solve({int(n): w * press for n, w in zip(triangle, weights, strict=True)}, fields=True)
+    needle = Needle.curved()
+    contact = weights @ mesh.points[triangle] + press
+    rotation = rotation_aligning(needle.tip_direction, [0, 0, -1])
+    pose = Pose(contact - rotation @ needle.vertices[0], rotation)
+    ghost = np.array([[0.0, 0.0, 0.012], [0.005, 0.005, 0.011], [0.01, 0.01, 0.012]])
+    frame = RenderFrame(
+        mesh.points + solution.displacement,
+        surface_stress(mesh, solution.von_mises),
+        needle.world_vertices(pose),
+        contact,
+        ghost,
+    )
+    return mesh, frame
+
+
+def test_render_matches_the_reference_image(tmp_path):
+    mesh, frame = pressed_cube_frame()
+    renderer = TissueRenderer(mesh, size=(320, 240), offscreen=True)
+    pixels = renderer.render(frame)
+    renderer.close()
+    assert pixels.shape == (240, 320, 3) and pixels.dtype == np.uint8
+    out = write_image(tmp_path / "cube_press.png", pixels)
+    if os.environ.get("VASCSIM_UPDATE_GOLDEN"):
+        write_image(GOLDEN, pixels)
+    failed, mean_error, _ = compare_images(out, GOLDEN, fail_threshold=0.1)
+    assert failed <= 0.005 * pixels.shape[0] * pixels.shape[1], (failed, mean_error)
+    assert mean_error < 0.01
+
+
+def test_frames_change_when_points_move(tmp_path):
+    """Moving points in place must produce a new frame, not a silently repeated one."""
+    mesh, frame = pressed_cube_frame()
+    renderer = TissueRenderer(mesh, size=(160, 120), offscreen=True)
+    first = renderer.render(frame).copy()
+    moved = RenderFrame(frame.points + np.array([0.0, 0.0, 0.003]), frame.triangle_stress * 0.2, frame.needle)
+    second = renderer.render(moved)
+    renderer.close()
+    assert np.abs(first.astype(int) - second.astype(int)).mean() > 1.0
+
+
+def test_exr_and_compare(tmp_path):
+    stress = np.linspace(0, 1, 64 * 32, dtype=np.float32).reshape(32, 64)
+    exr = write_image(tmp_path / "stress.exr", None, float_data=stress)
+    assert compare_images(exr, exr) == (0, 0.0, 0.0)
+    import OpenImageIO as oiio
+
+    back = oiio.ImageBuf(str(exr)).get_pixels(oiio.FLOAT)
+    np.testing.assert_allclose(back[:, :, 0], stress)
+    with pytest.raises(Exception, match="cannot"):
+        write_image(tmp_path / "no_such_dir" / "x.png", np.zeros((2, 2, 3), np.uint8))
