@@ -6,9 +6,10 @@ Run:  .venv/bin/python benchmarks/runtime.py [--seconds 60] [--no-render] [--siz
    precomputed), all layers, no rendering: simulated seconds per wall second.
 2. Real time, test cube: repeated stitches for --seconds, FEM at 500 Hz, global
    CD at 30 Hz, the display layer rendering offscreen (EGL) at 30 Hz.
-3. Real time, ~10k-node artery in on-demand mode (columns solved when needed,
-   prefetched by the graphics layer): the same loop, plus the contact-change
-   latency (graphics frame that found the contact -> first exact force).
+3. Real time, ~10k-node artery, precomputed: the same loop, plus the
+   contact-change latency (graphics frame that found the contact -> first exact force).
+4. The same artery in on-demand mode (columns solved when needed, prefetched by
+   the graphics layer near the needle tip).
 For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
 """
 
@@ -92,6 +93,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--no-render", action="store_true")
     parser.add_argument("--size", default="640x480")
+    parser.add_argument(
+        "--only", choices=["simulated", "cube", "artery", "artery-on-demand"], help="run one part only"
+    )
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     needle = Needle.curved()
@@ -99,6 +103,17 @@ def main() -> None:
     mesh, fixed = paper_cube()
     cube = BiphaseTissue.build(mesh, fixed)
     cube.precompute(use_cache=False)
+    if args.only in (None, "simulated"):
+        simulated_throughput(cube, needle)
+    if args.only in (None, "cube"):
+        realtime_cube(cube, needle, args.seconds, size, not args.no_render)
+    if args.only in (None, "artery"):
+        realtime_artery(needle, args.seconds, size, not args.no_render, precomputed=True)
+    if args.only in (None, "artery-on-demand"):
+        realtime_artery(needle, args.seconds, size, not args.no_render, precomputed=False)
+
+
+def simulated_throughput(cube, needle) -> None:
     one = cube_passes(needle, 1)[0]
     ratios = []
     for _ in range(3):
@@ -111,33 +126,31 @@ def main() -> None:
         flush=True,
     )
 
+
+def realtime_cube(cube, needle, seconds, size, render) -> None:
     trajectory, total = sequence_of_passes(cube_passes(needle, 20))
-    duration = min(args.seconds, total)
+    duration = min(seconds, total)
+    settings = RuntimeSettings(fem_rate=500.0)
     simulation = Simulation(
-        cube,
-        needle,
-        ScriptedDevice(trajectory),
-        RuntimeSettings(fem_rate=500.0),
-        renderer=renderer_for(cube, size, not args.no_render),
+        cube, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(cube, size, render)
     )
     report(f"real time, test cube, {duration:.0f} s", simulation, simulation.run_realtime(duration))
 
+
+def realtime_artery(needle, seconds, size, render, precomputed) -> None:
     case = scenario("vessel_10k")
     artery = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
+    if precomputed:
+        artery.precompute(use_cache=False)
     trajectory, total = sequence_of_passes(artery_passes(needle, case.mesh, 20))
-    duration = min(args.seconds, total)
+    duration = min(seconds, total)
+    settings = RuntimeSettings(fem_rate=500.0)
     simulation = Simulation(
-        artery,
-        needle,
-        ScriptedDevice(trajectory),
-        RuntimeSettings(fem_rate=500.0),
-        renderer=renderer_for(artery, size, not args.no_render),
+        artery, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(artery, size, render)
     )
-    report(
-        f"real time, {case.mesh.n_nodes}-node artery on demand, {duration:.0f} s",
-        simulation,
-        simulation.run_realtime(duration),
-    )
+    mode = "precomputed" if precomputed else "on demand"
+    name = f"real time, {case.mesh.n_nodes}-node artery {mode}, {duration:.0f} s"
+    report(name, simulation, simulation.run_realtime(duration))
     simulation.close()
 
 

@@ -157,6 +157,17 @@ class TissueModel:
     def _factor(self):
         return sparse_cholesky(self.penalised_stiffness())
 
+    def factorize(self) -> None:
+        """Factorise K0 now (on-demand mode does it lazily on the first contact otherwise)."""
+        self._factor  # noqa: B018 - the cached property does the work
+
+    def surface_von_mises(self, displacement: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(F,) von Mises stress (Pa) of the element under each exterior triangle, from a full field."""
+        elements = self.mesh.surface_elements
+        lam, mu = self._lame
+        grad = displacement_gradients(self._gradients[elements], self.mesh.tets[elements], displacement)
+        return von_mises_stress(small_strain(grad), lam[elements], mu[elements])
+
     # -- precomputation ----------------------------------------------------------
     def cache_key(self) -> str:
         """Identifies the precomputation: mesh, materials, fixed dofs, candidates, penalty."""

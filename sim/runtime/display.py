@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.fem import BiphaseTissue, TissueModel
-from sim.render import RenderFrame, TissueRenderer, surface_stress
+from sim.render import RenderFrame, TissueRenderer
 
 
 class DisplayScene:
@@ -28,11 +28,10 @@ class DisplayScene:
         points, stress, marker = self.mesh.points, self._rest_stress, None
         if snapshot.contact is not None and len(snapshot.contact[0]):
             nodes, intended = snapshot.contact
-            solution = self.model.solve(
-                {int(n): a for n, a in zip(nodes, intended, strict=True)}, fields=True
-            )
+            contacts = {int(n): a for n, a in zip(nodes, intended, strict=True)}
+            solution = self.model.solve(contacts, full_field=True)
             points = self.mesh.points + solution.displacement
-            stress = surface_stress(self.mesh, solution.von_mises)
+            stress = self.model.surface_von_mises(solution.displacement)  # surface elements only
             marker = points[nodes].mean(axis=0)
         self.last_image = self.renderer.render(RenderFrame(points, stress, snapshot.needle_vertices, marker))
         self.frames += 1

@@ -30,6 +30,7 @@ from sim.runtime.shared import (
     ControlBlock,
     SharedEvents,
     SharedForceHistory,
+    SharedGraphics,
     SharedHapticLog,
     SharedHolder,
     SharedTelemetry,
@@ -45,7 +46,26 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     """Run ``simulation`` for ``duration`` seconds of wall time (see the module docstring)."""
     settings = simulation.settings
     capacity = int(duration * settings.haptic_rate * 1.2) + 2000
-    arena = Arena(18 + 512 * 4 + 1 + capacity * 8 + 1 + capacity * 2 + 1 + 4096 * 2 + 1 + 4 + 64)
+    display_capacity = int(duration * settings.display_rate * 1.5) + 100
+    arena = Arena(
+        18
+        + 512 * 4
+        + 1
+        + capacity * 8
+        + 1
+        + capacity * 2
+        + 1
+        + 4096 * 2
+        + 1
+        + 4
+        + 64
+        + 3
+        + 3 * 64
+        + 1
+        + 16 * 4
+        + display_capacity * 2
+        + 1
+    )
     simulation.holder = SharedHolder(arena)
     simulation.forces = SharedForceHistory(arena)
     shared_log = SharedHapticLog(arena, capacity)
@@ -53,6 +73,9 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     telemetry = SharedTelemetry(arena, capacity)
     events = SharedEvents(arena)
     control = ControlBlock(arena)
+    simulation.graphics = SharedGraphics(arena)
+    display_telemetry = SharedTelemetry(arena, display_capacity)
+    display_pid = _start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()
     control.start = clock.perf_counter() + START_DELAY
     started = clock.perf_counter()
@@ -73,9 +96,13 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     finally:
         control.request_stop()
         _wait_for(pid, timeout=5.0)
+        if display_pid is not None:
+            _wait_for(display_pid, timeout=10.0)
         if previous_affinity is not None:
             _set_all_threads(previous_affinity)
     child_error = _read_all(errors_read)
+    if display_pid is not None:
+        simulation.telemetry["display"] = _as_layer_telemetry("display", simulation, display_telemetry)
     return _collect(
         simulation, shared_log, telemetry, events, control, child_error, clock.perf_counter() - started
     )
@@ -101,6 +128,46 @@ def _set_all_threads(cpus: set[int]) -> None:
             os.sched_setaffinity(int(tid), cpus)
         except OSError:  # a thread that just ended
             continue
+
+
+def _start_display_process(
+    simulation: Simulation, duration: float, control: ControlBlock, telemetry: SharedTelemetry
+) -> int | None:
+    """The display layer in its own low-priority process, so rendering never takes the FEM thread's GIL."""
+    if simulation.renderer is None:
+        return None
+    pid = os.fork()
+    if pid != 0:
+        return pid
+    status = 0
+    try:
+        os.nice(10)
+        gc.freeze()
+        period = simulation.settings.period("display")
+        start, k = control.start, 0
+        while not control.stop_requested and control.haptic_state == ControlBlock.RUNNING:
+            deadline = start + k * period
+            wait = deadline - clock.perf_counter()
+            if wait > 0:
+                clock.sleep(wait)
+            now = clock.perf_counter() - start
+            if now > duration:
+                break
+            began = clock.perf_counter()
+            simulation.display_step(now)
+            telemetry.record(now, clock.perf_counter() - began)
+            k = max(k + 1, int((clock.perf_counter() - start) / period))
+    except BaseException:
+        status = 1
+    finally:
+        os._exit(status)
+
+
+def _as_layer_telemetry(layer: str, simulation: Simulation, shared: SharedTelemetry) -> LoopTelemetry:
+    telemetry = LoopTelemetry(layer, simulation.settings.period(layer), max(len(shared.starts), 1))
+    for start, compute in zip(shared.starts, shared.computes, strict=True):
+        telemetry.record(float(start), float(compute))
+    return telemetry
 
 
 def _haptic_process(
@@ -200,8 +267,9 @@ def _run_other_layers(simulation: Simulation, duration: float, control: ControlB
     steps: dict[str, Callable[[float], None]] = {
         "fem": simulation.fem_step,
         "graphics": simulation.graphics_step,
-        "display": simulation.display_step,
     }
+    if simulation.renderer is None:
+        steps["display"] = simulation.display_step  # nothing to render: a cheap thread
     with threadpool_limits(1):
         threads = [
             threading.Thread(
@@ -285,10 +353,7 @@ def _collect(
         shared_log.time, shared_log.position, shared_log.grip, shared_log.force, strict=True
     ):
         log.append(float(t), p, bool(g), f)
-    haptic = LoopTelemetry("haptic", simulation.settings.period("haptic"), max(len(telemetry.starts), 1))
-    for start, compute in zip(telemetry.starts, telemetry.computes, strict=True):
-        haptic.record(float(start), float(compute))
-    simulation.telemetry["haptic"] = haptic
+    simulation.telemetry["haptic"] = _as_layer_telemetry("haptic", simulation, telemetry)
     for when, kind in events.read():
         simulation.events.append(
             RuntimeEvent(kind, when, "haptic", child_error if kind == "layer_failed" else "")

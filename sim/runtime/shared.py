@@ -232,3 +232,55 @@ class ControlBlock:
     @start.setter
     def start(self, value: float) -> None:
         self._data[2] = value
+
+
+class SharedGraphics:
+    """The latest graphics snapshot for the display process: needle, state, contact (seqlock).
+
+    Layout: [seq, time, n_vertices, vertices (64 x 3), n_contact, nodes (16), intended (16 x 3)].
+    """
+
+    MAX_VERTICES, MAX_CONTACT = 64, 16
+
+    def __init__(self, arena: Arena) -> None:
+        self._slot = arena.take(3 + 3 * self.MAX_VERTICES + 1 + self.MAX_CONTACT * 4)
+
+    def put(self, snapshot) -> None:
+        slot = self._slot
+        vertices = snapshot.needle_vertices[: self.MAX_VERTICES]
+        contact = snapshot.contact
+        slot[0] += 1
+        slot[1] = snapshot.time
+        slot[2] = len(vertices)
+        base = 3
+        slot[base : base + 3 * len(vertices)] = vertices.ravel()
+        base += 3 * self.MAX_VERTICES
+        count = 0 if contact is None else min(len(contact[0]), self.MAX_CONTACT)
+        slot[base] = count
+        if count:
+            slot[base + 1 : base + 1 + count] = contact[0][:count]
+            start = base + 1 + self.MAX_CONTACT
+            slot[start : start + 3 * count] = contact[1][:count].ravel()
+        slot[0] += 1
+
+    def get(self):
+        from sim.runtime.simulation import GraphicsSnapshot
+
+        slot = self._slot
+        for _ in range(1000):
+            before = slot[0]
+            copy = slot.copy()
+            if before == slot[0] and before % 2 == 0:
+                break
+        if copy[0] == 0:
+            return None
+        n = int(copy[2])
+        vertices = copy[3 : 3 + 3 * n].reshape(n, 3)
+        base = 3 + 3 * self.MAX_VERTICES
+        count = int(copy[base])
+        contact = None
+        if count:
+            nodes = copy[base + 1 : base + 1 + count].astype(np.int64)
+            start = base + 1 + self.MAX_CONTACT
+            contact = (nodes, copy[start : start + 3 * count].reshape(count, 3))
+        return GraphicsSnapshot(float(copy[1]), vertices, "", None, contact)

@@ -59,7 +59,7 @@ class RuntimeSettings:
     display_rate: float = 30.0
     force_delay: float = 1.0 / 30.0
     safety: SafetySettings = field(default_factory=SafetySettings)
-    prefetch_radius: float = 0.004
+    prefetch_radius: float = 0.002
 
     def __post_init__(self) -> None:
         if not 200.0 <= self.fem_rate <= 1000.0:
@@ -229,8 +229,12 @@ class Prefetcher:
 
     def __init__(self, tissue: TissueModel | BiphaseTissue) -> None:
         self.models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
+        for model in self.models:
+            model.factorize()  # now, not on the first contact
         mesh = tissue.mesh
-        self._nodes = np.intersect1d(mesh.surface_nodes, self.models[0].contact_nodes)
+        self._nodes = (
+            mesh.surface_nodes
+        )  # the exit can be on any face (lumen, wound edge), not only candidates
         self._points = mesh.points[self._nodes]
         self._requested: set[int] = set()
         self._queue: collections.deque = collections.deque()
@@ -240,14 +244,14 @@ class Prefetcher:
         self._thread.start()
 
     def near(self, point: NDArray[np.float64], radius: float) -> None:
-        """Queue the surface nodes within ``radius`` of ``point`` that were not requested yet."""
-        close = self._nodes[
-            np.einsum("ij,ij->i", self._points - point, self._points - point) <= radius * radius
-        ]
+        """Ask for the surface nodes within ``radius`` of ``point`` not requested yet, nearest first."""
+        squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
+        close = np.flatnonzero(squared <= radius * radius)
+        close = self._nodes[close[np.argsort(squared[close])]]
         fresh = [int(n) for n in close if int(n) not in self._requested]
         if fresh:
             self._requested.update(fresh)
-            self._queue.append(np.array(fresh))
+            self._queue.appendleft(fresh)  # the newest request is where the needle is now
             self._wake.set()
 
     def _work(self) -> None:
@@ -255,9 +259,12 @@ class Prefetcher:
             self._wake.wait(0.1)
             self._wake.clear()
             while self._queue and not self._closed:
-                nodes = self._queue.popleft()
+                batch = self._queue.popleft()
+                chunk, rest = batch[:3], batch[3:]  # small solves, so newer requests overtake
+                if rest:
+                    self._queue.appendleft(rest)
                 for model in self.models:
-                    model.prefetch(nodes)
+                    model.prefetch(np.array(chunk))
 
     def close(self) -> None:
         self._closed = True
