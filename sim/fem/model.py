@@ -234,16 +234,6 @@ class TissueModel:
         return self._precomputed
 
     # -- columns -------------------------------------------------------------------
-    def _candidate_positions(self, nodes: NDArray[np.int64]) -> NDArray[np.int64]:
-        rows = self._candidate_row[nodes]
-        if np.any(rows < 0):
-            bad = nodes[rows < 0][0]
-            raise ModelError(
-                f"node {bad} is not a contact candidate of the precomputed model "
-                f"({len(self.contact_nodes)} candidates); use a surface node or pass contact_nodes"
-            )
-        return rows
-
     def _nodes_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs: cached ones reused, the rest
         solved together in one multi-right-hand-side solve (on-demand mode)."""
@@ -279,14 +269,33 @@ class TissueModel:
     def _contact_columns(self, nodes: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
         """(G rows x 3k columns, G_JJ block, ids of the rows) for a contact set."""
         if self._precomputed is not None:
-            rows = self._candidate_positions(nodes)
-            dofs_local = node_dofs(rows)
-            columns = self._precomputed.matrix[:, dofs_local]
-            block = columns[dofs_local]
-            return columns, block, self.contact_nodes
+            rows = self._candidate_row[nodes]
+            if np.all(rows >= 0):
+                dofs_local = node_dofs(rows)
+                columns = self._precomputed.matrix[:, dofs_local]
+                return columns, columns[dofs_local], self.contact_nodes
+            return self._mixed_columns(nodes, rows)
         full = self._nodes_columns(nodes)
         block = full[node_dofs(nodes)]
         return full[node_dofs(self.contact_nodes)], block, self.contact_nodes
+
+    def _mixed_columns(
+        self, nodes: NDArray[np.int64], rows: NDArray[np.int64]
+    ) -> tuple[NDArray, NDArray, NDArray]:
+        """Precomputed columns for candidate nodes, on-demand columns for the others (e.g. an exit
+        through a face that is not a contact candidate); exact either way."""
+        g = self._precomputed.matrix
+        inside = rows >= 0
+        in_pos, out_pos = node_dofs(np.flatnonzero(inside)), node_dofs(np.flatnonzero(~inside))
+        full_out = self._nodes_columns(nodes[~inside])  # (3N, 3m) columns of K0^-1
+        columns = np.empty((g.shape[0], 3 * len(nodes)))
+        columns[:, in_pos] = g[:, node_dofs(rows[inside])]
+        columns[:, out_pos] = full_out[node_dofs(self.contact_nodes)]
+        block = np.empty((3 * len(nodes), 3 * len(nodes)))
+        block[:, out_pos] = full_out[node_dofs(nodes)]
+        block[np.ix_(in_pos, in_pos)] = columns[np.ix_(node_dofs(rows[inside]), in_pos)]
+        block[np.ix_(out_pos, in_pos)] = block[np.ix_(in_pos, out_pos)].T
+        return columns, block, self.contact_nodes
 
     # -- solving -------------------------------------------------------------------------
     def contact(self, nodes: ArrayLike) -> ContactHandle:

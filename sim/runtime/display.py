@@ -18,6 +18,9 @@ class DisplayScene:
 
     def __init__(self, tissue: TissueModel | BiphaseTissue, renderer: TissueRenderer) -> None:
         self.model = tissue.soft if isinstance(tissue, BiphaseTissue) else tissue
+        # Factorise here, in the parent: CHOLMOD's OpenMP pool does not survive fork, so a
+        # forked display process must only solve, never factorise.
+        self.model.factorize()
         self.renderer = renderer
         self.mesh = self.model.mesh
         self._rest_stress = np.zeros(len(self.mesh.surface_triangles))

@@ -141,7 +141,10 @@ def _start_display_process(
         return pid
     status = 0
     try:
+        from threadpoolctl import threadpool_limits
+
         os.nice(10)
+        threadpool_limits(1)
         gc.freeze()
         period = simulation.settings.period("display")
         start, k = control.start, 0
@@ -149,7 +152,7 @@ def _start_display_process(
             deadline = start + k * period
             wait = deadline - clock.perf_counter()
             if wait > 0:
-                clock.sleep(wait)
+                clock.sleep(min(wait, period))
             now = clock.perf_counter() - start
             if now > duration:
                 break
