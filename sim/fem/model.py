@@ -262,9 +262,13 @@ class TissueModel:
             used -= dropped.nbytes
 
     def prefetch(self, nodes: ArrayLike) -> None:
-        """Solve and cache the on-demand columns of ``nodes`` ahead of contact."""
-        if self._precomputed is None:
-            self._nodes_columns(_node_ids(nodes, self.mesh.n_nodes, "nodes"))
+        """Solve and cache the on-demand columns of ``nodes`` ahead of contact (in precomputed
+        mode only those of nodes outside the precomputed candidates are needed)."""
+        ids = _node_ids(nodes, self.mesh.n_nodes, "nodes")
+        if self._precomputed is not None:
+            ids = ids[self._candidate_row[ids] < 0]
+        if ids.size:
+            self._nodes_columns(ids)
 
     def _contact_columns(self, nodes: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
         """(G rows x 3k columns, G_JJ block, ids of the rows) for a contact set."""

@@ -145,6 +145,8 @@ def _start_display_process(
 
         os.nice(10)
         threadpool_limits(1)
+        if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
+            os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:-1]))  # off the haptic core
         gc.freeze()
         period = simulation.settings.period("display")
         start, k = control.start, 0
@@ -190,6 +192,7 @@ def _haptic_process(
             os.sched_setaffinity(0, {cpus[-1]})
     threadpool_limits(1)
     _try_realtime_priority()
+    _lock_memory()
     # The child inherits the whole heap: a full garbage collection would walk it for
     # milliseconds. Freeze what exists and collect nothing during the loop (the loop's
     # own garbage is freed by reference counting).
@@ -246,6 +249,24 @@ def _try_realtime_priority() -> bool:
     except (PermissionError, OSError):
         return False
     return True
+
+
+def _lock_memory() -> bool:
+    """Keep the haptic process's pages resident and off transparent huge pages.
+
+    Large allocations elsewhere on the machine can make a page fault wait for
+    memory compaction for milliseconds; locked, pre-faulted memory never does.
+    """
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(41, 1, 0, 0, 0)  # PR_SET_THP_DISABLE
+        # MCL_FUTURE only: locking the inherited heap (MCL_CURRENT) would copy every
+        # copy-on-write page of the parent, seconds of work for a large precomputation.
+        return libc.mlockall(2) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def _paced_wind_down(simulation: Simulation, now: float, period: float) -> None:

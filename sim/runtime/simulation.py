@@ -220,8 +220,13 @@ class RunResult:
 
 
 def _on_demand(tissue: TissueModel | BiphaseTissue) -> bool:
+    """Whether some contact could need columns solved on demand (no precomputation, or
+    surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through)."""
     models = (tissue.soft, tissue.stiff) if isinstance(tissue, BiphaseTissue) else (tissue,)
-    return any(model.precomputation is None for model in models)
+    return any(
+        model.precomputation is None or len(np.setdiff1d(tissue.mesh.surface_nodes, model.contact_nodes))
+        for model in models
+    )
 
 
 class Prefetcher:
@@ -229,6 +234,7 @@ class Prefetcher:
 
     def __init__(self, tissue: TissueModel | BiphaseTissue) -> None:
         self.models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
+        self.on_demand = any(model.precomputation is None for model in self.models)
         for model in self.models:
             model.factorize()  # now, not on the first contact
         mesh = tissue.mesh
@@ -260,11 +266,12 @@ class Prefetcher:
             self._wake.clear()
             while self._queue and not self._closed:
                 batch = self._queue.popleft()
-                chunk, rest = batch[:3], batch[3:]  # small solves, so newer requests overtake
+                chunk, rest = batch[:1], batch[1:]  # one node at a time: newer requests overtake
                 if rest:
                     self._queue.appendleft(rest)
                 for model in self.models:
                     model.prefetch(np.array(chunk))
+                    wallclock.sleep(0.001)  # let the FEM thread in between solves
 
     def close(self) -> None:
         self._closed = True
@@ -370,7 +377,11 @@ class Simulation:
         posted = wallclock.perf_counter()
         hits = self.interaction.collision.query(fem.needle_vertices)
         self.global_queue.append((now, fem.needle_vertices, hits, posted))
-        if self._prefetcher is not None:
+        if self._prefetcher is not None and (
+            self._prefetcher.on_demand or fem.state in ("pierced", "exited")
+        ):
+            # Precomputed models only need columns for nodes off the candidates, i.e. where
+            # a needle inside the wall may come out.
             self._prefetcher.near(fem.needle_vertices[0], self.settings.prefetch_radius)
         self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
 

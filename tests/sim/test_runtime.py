@@ -214,3 +214,25 @@ def test_holder_snapshot_pose_is_validated(tissue):
     assert "rotation must be a proper" in result.error
     assert_forces_safe(result, LIMITS)
     assert isinstance(Pose.identity(), Pose)
+
+
+def test_realtime_run_shares_state_across_processes(tissue):
+    """The haptic layer in its own process: the run completes, the stitch happens, forces stay safe."""
+    simulation, suturing, _ = make(tissue)
+    result = simulation.run_realtime(2.4)
+    assert result.completed, result.error
+    assert "contact_start" in kinds(result) and "pierce" in kinds(result)
+    times = result.haptic.time
+    assert np.all(np.diff(times) > 0) and times[0] < 0.01 and times[-1] > 2.3
+    assert result.telemetry["haptic"].steps > 1000 and result.telemetry["fem"].steps > 500
+    assert_forces_safe(result, LIMITS)
+    assert np.all(result.haptic.force[-1] == 0)
+
+
+def test_realtime_device_unplug_ends_the_session(tissue):
+    simulation, _, _ = make(tissue, device_wrapper=lambda d: UnpluggedAt(d, 1.0))
+    result = simulation.run_realtime(3.0)
+    assert result.stop_reason == "device_lost"
+    assert "device_lost" in kinds(result) and "contact_start" in kinds(result)
+    assert result.haptic.time[-1] < 1.0
+    assert_forces_safe(result, LIMITS)
