@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.needle import Pose
+from sim.runtime.logs import HapticColumns
 
 
 class Arena:
@@ -40,6 +41,16 @@ class Arena:
         out[...] = 0.0
         self._used += size
         return out
+
+
+def _consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Seqlock read: a copy taken while no write was in progress (None before the first write)."""
+    for _ in range(1000):
+        before = slot[0]
+        copy = slot.copy()
+        if before == slot[0] and before % 2 == 0:
+            break
+    return None if copy[0] == 0 else copy
 
 
 class SharedHolder:
@@ -61,13 +72,8 @@ class SharedHolder:
     def get(self):
         from sim.runtime.simulation import HolderSnapshot
 
-        slot = self._slot
-        for _ in range(1000):
-            before = slot[0]
-            copy = slot.copy()
-            if before == slot[0] and before % 2 == 0:
-                break
-        if copy[0] == 0:
+        copy = _consistent_copy(self._slot)
+        if copy is None:
             return None
         return HolderSnapshot(
             float(copy[1]), Pose.unchecked(copy[2:5], copy[5:14].reshape(3, 3)), copy[14:17], bool(copy[17])
@@ -116,7 +122,7 @@ class SharedForceHistory:
         return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
 
 
-class SharedHapticLog:
+class SharedHapticLog(HapticColumns):
     """The haptic log in shared memory: [time, position 3, grip, force 3] per tick."""
 
     def __init__(self, arena: Arena, capacity: int) -> None:
@@ -134,22 +140,6 @@ class SharedHapticLog:
         row = self._data[index]
         row[0], row[1:4], row[4], row[5:8] = time, position, float(grip), force
         self._count[0] = index + 1
-
-    @property
-    def time(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 0]
-
-    @property
-    def position(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 1:4]
-
-    @property
-    def grip(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 4]
-
-    @property
-    def force(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 5:8]
 
 
 class SharedTelemetry:
@@ -266,13 +256,8 @@ class SharedGraphics:
     def get(self):
         from sim.runtime.simulation import GraphicsSnapshot
 
-        slot = self._slot
-        for _ in range(1000):
-            before = slot[0]
-            copy = slot.copy()
-            if before == slot[0] and before % 2 == 0:
-                break
-        if copy[0] == 0:
+        copy = _consistent_copy(self._slot)
+        if copy is None:
             return None
         n = int(copy[2])
         vertices = copy[3 : 3 + 3 * n].reshape(n, 3)

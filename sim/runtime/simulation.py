@@ -34,6 +34,7 @@ from sim.errors import VascsimError
 from sim.fem import BiphaseTissue, TissueModel
 from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
+from sim.runtime.logs import HapticColumns
 from sim.runtime.safety import ForceSafety, SafetySettings
 from sim.runtime.telemetry import LayerSummary, LoopTelemetry
 
@@ -170,7 +171,7 @@ class ForceHistory:
         return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
 
 
-class HapticLog:
+class HapticLog(HapticColumns):
     """Every haptic tick: time, holder position, grip, force sent, in growing preallocated arrays."""
 
     def __init__(self, capacity: int = 1 << 16) -> None:
@@ -183,22 +184,6 @@ class HapticLog:
         row = self._data[self.count]
         row[0], row[1:4], row[4], row[5:8] = time, position, float(grip), force
         self.count += 1
-
-    @property
-    def time(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 0]
-
-    @property
-    def position(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 1:4]
-
-    @property
-    def grip(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 4]
-
-    @property
-    def force(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 5:8]
 
 
 @dataclass
