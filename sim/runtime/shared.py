@@ -15,14 +15,13 @@ step function runs unchanged on either side.
 
 from __future__ import annotations
 
-import bisect
 import mmap
 
 import numpy as np
 from numpy.typing import NDArray
 
 from sim.needle import Pose
-from sim.runtime.logs import HapticColumns
+from sim.runtime.logs import HapticColumns, interpolate_force
 
 
 class Arena:
@@ -110,16 +109,7 @@ class SharedForceHistory:
 
     def at(self, time: float) -> NDArray[np.float64]:
         times, forces = self._recent()
-        if not times:
-            return np.zeros(3)
-        k = bisect.bisect_right(times, time)
-        if k == 0:
-            return np.array(forces[0])
-        if k == len(times):
-            return np.array(forces[-1])
-        w = (time - times[k - 1]) / (times[k] - times[k - 1])
-        a, b = forces[k - 1], forces[k]
-        return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
+        return interpolate_force(times, forces, time)
 
 
 class SharedHapticLog(HapticColumns):

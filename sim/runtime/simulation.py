@@ -17,7 +17,6 @@ as fast as the machine allows) and :meth:`Simulation.run_realtime` (threads).
 
 from __future__ import annotations
 
-import bisect
 import collections
 import heapq
 import threading
@@ -34,7 +33,7 @@ from sim.errors import VascsimError
 from sim.fem import BiphaseTissue, TissueModel
 from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
-from sim.runtime.logs import HapticColumns
+from sim.runtime.logs import HapticColumns, interpolate_force
 from sim.runtime.safety import ForceSafety, SafetySettings
 from sim.runtime.telemetry import LayerSummary, LoopTelemetry
 
@@ -159,16 +158,7 @@ class ForceHistory:
     def at(self, time: float) -> NDArray[np.float64]:
         """Force at ``time``: linear between the two outputs around it, held at the ends."""
         times, forces = self._times, self._forces
-        if not times:
-            return np.zeros(3)
-        k = bisect.bisect_right(times, time)
-        if k == 0:
-            return np.array(forces[0])
-        if k == len(times):
-            return np.array(forces[-1])
-        w = (time - times[k - 1]) / (times[k] - times[k - 1])
-        a, b = forces[k - 1], forces[k]
-        return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
+        return interpolate_force(times, forces, time)
 
 
 class HapticLog(HapticColumns):
