@@ -1,0 +1,109 @@
+"""Reading recorded sessions: header, samples and events, checked before they are trusted."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from recorder.schema import SAMPLE_COLUMNS, SCHEMA_VERSION, RecorderError
+from recorder.writer import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, sha256_of
+
+
+@dataclass(frozen=True)
+class Session:
+    """One recorded session: its header and its sample and event tables (Arrow)."""
+
+    path: Path
+    header: dict[str, Any]
+    samples: pa.Table
+    events: pa.Table
+
+    def samples_frame(self, library: str = "pandas"):
+        """The samples as a pandas or polars DataFrame."""
+        return _frame(self.samples, library)
+
+    def events_frame(self, library: str = "pandas"):
+        return _frame(self.events, library)
+
+
+def _frame(table: pa.Table, library: str):
+    if library == "pandas":
+        return table.to_pandas()
+    if library == "polars":
+        import polars as pl
+
+        return pl.from_arrow(table)
+    raise RecorderError(f"frames are 'pandas' or 'polars'; got {library!r}")
+
+
+def open_session(path: str | Path, verify: bool = True) -> Session:
+    """Open a closed (or recovered) session directory; raises RecorderError naming what is wrong."""
+    path = Path(path)
+    header_path = path / HEADER_FILE
+    if not header_path.is_file():
+        raise RecorderError(f"{path} is not a session directory (no {HEADER_FILE})")
+    try:
+        header = json.loads(header_path.read_text())
+    except json.JSONDecodeError as error:
+        raise RecorderError(f"{header_path} is not valid JSON: {error}") from error
+    version = header.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise RecorderError(
+            f"{path}: schema version {version!r} is not one this vascsim reads "
+            f"(it reads version {SCHEMA_VERSION})"
+        )
+    if header.get("status") == "recording":
+        if (path / SAMPLES_JOURNAL).exists():
+            raise RecorderError(f"{path} was not closed (a crash?); run `vascsim recover {path}` first")
+        raise RecorderError(f"{path} is still marked as recording but has no journal")
+    samples = _read_checked(path, SAMPLES_FILE, header.get("samples", {}), verify)
+    events = _read_checked(path, EVENTS_FILE, header.get("events", {}), verify)
+    missing = [c for c in SAMPLE_COLUMNS if c not in samples.column_names]
+    if missing:
+        raise RecorderError(f"{path / SAMPLES_FILE} lacks column(s) {', '.join(missing)}")
+    times = samples.column("time").to_numpy()
+    backwards = np.flatnonzero(np.diff(times) < 0)
+    if backwards.size:
+        k = int(backwards[0])
+        raise RecorderError(
+            f"{path / SAMPLES_FILE}: time goes backwards at row {k + 1} "
+            f"({times[k + 1]:.6f} s after {times[k]:.6f} s)"
+        )
+    return Session(path, header, samples, events)
+
+
+def _read_checked(path: Path, name: str, record: dict[str, Any], verify: bool) -> pa.Table:
+    file = path / name
+    if not file.is_file():
+        raise RecorderError(f"{file} is missing")
+    if verify:
+        expected = record.get("sha256")
+        if expected is None:
+            raise RecorderError(f"{path / HEADER_FILE} records no checksum for {name}")
+        if sha256_of(file) != expected:
+            raise RecorderError(f"{file} does not match its recorded SHA-256 (corrupted or altered)")
+    try:
+        table = pq.read_table(file)
+    except (pa.ArrowInvalid, OSError) as error:
+        raise RecorderError(f"{file} cannot be read (truncated or not Parquet): {error}") from error
+    if record.get("rows") is not None and table.num_rows != record["rows"]:
+        raise RecorderError(f"{file} has {table.num_rows} rows; its header says {record['rows']}")
+    return table
+
+
+def list_sessions(root: str | Path) -> tuple[list[Session], dict[Path, str]]:
+    """Every readable session below ``root``, and for each unreadable one the reason (one bad file
+    never stops the others from being listed)."""
+    good, bad = [], {}
+    for header in sorted(Path(root).rglob(HEADER_FILE)):
+        try:
+            good.append(open_session(header.parent))
+        except RecorderError as error:
+            bad[header.parent] = str(error)
+    return good, bad

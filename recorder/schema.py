@@ -1,0 +1,107 @@
+"""The recorder's versioned schemas: the haptic-rate sample stream, discrete events, the header.
+
+Samples are flat float columns (one per component) so pandas, polars and DuckDB
+read them without nested types; units are in each field's metadata (SI).
+"""
+
+from __future__ import annotations
+
+import pyarrow as pa
+
+from sim.errors import VascsimError
+
+SCHEMA_VERSION = 1
+
+
+class RecorderError(VascsimError):
+    """A session file is missing, malformed, of an unknown version, or fails its checksum."""
+
+
+# (name, unit, description). Order defines the row layout used by SessionWriter.record.
+SAMPLE_FIELDS: tuple[tuple[str, str, str], ...] = (
+    ("time", "s", "session time"),
+    ("tool_x", "m", "dominant tool position"),
+    ("tool_y", "m", ""),
+    ("tool_z", "m", ""),
+    ("tool_qw", "1", "dominant tool orientation quaternion"),
+    ("tool_qx", "1", ""),
+    ("tool_qy", "1", ""),
+    ("tool_qz", "1", ""),
+    ("tool_vx", "m/s", "dominant tool velocity"),
+    ("tool_vy", "m/s", ""),
+    ("tool_vz", "m/s", ""),
+    ("tip_x", "m", "needle tip position"),
+    ("tip_y", "m", ""),
+    ("tip_z", "m", ""),
+    ("tip_speed", "m/s", "needle tip speed"),
+    ("tangent_x", "1", "needle tip direction"),
+    ("tangent_y", "1", ""),
+    ("tangent_z", "1", ""),
+    ("force_x", "N", "force sent to the device"),
+    ("force_y", "N", ""),
+    ("force_z", "N", ""),
+    ("contact_triangle", "1", "exterior triangle in contact, -1 for none"),
+    ("bary_0", "1", "barycentric coordinates of the contact"),
+    ("bary_1", "1", ""),
+    ("bary_2", "1", ""),
+    ("local_stress", "Pa", "max von Mises stress around the contact"),
+    ("stretch", "1", "stretch statistic lambda"),
+    ("pierced", "1", "needle state: 0 free, 1 contact, 2 pierced, 3 exited"),
+    ("sub_dx", "m", "subordinate-hand displacement"),
+    ("sub_dy", "m", ""),
+    ("sub_dz", "m", ""),
+    ("grip", "1", "needle-holder grip closed (1) or open (0)"),
+    ("period", "s", "haptic loop period"),
+    ("compute", "s", "haptic step compute time"),
+)
+SAMPLE_COLUMNS = tuple(name for name, _, _ in SAMPLE_FIELDS)
+COLUMN = {name: i for i, name in enumerate(SAMPLE_COLUMNS)}
+INTEGER_COLUMNS = {"contact_triangle": pa.int32(), "pierced": pa.int8(), "grip": pa.int8()}
+
+
+def _field(name: str, unit: str, description: str) -> pa.Field:
+    kind = INTEGER_COLUMNS.get(name, pa.float64())
+    return pa.field(name, kind, nullable=False, metadata={"unit": unit, "description": description})
+
+
+SAMPLE_SCHEMA = pa.schema(
+    [_field(*spec) for spec in SAMPLE_FIELDS],
+    metadata={"vascsim.schema": "samples", "vascsim.schema_version": str(SCHEMA_VERSION)},
+)
+
+EVENT_KINDS = (
+    "contact_start",
+    "contact_end",
+    "pierce",
+    "exit",
+    "pull_through",
+    "release",
+    "regrab",
+    "implausible_hit",
+    "force_clamped",
+    "nonfinite_force",
+    "watchdog",
+    "watchdog_recovered",
+    "device_lost",
+    "layer_failed",
+    "stopped",
+    "queue_overflow",
+    "marker",
+    "annotation",
+)
+
+EVENT_SCHEMA = pa.schema(
+    [
+        pa.field("time", pa.float64(), nullable=False, metadata={"unit": "s"}),
+        pa.field("kind", pa.string(), nullable=False),
+        pa.field("triangle", pa.int32(), nullable=False),
+        pa.field("bary_0", pa.float64()),
+        pa.field("bary_1", pa.float64()),
+        pa.field("bary_2", pa.float64()),
+        pa.field("entry_angle_deg", pa.float64(), metadata={"unit": "deg"}),
+        pa.field("tip_speed", pa.float64(), metadata={"unit": "m/s"}),
+        pa.field("layer", pa.string()),
+        pa.field("detail", pa.string()),
+    ],
+    metadata={"vascsim.schema": "events", "vascsim.schema_version": str(SCHEMA_VERSION)},
+)

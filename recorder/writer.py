@@ -1,0 +1,311 @@
+"""Durable session recording that never blocks the haptic loop.
+
+``record(row)`` copies one sample row into a preallocated ring (about a
+microsecond, no locks, no allocation) and returns; a background thread turns
+the rows written since its last pass into an Arrow record batch, appends it to
+an append-only journal (Arrow IPC stream) and fsyncs it every
+``flush_interval`` (100 ms by default), so a crash loses at most that interval.
+If the ring fills up (the disk stalls), samples are dropped and counted, and a
+``queue_overflow`` event records how many and over which time range: nothing is
+lost silently. ``close()`` turns the journals into Parquet (zstd), verifies them,
+records their SHA-256 in ``header.json``, and only then removes the journals.
+
+Session directory: ``header.json``, ``samples.arrows`` / ``events.arrows``
+(journals while recording), ``samples.parquet`` / ``events.parquet`` (after close).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import threading
+import time as clock
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.ipc as ipc
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+
+from recorder.schema import (
+    EVENT_SCHEMA,
+    INTEGER_COLUMNS,
+    SAMPLE_COLUMNS,
+    SAMPLE_SCHEMA,
+    SCHEMA_VERSION,
+    RecorderError,
+)
+
+SAMPLES_JOURNAL, EVENTS_JOURNAL = "samples.arrows", "events.arrows"
+SAMPLES_FILE, EVENTS_FILE, HEADER_FILE = "samples.parquet", "events.parquet", "header.json"
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
+    temporary = path.with_suffix(path.suffix + ".tmp")
+    with open(temporary, "w") as handle:
+        json.dump(data, handle, indent=2, sort_keys=True)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, path)
+
+
+def samples_batch(rows: NDArray[np.float64]) -> pa.RecordBatch:
+    """An Arrow batch of the sample schema from (n, columns) float rows."""
+    arrays = []
+    for i, name in enumerate(SAMPLE_COLUMNS):
+        column = rows[:, i]
+        kind = INTEGER_COLUMNS.get(name)
+        arrays.append(pa.array(column.astype(kind.to_pandas_dtype()) if kind else column))
+    return pa.RecordBatch.from_arrays(arrays, schema=SAMPLE_SCHEMA)
+
+
+class SessionWriter:
+    """Records one session into ``directory`` (see the module docstring).
+
+    header: session metadata (participant, session ids, task, mesh hash,
+        materials, model parameters, device, software version, clock mode, ...).
+    Single producer: call ``record`` from one thread (the haptic loop).
+    """
+
+    def __init__(
+        self,
+        directory: str | Path,
+        header: dict[str, Any],
+        flush_interval: float = 0.1,
+        capacity: int = 1 << 16,
+    ) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        if (self.directory / SAMPLES_FILE).exists() or (self.directory / SAMPLES_JOURNAL).exists():
+            raise RecorderError(f"session directory {self.directory} already holds a recording")
+        self.flush_interval = flush_interval
+        self.header = {
+            **header,
+            "schema_version": SCHEMA_VERSION,
+            "status": "recording",
+            "started_unix": clock.time(),
+            "flush_interval_s": flush_interval,
+        }
+        write_json_atomically(self.directory / HEADER_FILE, self.header)
+        self._ring = np.zeros((capacity, len(SAMPLE_COLUMNS)))
+        self._capacity = capacity
+        self._head = 0  # rows written by the producer
+        self._tail = 0  # rows made durable by the writer thread
+        self.dropped = 0
+        self._drop_range: list[float] = []
+        self._events: list[tuple] = []
+        self._events_lock = threading.Lock()
+        self._sample_sink = open(self.directory / SAMPLES_JOURNAL, "wb")
+        self._sample_stream = ipc.new_stream(self._sample_sink, SAMPLE_SCHEMA)
+        self._event_sink = open(self.directory / EVENTS_JOURNAL, "wb")
+        self._event_stream = ipc.new_stream(self._event_sink, EVENT_SCHEMA)
+        for sink in (self._sample_sink, self._event_sink):  # the schemas are durable from the start
+            sink.flush()
+            os.fsync(sink.fileno())
+        self.durable_samples = 0
+        self.flush_seconds: list[float] = []
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="vascsim-recorder", daemon=True)
+        self._thread.start()
+
+    # -- producer side (the haptic loop) ------------------------------------------------------
+    def record(self, row: NDArray[np.float64]) -> bool:
+        """Queue one sample row (columns as ``recorder.schema.SAMPLE_COLUMNS``); False if dropped."""
+        head = self._head
+        if head - self._tail >= self._capacity:
+            self.dropped += 1
+            if len(self._drop_range) < 2:
+                self._drop_range.append(float(row[0]))
+            else:
+                self._drop_range[1] = float(row[0])
+            return False
+        self._ring[head % self._capacity] = row
+        self._head = head + 1
+        return True
+
+    def event(
+        self,
+        time: float,
+        kind: str,
+        triangle: int = -1,
+        barycentric: tuple[float, float, float] = (math.nan, math.nan, math.nan),
+        entry_angle_deg: float = math.nan,
+        tip_speed: float = math.nan,
+        layer: str = "",
+        detail: str = "",
+    ) -> None:
+        """Queue a discrete event (thread-safe; events are rare)."""
+        with self._events_lock:
+            self._events.append(
+                (
+                    float(time),
+                    kind,
+                    int(triangle),
+                    *map(float, barycentric),
+                    float(entry_angle_deg),
+                    float(tip_speed),
+                    layer,
+                    detail,
+                )
+            )
+
+    # -- writer thread ---------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            while not self._stop.wait(self.flush_interval):
+                self.flush()
+        except BaseException as error:  # reported by close(); recording stops being durable
+            self._error = error
+
+    def flush(self) -> None:
+        """Make everything queued so far durable (journal append + fsync)."""
+        started = clock.perf_counter()
+        head, tail = self._head, self._tail
+        if head > tail:
+            indices = np.arange(tail, head) % self._capacity
+            self._sample_stream.write_batch(samples_batch(self._ring[indices]))
+        self._note_drops()
+        with self._events_lock:
+            events, self._events = self._events, []
+        if events:
+            columns = list(zip(*events, strict=True))
+            self._event_stream.write_batch(
+                pa.RecordBatch.from_arrays(
+                    [pa.array(c, type=f.type) for c, f in zip(columns, EVENT_SCHEMA, strict=True)],
+                    schema=EVENT_SCHEMA,
+                )
+            )
+        for sink in (self._sample_sink, self._event_sink):
+            sink.flush()
+            os.fsync(sink.fileno())
+        self._tail = head
+        self.durable_samples = head
+        self.flush_seconds.append(clock.perf_counter() - started)
+
+    def _note_drops(self) -> None:
+        if self.dropped and self._drop_range:
+            first, last = self._drop_range[0], self._drop_range[-1]
+            self.event(
+                first,
+                "queue_overflow",
+                detail=f"{self.dropped} samples dropped between {first:.3f} s "
+                f"and {last:.3f} s: the recorder could not keep up",
+            )
+            self._drop_range = []
+            self.header["dropped_samples"] = self.header.get("dropped_samples", 0) + self.dropped
+            self.dropped = 0
+
+    # -- closing -------------------------------------------------------------------------------------
+    def close(self, status: str = "complete") -> dict[str, Any]:
+        """Final flush, Parquet conversion with verification and checksums; returns the header."""
+        self._stop.set()
+        self._thread.join()
+        if self._error is not None:
+            raise RecorderError(f"recording to {self.directory} failed: {self._error}") from self._error
+        self.flush()
+        for stream, sink in (
+            (self._sample_stream, self._sample_sink),
+            (self._event_stream, self._event_sink),
+        ):
+            stream.close()
+            sink.close()
+        write_json_atomically(self.directory / HEADER_FILE, self.header)
+        return finalize(self.directory, status)
+
+
+def read_journal(path: Path, schema: pa.Schema) -> tuple[pa.Table, bool]:
+    """Every complete batch of an IPC journal; the flag says whether a torn tail was cut off."""
+    batches, torn = [], False
+    try:
+        with pa.OSFile(str(path), "rb") as source:
+            reader = ipc.open_stream(source)
+            while True:
+                try:
+                    batches.append(reader.read_next_batch())
+                except StopIteration:
+                    break
+    except (pa.ArrowInvalid, OSError, EOFError):
+        torn = True
+    return pa.Table.from_batches(batches, schema=schema), torn
+
+
+def same_values(a: pa.Table, b: pa.Table) -> bool:
+    """Column-by-column equality, NaN equal to NaN (Table.equals treats NaN as different)."""
+    if a.num_rows != b.num_rows or a.column_names != b.column_names:
+        return False
+    for name in a.column_names:
+        x, y = a.column(name).to_numpy(zero_copy_only=False), b.column(name).to_numpy(zero_copy_only=False)
+        if x.dtype.kind == "f":
+            if not np.array_equal(x, y, equal_nan=True):
+                return False
+        elif x.tolist() != y.tolist():
+            return False
+    return True
+
+
+def finalize(directory: Path, status: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Journals -> verified Parquet files with SHA-256 in the header; journals removed last."""
+    header = json.loads((directory / HEADER_FILE).read_text())
+    for journal, target, schema, key in (
+        (SAMPLES_JOURNAL, SAMPLES_FILE, SAMPLE_SCHEMA, "samples"),
+        (EVENTS_JOURNAL, EVENTS_FILE, EVENT_SCHEMA, "events"),
+    ):
+        table, torn = read_journal(directory / journal, schema)
+        temporary = directory / (target + ".tmp")
+        pq.write_table(table, temporary, compression="zstd")
+        check = pq.read_table(temporary)
+        if not same_values(check, table):
+            raise RecorderError(f"verification of {temporary} failed; the journal {journal} is kept")
+        os.replace(temporary, directory / target)
+        header[key] = {
+            "file": target,
+            "rows": table.num_rows,
+            "sha256": sha256_of(directory / target),
+            "torn_tail_cut": torn,
+        }
+        if key == "samples" and table.num_rows:
+            times = table.column("time").to_numpy()
+            header[key]["time_range_s"] = [float(times[0]), float(times[-1])]
+    header.update(extra or {})
+    header["status"] = status
+    header["closed_unix"] = clock.time()
+    write_json_atomically(directory / HEADER_FILE, header)
+    for journal in (SAMPLES_JOURNAL, EVENTS_JOURNAL):
+        (directory / journal).unlink(missing_ok=True)
+    return header
+
+
+def recover(directory: str | Path) -> dict[str, Any]:
+    """Turn the journals a crash left behind into a valid session marked ``recovered``.
+
+    Everything up to the last complete journal batch is kept; the header records the
+    recovered time range and that at most one flush interval after it was lost.
+    """
+    directory = Path(directory)
+    if not (directory / SAMPLES_JOURNAL).exists():
+        raise RecorderError(f"{directory} has no journal to recover (nothing was being recorded there)")
+    if not (directory / HEADER_FILE).exists():
+        raise RecorderError(f"{directory} has a journal but no header.json; cannot tell which session it is")
+    table, _ = read_journal(directory / SAMPLES_JOURNAL, SAMPLE_SCHEMA)
+    header = json.loads((directory / HEADER_FILE).read_text())
+    last = float(table.column("time").to_numpy()[-1]) if table.num_rows else None
+    lost = {
+        "recovered": True,
+        "recovered_until_s": last,
+        "lost_after_s": last,
+        "lost_at_most_s": header.get("flush_interval_s"),
+    }
+    return finalize(directory, "recovered", lost)

@@ -1,0 +1,188 @@
+"""The recorder: round trips, crash recovery by kill -9, overflow accounting, bad files."""
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import duckdb
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from recorder import (
+    COLUMN,
+    SAMPLE_COLUMNS,
+    RecorderError,
+    SessionWriter,
+    list_sessions,
+    open_session,
+    recover,
+)
+
+
+def rows(n, start=0):
+    data = np.zeros((n, len(SAMPLE_COLUMNS)))
+    t = (np.arange(start, start + n)) * 1e-3
+    data[:, COLUMN["time"]] = t
+    data[:, COLUMN["tool_x"]] = np.sin(t)
+    data[:, COLUMN["force_z"]] = np.cos(t) * 0.1
+    data[:, COLUMN["contact_triangle"]] = np.where(np.arange(n) % 7 == 0, 12, -1)
+    data[:, COLUMN["pierced"]] = np.arange(n) % 4
+    data[:, COLUMN["tool_qw"]] = 1.0
+    return data
+
+
+def test_round_trip_bit_for_bit_and_in_three_engines(tmp_path):
+    session = tmp_path / "s1"
+    writer = SessionWriter(session, {"participant": "P01", "task": "arteriotomy"}, flush_interval=0.02)
+    data = rows(20000)
+    for row in data:
+        assert writer.record(row)
+    writer.event(
+        0.5, "pierce", triangle=12, barycentric=(0.2, 0.3, 0.5), entry_angle_deg=4.0, tip_speed=0.003
+    )
+    writer.event(1.0, "marker", detail="supervisor note")
+    header = writer.close()
+    assert header["status"] == "complete" and header["samples"]["rows"] == 20000
+    assert not (session / "samples.arrows").exists()
+    loaded = open_session(session)
+    for i, name in enumerate(SAMPLE_COLUMNS):
+        np.testing.assert_array_equal(
+            loaded.samples.column(name).to_numpy(),
+            data[:, i].astype(loaded.samples.column(name).to_numpy().dtype),
+        )
+    assert loaded.events.column("kind").to_pylist() == ["pierce", "marker"]
+    assert loaded.header["participant"] == "P01"
+    frame = loaded.samples_frame("pandas")
+    assert frame["force_z"].iloc[100] == pytest.approx(np.cos(0.1) * 0.1)
+    assert loaded.samples_frame("polars").height == 20000
+    count = duckdb.sql(
+        f"select count(*) from '{session / 'samples.parquet'}' where contact_triangle = 12"
+    ).fetchone()
+    assert count[0] == (20000 + 6) // 7
+    units = pq.read_schema(session / "samples.parquet").field("force_z").metadata[b"unit"]
+    assert units == b"N"
+
+
+def test_overflow_is_counted_and_recorded(tmp_path):
+    writer = SessionWriter(tmp_path / "s", {}, flush_interval=10.0, capacity=1000)
+    accepted = sum(writer.record(row) for row in rows(1500))
+    assert accepted == 1000
+    header = writer.close()
+    session = open_session(tmp_path / "s")
+    overflow = [r for r in session.events.to_pylist() if r["kind"] == "queue_overflow"]
+    assert len(overflow) == 1 and "500 samples dropped between 1.000 s and 1.499 s" in overflow[0]["detail"]
+    assert header["dropped_samples"] == 500
+
+
+CHILD = textwrap.dedent("""
+    import sys, time, numpy as np
+    from recorder import SessionWriter, COLUMN, SAMPLE_COLUMNS
+    path, ack = sys.argv[1], sys.argv[2]
+    writer = SessionWriter(path, {"participant": "crash"}, flush_interval=0.02)
+    row = np.zeros(len(SAMPLE_COLUMNS))
+    acked = 0
+    with open(ack, "w") as log:
+        i = 0
+        while True:
+            row[COLUMN["time"]] = i * 1e-3
+            row[COLUMN["tool_x"]] = i
+            writer.record(row)
+            i += 1
+            if writer.durable_samples != acked:
+                acked = writer.durable_samples
+                log.write(f"{acked}\\n"); log.flush()
+            if i % 50 == 0:
+                time.sleep(0.001)
+""")
+
+
+@pytest.mark.slow
+def test_kill_9_loses_at_most_the_unflushed_tail(tmp_path):
+    rng = random.Random(4)
+    for attempt in range(8):
+        session, ack = tmp_path / f"crash{attempt}", tmp_path / f"ack{attempt}"
+        child = subprocess.Popen([sys.executable, "-c", CHILD, str(session), str(ack)])
+        time.sleep(rng.uniform(0.3, 1.2))
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait()
+        acknowledged = [int(x) for x in ack.read_text().split()] if ack.exists() else []
+        header = recover(session)
+        assert header["status"] == "recovered"
+        recovered = open_session(session)
+        xs = recovered.samples.column("tool_x").to_numpy()
+        np.testing.assert_array_equal(xs, np.arange(len(xs)))  # contiguous, uncorrupted
+        if acknowledged:
+            assert len(xs) >= acknowledged[-1]  # everything acknowledged as durable is there
+        if len(xs):
+            assert recovered.header["recovered_until_s"] == pytest.approx((len(xs) - 1) * 1e-3)
+
+
+def test_truncated_journal_recovers_complete_batches(tmp_path):
+    session = tmp_path / "s"
+    writer = SessionWriter(session, {}, flush_interval=10.0)
+    for chunk in range(5):
+        for row in rows(100, start=100 * chunk):
+            writer.record(row)
+        writer.flush()
+    writer._stop.set()  # simulate a crash: no close(), no end-of-stream marker
+    writer._thread.join()
+    writer._sample_sink.close()
+    writer._event_sink.close()
+    journal = session / "samples.arrows"
+    journal.write_bytes(journal.read_bytes()[:-37])  # power loss tears the last batch
+    header = recover(session)
+    assert header["samples"]["rows"] == 400 and header["samples"]["torn_tail_cut"]
+
+
+def test_bad_files_are_named_and_do_not_hide_others(tmp_path):
+    good = tmp_path / "good"
+    writer = SessionWriter(good, {})
+    for row in rows(100):
+        writer.record(row)
+    writer.close()
+    flipped = tmp_path / "flipped"
+    writer = SessionWriter(flipped, {})
+    for row in rows(100):
+        writer.record(row)
+    writer.close()
+    raw = bytearray((flipped / "samples.parquet").read_bytes())
+    raw[len(raw) // 2] ^= 0x40
+    (flipped / "samples.parquet").write_bytes(bytes(raw))
+    with pytest.raises(RecorderError, match="does not match its recorded SHA-256"):
+        open_session(flipped)
+    future = tmp_path / "future"
+    future.mkdir()
+    (future / "header.json").write_text(json.dumps({"schema_version": 99, "status": "complete"}))
+    with pytest.raises(RecorderError, match="schema version 99 is not one this vascsim reads"):
+        open_session(future)
+    truncated = tmp_path / "truncated"
+    writer = SessionWriter(truncated, {})
+    for row in rows(100):
+        writer.record(row)
+    writer.close()
+    data = (truncated / "samples.parquet").read_bytes()
+    (truncated / "samples.parquet").write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecorderError, match=r"cannot be read|does not match"):
+        open_session(truncated)
+    sessions, problems = list_sessions(tmp_path)
+    assert [s.path.name for s in sessions] == ["good"]
+    assert set(p.name for p in problems) == {"flipped", "future", "truncated"}
+    with pytest.raises(RecorderError, match="already holds a recording"):
+        SessionWriter(good, {})
+
+
+def test_time_going_backwards_is_rejected(tmp_path):
+    writer = SessionWriter(tmp_path / "s", {})
+    data = rows(10)
+    data[5, COLUMN["time"]] = 0.0001
+    for row in data:
+        writer.record(row)
+    writer.close()
+    with pytest.raises(RecorderError, match="time goes backwards at row 5"):
+        open_session(tmp_path / "s")
