@@ -61,12 +61,12 @@ def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
     os.replace(temporary, path)
 
 
-def samples_batch(rows: NDArray[np.float64]) -> pa.RecordBatch:
-    """An Arrow batch of the sample schema from (n, columns) float rows."""
+def samples_batch(columns: NDArray[np.float64]) -> pa.RecordBatch:
+    """An Arrow batch of the sample schema from (columns, n) float data (float columns zero-copy)."""
     arrays = []
     for i, name in enumerate(SAMPLE_COLUMNS):
-        column = rows[:, i]
         kind = INTEGER_COLUMNS.get(name)
+        column = columns[i]
         arrays.append(pa.array(column.astype(kind.to_pandas_dtype()) if kind else column))
     return pa.RecordBatch.from_arrays(arrays, schema=SAMPLE_SCHEMA)
 
@@ -99,7 +99,7 @@ class SessionWriter:
             "flush_interval_s": flush_interval,
         }
         write_json_atomically(self.directory / HEADER_FILE, self.header)
-        self._ring = np.zeros((capacity, len(SAMPLE_COLUMNS)))
+        self._ring = np.zeros((len(SAMPLE_COLUMNS), capacity))  # column-major: batches slice columns
         self._capacity = capacity
         self._head = 0  # rows written by the producer
         self._tail = 0  # rows made durable by the writer thread
@@ -132,7 +132,7 @@ class SessionWriter:
             else:
                 self._drop_range[1] = float(row[0])
             return False
-        self._ring[head % self._capacity] = row
+        self._ring[:, head % self._capacity] = row
         self._head = head + 1
         return True
 
@@ -175,8 +175,13 @@ class SessionWriter:
         started = clock.perf_counter()
         head, tail = self._head, self._tail
         if head > tail:
-            indices = np.arange(tail, head) % self._capacity
-            self._sample_stream.write_batch(samples_batch(self._ring[indices]))
+            start, stop = tail % self._capacity, head % self._capacity
+            if start < stop:
+                self._sample_stream.write_batch(samples_batch(self._ring[:, start:stop]))
+            else:  # wrapped around the end of the ring: two contiguous pieces
+                self._sample_stream.write_batch(samples_batch(self._ring[:, start:]))
+                if stop:
+                    self._sample_stream.write_batch(samples_batch(self._ring[:, :stop]))
         self._note_drops()
         with self._events_lock:
             events, self._events = self._events, []

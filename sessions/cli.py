@@ -141,3 +141,29 @@ def devices(as_json: bool) -> None:
     for r in reports:
         table.add_row(r.name, r.driver, r.connection, r.status)
     Console().print(table)
+
+
+@main.command()
+@click.argument("session_dir", type=click.Path(file_okay=False, path_type=str))
+@click.option("--json", "as_json", is_flag=True, help="Print the recovered session's header as JSON.")
+@user_errors
+def recover(session_dir: str, as_json: bool) -> None:
+    """Recover a session a crash left unfinished (SESSION_DIR holds its journal).
+
+    Every complete batch of the journal becomes the session's Parquet files; the
+    header is marked recovered with the time up to which data was kept (at most one
+    flush interval, 100 ms by default, was lost).
+    """
+    from recorder import recover as recover_session
+
+    header = recover_session(session_dir)
+    if as_json:
+        click.echo(json.dumps(header, indent=2, sort_keys=True))
+        return
+    rows = header["samples"]["rows"]
+    until = header.get("recovered_until_s")
+    kept = f"up to {until:.3f} s" if until is not None else "no samples"
+    click.echo(
+        f"recovered {session_dir}: {rows} samples kept ({kept}); at most "
+        f"{header.get('lost_at_most_s')} s after that was lost"
+    )
