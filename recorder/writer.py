@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import mmap
 import os
 import threading
 import time as clock
@@ -61,8 +62,9 @@ def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
     os.replace(temporary, path)
 
 
-def samples_batch(columns: NDArray[np.float64]) -> pa.RecordBatch:
-    """An Arrow batch of the sample schema from (columns, n) float data (float columns zero-copy)."""
+def samples_batch(rows: NDArray[np.float64]) -> pa.RecordBatch:
+    """An Arrow batch of the sample schema from (n, columns) float rows."""
+    columns = np.ascontiguousarray(rows.T)
     arrays = []
     for i, name in enumerate(SAMPLE_COLUMNS):
         kind = INTEGER_COLUMNS.get(name)
@@ -99,12 +101,13 @@ class SessionWriter:
             "flush_interval_s": flush_interval,
         }
         write_json_atomically(self.directory / HEADER_FILE, self.header)
-        self._ring = np.zeros((len(SAMPLE_COLUMNS), capacity))  # column-major: batches slice columns
+        # Ring and counters live in an anonymous shared mapping, so a producer in a forked
+        # process (the real-time haptic process) records straight into this writer.
+        width = len(SAMPLE_COLUMNS)
+        shared = np.frombuffer(mmap.mmap(-1, 8 * (capacity * width + 8)), dtype=np.float64)
+        self._ring = shared[: capacity * width].reshape(capacity, width)
+        self._counters = shared[capacity * width :]  # head, tail, dropped, first and last dropped time
         self._capacity = capacity
-        self._head = 0  # rows written by the producer
-        self._tail = 0  # rows made durable by the writer thread
-        self.dropped = 0
-        self._drop_range: list[float] = []
         self._events: list[tuple] = []
         self._events_lock = threading.Lock()
         self._sample_sink = open(self.directory / SAMPLES_JOURNAL, "wb")
@@ -124,17 +127,31 @@ class SessionWriter:
     # -- producer side (the haptic loop) ------------------------------------------------------
     def record(self, row: NDArray[np.float64]) -> bool:
         """Queue one sample row (columns as ``recorder.schema.SAMPLE_COLUMNS``); False if dropped."""
-        head = self._head
-        if head - self._tail >= self._capacity:
-            self.dropped += 1
-            if len(self._drop_range) < 2:
-                self._drop_range.append(float(row[0]))
-            else:
-                self._drop_range[1] = float(row[0])
+        counters = self._counters
+        head = int(counters[0])
+        if head - int(counters[1]) >= self._capacity:
+            if counters[2] == 0:
+                counters[3] = row[0]
+            counters[2] += 1
+            counters[4] = row[0]
             return False
-        self._ring[:, head % self._capacity] = row
-        self._head = head + 1
+        self._ring[head % self._capacity] = row
+        counters[0] = head + 1  # publish after the row is complete
         return True
+
+    def record_block(self, rows: NDArray[np.float64]) -> int:
+        """Queue many rows at once (imports, replays); returns how many fitted."""
+        counters = self._counters
+        head = int(counters[0])
+        count = min(self._capacity - (head - int(counters[1])), len(rows))
+        self._ring[(head + np.arange(count)) % self._capacity] = rows[:count]
+        counters[0] = head + count
+        return count
+
+    @property
+    def dropped(self) -> int:
+        """Samples dropped since the last flush (the ring was full)."""
+        return int(self._counters[2])
 
     def event(
         self,
@@ -173,15 +190,9 @@ class SessionWriter:
     def flush(self) -> None:
         """Make everything queued so far durable (journal append + fsync)."""
         started = clock.perf_counter()
-        head, tail = self._head, self._tail
+        head, tail = int(self._counters[0]), int(self._counters[1])
         if head > tail:
-            start, stop = tail % self._capacity, head % self._capacity
-            if start < stop:
-                self._sample_stream.write_batch(samples_batch(self._ring[:, start:stop]))
-            else:  # wrapped around the end of the ring: two contiguous pieces
-                self._sample_stream.write_batch(samples_batch(self._ring[:, start:]))
-                if stop:
-                    self._sample_stream.write_batch(samples_batch(self._ring[:, :stop]))
+            self._sample_stream.write_batch(samples_batch(self._ring[np.arange(tail, head) % self._capacity]))
         self._note_drops()
         with self._events_lock:
             events, self._events = self._events, []
@@ -196,22 +207,22 @@ class SessionWriter:
         for sink in (self._sample_sink, self._event_sink):
             sink.flush()
             os.fsync(sink.fileno())
-        self._tail = head
+        self._counters[1] = head
         self.durable_samples = head
         self.flush_seconds.append(clock.perf_counter() - started)
 
     def _note_drops(self) -> None:
-        if self.dropped and self._drop_range:
-            first, last = self._drop_range[0], self._drop_range[-1]
+        dropped = int(self._counters[2])
+        if dropped:
+            first, last = float(self._counters[3]), float(self._counters[4])
             self.event(
                 first,
                 "queue_overflow",
-                detail=f"{self.dropped} samples dropped between {first:.3f} s "
+                detail=f"{dropped} samples dropped between {first:.3f} s "
                 f"and {last:.3f} s: the recorder could not keep up",
             )
-            self._drop_range = []
-            self.header["dropped_samples"] = self.header.get("dropped_samples", 0) + self.dropped
-            self.dropped = 0
+            self.header["dropped_samples"] = self.header.get("dropped_samples", 0) + dropped
+            self._counters[2] = 0
 
     # -- closing -------------------------------------------------------------------------------------
     def close(self, status: str = "complete") -> dict[str, Any]:

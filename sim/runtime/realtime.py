@@ -29,6 +29,7 @@ from sim.runtime.shared import (
     Arena,
     ControlBlock,
     SharedEvents,
+    SharedFem,
     SharedForceHistory,
     SharedGraphics,
     SharedHapticLog,
@@ -46,7 +47,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     """Run ``simulation`` for ``duration`` seconds of wall time (see the module docstring)."""
     settings = simulation.settings
     capacity = int(duration * settings.haptic_rate * 1.2) + 2000
-    display_capacity = int(duration * settings.display_rate * 1.5) + 100
+    display_capacity = int(duration * settings.display_rate * 1.5) + 100  # plus 15 for the FEM slot
     arena = Arena(
         18
         + 512 * 4
@@ -74,6 +75,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     events = SharedEvents(arena)
     control = ControlBlock(arena)
     simulation.graphics = SharedGraphics(arena)
+    simulation.fem = SharedFem(arena)
     display_telemetry = SharedTelemetry(arena, display_capacity)
     display_pid = _start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()

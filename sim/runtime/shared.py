@@ -16,6 +16,7 @@ step function runs unchanged on either side.
 from __future__ import annotations
 
 import mmap
+import os
 
 import numpy as np
 from numpy.typing import NDArray
@@ -259,3 +260,54 @@ class SharedGraphics:
             start = base + 1 + self.MAX_CONTACT
             contact = (nodes, copy[start : start + 3 * count].reshape(count, 3))
         return GraphicsSnapshot(float(copy[1]), vertices, "", None, contact)
+
+
+class SharedFem:
+    """The FEM layer's snapshot: whole in the process that writes it, and the fields the haptic
+    process records (tip, speed, direction, contact triangle, barycentrics, state) in shared memory.
+
+    Layout: [seq, time, tip 3, tip speed, tangent 3, triangle, barycentric 3, state code].
+    """
+
+    def __init__(self, arena: Arena) -> None:
+        self._slot = arena.take(15)
+        self._owner = os.getpid()
+        self._local = None
+
+    def put(self, snapshot) -> None:
+        from sim.runtime.simulation import STATE_CODES
+
+        self._local = snapshot
+        slot = self._slot
+        slot[0] += 1
+        slot[1] = snapshot.time
+        slot[2:5] = snapshot.needle_vertices[0]
+        slot[5] = snapshot.tip_speed
+        slot[6:9] = snapshot.tip_tangent if snapshot.tip_tangent is not None else 0.0
+        slot[9] = snapshot.contact_triangle
+        slot[10:13] = snapshot.barycentric
+        slot[13] = STATE_CODES.get(snapshot.state, 0)
+        slot[0] += 1
+
+    def get(self):
+        if os.getpid() == self._owner:
+            return self._local
+        from sim.runtime.simulation import STATE_CODES, FemSnapshot
+
+        copy = _consistent_copy(self._slot)
+        if copy is None:
+            return None
+        state = {code: name for name, code in STATE_CODES.items()}.get(int(copy[13]), "free")
+        return FemSnapshot(
+            float(copy[1]),
+            np.zeros(3),
+            copy[2:5].reshape(1, 3),
+            state,
+            np.zeros(0, dtype=np.int64),
+            np.zeros((0, 3)),
+            None,
+            float(copy[5]),
+            copy[6:9],
+            int(copy[9]),
+            tuple(float(w) for w in copy[10:13]),
+        )

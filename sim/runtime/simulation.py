@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import collections
 import heapq
+import math
 import threading
 import time as wallclock
 import traceback
@@ -95,6 +96,13 @@ class FemSnapshot:
     contact_nodes: NDArray[np.int64]
     reaction_forces: NDArray[np.float64]
     contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
+    tip_speed: float = 0.0
+    tip_tangent: NDArray[np.float64] | None = None
+    contact_triangle: int = -1
+    barycentric: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+
+
+STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
 
 
 @dataclass(frozen=True)
@@ -265,6 +273,7 @@ class Simulation:
         rules: PiercingRules | None = None,
         renderer: Callable[[GraphicsSnapshot], None] | None = None,
         on_event: Callable[[NeedleEvent | RuntimeEvent], None] | None = None,
+        on_sample: Callable[..., None] | None = None,
     ) -> None:
         self.settings = settings or RuntimeSettings()
         self.device = device
@@ -280,6 +289,7 @@ class Simulation:
         self.telemetry = {layer: LoopTelemetry(layer, self.settings.period(layer)) for layer in LAYERS}
         self.renderer = renderer
         self.on_event = on_event
+        self.on_sample = on_sample  # (now, DeviceSample, force sent, latest FemSnapshot) every haptic tick
         self.stop_reason: str | None = None
         self.error: str | None = None
         self.error_layer: str | None = None
@@ -309,6 +319,8 @@ class Simulation:
             self.stop("device_lost", now)
             return
         self.haptic_log.append(now, sample.position, sample.pressed(0), force)
+        if self.on_sample is not None:
+            self.on_sample(now, sample, force, self.fem.get())
 
     def fem_step(self, now: float) -> None:
         holder = self.holder.get()
@@ -333,15 +345,21 @@ class Simulation:
         if contact is not None:
             contact = (contact[0].copy(), contact[1].copy())
         vertices = self.interaction.needle_vertices()
+        interaction = self.interaction
+        nominated = interaction.contacts[0] if interaction.contacts else None
         self.fem.put(
             FemSnapshot(
                 now,
                 step.needle_force,
                 vertices,
-                self.interaction.state,
+                interaction.state,
                 step.contact_nodes,
                 step.reaction_forces,
                 contact,
+                interaction.tip_speed,
+                interaction.needle.tip_tangent(interaction.needle_pose),
+                -1 if nominated is None else nominated.triangle,
+                (math.nan,) * 3 if nominated is None else tuple(float(w) for w in nominated.barycentric),
             )
         )
 

@@ -108,7 +108,10 @@ def test_kill_9_loses_at_most_the_unflushed_tail(tmp_path):
     for attempt in range(8):
         session, ack = tmp_path / f"crash{attempt}", tmp_path / f"ack{attempt}"
         child = subprocess.Popen([sys.executable, "-c", CHILD, str(session), str(ack)])
-        time.sleep(rng.uniform(0.3, 1.2))
+        deadline = time.monotonic() + 60
+        while not (ack.exists() and ack.read_text().strip()) and time.monotonic() < deadline:
+            time.sleep(0.01)  # wait until the recorder is running
+        time.sleep(rng.uniform(0.0, 0.6))
         os.kill(child.pid, signal.SIGKILL)
         child.wait()
         acknowledged = [int(x) for x in ack.read_text().split()] if ack.exists() else []

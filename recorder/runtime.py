@@ -1,0 +1,80 @@
+"""Recording a running simulation: one sample row per haptic tick, every event."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from recorder.schema import COLUMN, SAMPLE_COLUMNS
+from recorder.writer import SessionWriter
+from sim.devices.base import DeviceSample
+from sim.runtime.simulation import STATE_CODES, FemSnapshot, Simulation
+
+
+def quaternion_of(rotation: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    """(w, x, y, z) of a rotation matrix, in plain floats (cheap enough per haptic tick)."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = rotation.tolist()
+    trace = m00 + m11 + m22
+    if trace > 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        return 0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s
+    if m00 >= m11 and m00 >= m22:
+        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        return (m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s
+    if m11 >= m22:
+        s = 2.0 * math.sqrt(1.0 + m11 - m00 - m22)
+        return (m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s
+    s = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+    return (m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s
+
+
+class RuntimeRecorder:
+    """Feeds a :class:`Simulation`'s haptic ticks and events into a :class:`SessionWriter`."""
+
+    def __init__(self, writer: SessionWriter) -> None:
+        self.writer = writer
+        self._row = np.zeros(len(SAMPLE_COLUMNS))
+        self._row[COLUMN["local_stress"]] = math.nan
+        self._row[COLUMN["stretch"]] = math.nan
+        self._last_time: float | None = None
+
+    def attach(self, simulation: Simulation) -> Simulation:
+        simulation.on_sample = self.on_sample
+        simulation.on_event = self.on_event
+        return simulation
+
+    def on_sample(
+        self, now: float, sample: DeviceSample, force: NDArray[np.float64], fem: FemSnapshot | None
+    ) -> None:
+        row = self._row
+        row[0] = now
+        row[1:4] = sample.position
+        row[4:8] = quaternion_of(sample.rotation)
+        row[8:11] = sample.velocity
+        if fem is not None:
+            row[11:14] = fem.needle_vertices[0]
+            row[14] = fem.tip_speed
+            if fem.tip_tangent is not None:
+                row[15:18] = fem.tip_tangent
+            row[COLUMN["contact_triangle"]] = fem.contact_triangle
+            row[22:25] = fem.barycentric
+            row[COLUMN["pierced"]] = STATE_CODES.get(fem.state, 0)
+        row[18:21] = force
+        row[COLUMN["grip"]] = sample.buttons & 1
+        row[COLUMN["period"]] = 0.0 if self._last_time is None else now - self._last_time
+        self._last_time = now
+        self.writer.record(row)
+
+    def on_event(self, event) -> None:
+        self.writer.event(
+            event.time,
+            event.kind,
+            triangle=getattr(event, "triangle", -1),
+            barycentric=getattr(event, "barycentric", (math.nan,) * 3),
+            entry_angle_deg=getattr(event, "entry_angle_deg", math.nan),
+            tip_speed=getattr(event, "tip_speed", math.nan),
+            layer=getattr(event, "layer", "fem" if hasattr(event, "triangle") else ""),
+            detail=event.detail.splitlines()[0] if event.detail else "",
+        )
