@@ -66,6 +66,7 @@ def forked_cost(directory: str, seconds: float = 10.0) -> np.ndarray:
     start = time.perf_counter() + 0.1
     pid = os.fork()
     if pid == 0:
+        writer.prefault()  # as the haptic process does before its loop
         row = np.zeros(len(SAMPLE_COLUMNS))
         for i in range(calls):
             _sleep_until(start + i * 1e-3)

@@ -43,6 +43,7 @@ class RuntimeRecorder:
     def attach(self, simulation: Simulation) -> Simulation:
         simulation.on_sample = self.on_sample
         simulation.on_event = self.on_event
+        simulation.on_haptic_start = self.writer.prefault
         return simulation
 
     def on_sample(

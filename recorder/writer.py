@@ -148,6 +148,11 @@ class SessionWriter:
         counters[0] = head + count
         return count
 
+    def prefault(self) -> None:
+        """Touch every page of the ring from the calling (producer) process, so recording never
+        takes a first-touch page fault (after fork, shared pages are mapped lazily)."""
+        self._ring.reshape(-1)[::512].sum()
+
     @property
     def dropped(self) -> int:
         """Samples dropped since the last flush (the ring was full)."""

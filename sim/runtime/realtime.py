@@ -201,6 +201,8 @@ def _haptic_process(
     gc.freeze()
     gc.disable()
     period = 1.0 / simulation.settings.haptic_rate
+    if simulation.on_haptic_start is not None:
+        simulation.on_haptic_start()
     simulation.device.read(0.0)  # warm caches and lazy imports before the first deadline
     simulation.forces.at(0.0)
     start = control.start

@@ -290,6 +290,7 @@ class Simulation:
         self.renderer = renderer
         self.on_event = on_event
         self.on_sample = on_sample  # (now, DeviceSample, force sent, latest FemSnapshot) every haptic tick
+        self.on_haptic_start: Callable[[], None] | None = None  # runs in the haptic process before its loop
         self.stop_reason: str | None = None
         self.error: str | None = None
         self.error_layer: str | None = None
