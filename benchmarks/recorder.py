@@ -82,6 +82,23 @@ def forked_cost(directory: str, seconds: float = 10.0) -> np.ndarray:
     return costs.copy()
 
 
+def paced_floor(calls: int = 10_000) -> np.ndarray:
+    """The same timing around a call that does nothing, paced the same way: the measurement floor."""
+
+    def nothing(row: np.ndarray) -> bool:
+        return True
+
+    row = np.zeros(len(SAMPLE_COLUMNS))
+    costs = np.empty(calls)
+    start = time.perf_counter() + 0.05
+    for i in range(calls):
+        _sleep_until(start + i * 1e-3)
+        t0 = time.perf_counter_ns()
+        nothing(row)
+        costs[i] = (time.perf_counter_ns() - t0) * 1e-9
+    return costs
+
+
 def hot_cost(directory: str, calls: int = 200_000) -> np.ndarray:
     """record() called back to back (the writer flushing meanwhile)."""
     writer = SessionWriter(directory, {"benchmark": "hot"}, flush_interval=0.1, capacity=1 << 20)
@@ -132,6 +149,11 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as directory:
             forked.append(forked_cost(directory + "/s"))
     forked = np.concatenate(forked)
+    floor = paced_floor()
+    print(
+        f"floor: an empty call timed and paced the same way: p50={1e6 * np.percentile(floor, 50):.2f} us "
+        f"p99={1e6 * np.percentile(floor, 99):.2f} us"
+    )
     p50, p99 = 1e6 * np.percentile(forked, 50), 1e6 * np.percentile(forked, 99)
     print(
         f"record() from a forked producer at 1 kHz, writer thread in the parent: p50={p50:.2f} us "
