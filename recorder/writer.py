@@ -144,7 +144,10 @@ class SessionWriter:
         counters = self._counters
         head = int(counters[0])
         count = min(self._capacity - (head - int(counters[1])), len(rows))
-        self._ring[(head + np.arange(count)) % self._capacity] = rows[:count]
+        start = head % self._capacity
+        first = min(count, self._capacity - start)  # up to the end of the ring, then from its start
+        self._ring[start : start + first] = rows[:first]
+        self._ring[: count - first] = rows[first:count]
         counters[0] = head + count
         return count
 
@@ -197,7 +200,13 @@ class SessionWriter:
         started = clock.perf_counter()
         head, tail = int(self._counters[0]), int(self._counters[1])
         if head > tail:
-            self._sample_stream.write_batch(samples_batch(self._ring[np.arange(tail, head) % self._capacity]))
+            start, stop = tail % self._capacity, head % self._capacity
+            if start < stop:  # one contiguous slice: no gather copy
+                self._sample_stream.write_batch(samples_batch(self._ring[start:stop]))
+            else:
+                self._sample_stream.write_batch(
+                    samples_batch(self._ring[np.arange(tail, head) % self._capacity])
+                )
         self._note_drops()
         with self._events_lock:
             events, self._events = self._events, []

@@ -210,3 +210,17 @@ def test_recover_command(tmp_path):
     assert "300 samples kept (up to 0.299 s)" in result.output
     again = CliRunner().invoke(main, ["recover", str(session)])
     assert again.exit_code == 1 and "has no journal to recover" in again.output
+
+
+def test_record_block_wraps_around_the_ring(tmp_path):
+    writer = SessionWriter(tmp_path / "s", {}, flush_interval=10.0, capacity=100)
+    data = rows(250)
+    assert writer.record_block(data[:60]) == 60
+    writer.flush()
+    assert writer.record_block(data[60:160]) == 100  # wraps: 40 at the end, 60 from the start
+    assert writer.record_block(data[160:170]) == 0  # full until flushed
+    writer.flush()
+    assert writer.record_block(data[160:250]) == 90
+    writer.close()
+    times = open_session(tmp_path / "s").samples.column("time").to_numpy()
+    np.testing.assert_array_equal(times, data[:, COLUMN["time"]])
