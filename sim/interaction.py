@@ -323,16 +323,19 @@ class NeedleInteraction:
 
     @staticmethod
     def _needle_point_at_plane(vertices: NDArray, contact: TriangleContact) -> NDArray | None:
-        side = (vertices - contact.point) @ contact.normal
-        crossing = np.flatnonzero(np.sign(side[:-1]) != np.sign(side[1:]))
+        """Where the needle crosses the contact's plane, the crossing nearest the contact point."""
+        side = vertices @ contact.normal - float(contact.point @ contact.normal)
+        sign = np.sign(side)
+        crossing = np.flatnonzero(sign[:-1] != sign[1:])
         if crossing.size == 0:
             return None
-        points = []
-        for k in crossing:
-            t = side[k] / (side[k] - side[k + 1])
-            points.append(vertices[k] + t * (vertices[k + 1] - vertices[k]))
-        points = np.array(points)
-        return points[np.argmin(np.linalg.norm(points - contact.point, axis=1))]
+        a, b = side[crossing], side[crossing + 1]
+        t = a / (a - b)
+        points = vertices[crossing] + t[:, None] * (vertices[crossing + 1] - vertices[crossing])
+        if len(points) == 1:
+            return points[0]
+        offsets = points - contact.point
+        return points[np.argmin(np.einsum("ij,ij->i", offsets, offsets))]
 
     def _event(
         self, kind: str, time: float, hits, k: int, detail: str, angle: float = math.nan
@@ -409,10 +412,12 @@ class NeedleInteraction:
             intended.append(np.outer(contact.barycentric, sideways))
         if not nodes:
             return FemStep(np.zeros(3), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
-        all_nodes = np.unique(np.concatenate(nodes))
-        stacked = np.concatenate(intended)
-        merged = np.zeros((len(all_nodes), 3))
-        np.add.at(merged, np.searchsorted(all_nodes, np.concatenate(nodes)), stacked)
+        if len(nodes) == 1:
+            all_nodes, merged = nodes[0], intended[0]
+        else:  # entry and exit triangles may share nodes: add their intended displacements
+            all_nodes = np.unique(np.concatenate(nodes))
+            merged = np.zeros((len(all_nodes), 3))
+            np.add.at(merged, np.searchsorted(all_nodes, np.concatenate(nodes)), np.concatenate(intended))
         reactions = self._reactions(all_nodes, merged, merged.sum(axis=0))
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
 
