@@ -146,10 +146,6 @@ class TetMesh:
         """A copy with moved nodes (same elements, regions and node sets), validated again."""
         return TetMesh(points, self.tets, self.regions, self.region_names, self.node_sets)
 
-    def nodes_where(self, mask: ArrayLike) -> NDArray[np.int64]:
-        """Ids of the nodes selected by a boolean mask over nodes."""
-        return np.flatnonzero(np.asarray(mask, dtype=bool))
-
 
 def triangle_normals(points: NDArray[np.float64], triangles: NDArray[np.int64]) -> NDArray[np.float64]:
     """Unit right-hand normals of triangles (zero vector for a degenerate triangle)."""

@@ -224,3 +224,12 @@ def test_record_block_wraps_around_the_ring(tmp_path):
     writer.close()
     times = open_session(tmp_path / "s").samples.column("time").to_numpy()
     np.testing.assert_array_equal(times, data[:, COLUMN["time"]])
+
+
+def test_every_event_kind_the_simulator_emits_has_a_place_in_the_schema():
+    from recorder.schema import EVENT_KINDS
+    from sim.interaction import EVENT_KINDS as NEEDLE_KINDS
+    from sim.runtime.shared import EVENT_CODES as RUNTIME_KINDS
+
+    assert set(NEEDLE_KINDS) <= set(EVENT_KINDS)
+    assert set(RUNTIME_KINDS) <= set(EVENT_KINDS)
