@@ -9,6 +9,8 @@ from __future__ import annotations
 import pyarrow as pa
 
 from sim.errors import VascsimError
+from sim.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
+from sim.runtime.shared import EVENT_CODES as RUNTIME_EVENT_KINDS
 
 SCHEMA_VERSION = 1
 
@@ -69,25 +71,18 @@ SAMPLE_SCHEMA = pa.schema(
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": str(SCHEMA_VERSION)},
 )
 
-EVENT_KINDS = (
-    "contact_start",
-    "contact_end",
-    "pierce",
-    "exit",
-    "pull_through",
-    "release",
-    "regrab",
-    "implausible_hit",
-    "force_clamped",
-    "nonfinite_force",
-    "watchdog",
-    "watchdog_recovered",
-    "device_lost",
-    "layer_failed",
-    "stopped",
-    "queue_overflow",
-    "marker",
-    "annotation",
+# Every kind the simulator emits (needle events, runtime events), plus the recorder's own.
+EVENT_KINDS = tuple(
+    dict.fromkeys(
+        (
+            *NEEDLE_EVENT_KINDS,
+            *RUNTIME_EVENT_KINDS,
+            "stopped",
+            "queue_overflow",
+            "marker",
+            "annotation",
+        )
+    )
 )
 
 EVENT_SCHEMA = pa.schema(

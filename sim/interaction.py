@@ -270,17 +270,7 @@ class NeedleInteraction:
             if np.any(hits.triangle == c.triangle) or self._crosses_plane_near(vertices, c)
         ]
         if not still_held:
-            self.state, self.contacts, self._handle = "free", [], None
-            return [
-                NeedleEvent(
-                    "pull_through",
-                    time,
-                    entry.triangle,
-                    tuple(entry.barycentric),
-                    tip_speed=self.tip_speed,
-                    detail="needle pulled clear of the wall",
-                )
-            ]
+            return [self._let_go(time, "pull_through", entry, "needle pulled clear of the wall")]
         events = []
         entry_rank = int(through_entry[0]) if through_entry.size else len(hits)
         ahead = range(entry_rank)  # crossings nearer the tip than the entry
@@ -362,18 +352,17 @@ class NeedleInteraction:
             return self._contact_step(time, tip)
         return self._pierced_step(vertices)
 
+    def _let_go(self, time: float, kind: str, contact: TriangleContact, detail: str) -> NeedleEvent:
+        """Back to the free state, and the event saying where the tissue let go of the needle."""
+        self.state, self.contacts, self._handle = "free", [], None
+        return NeedleEvent(
+            kind, time, contact.triangle, tuple(contact.barycentric), tip_speed=self.tip_speed, detail=detail
+        )
+
     def _contact_step(self, time: float, tip: NDArray) -> FemStep:
         contact = self.contacts[0]
         if contact.penetration(tip) <= 0.0:
-            self.state, self.contacts, self._handle = "free", [], None
-            event = NeedleEvent(
-                "contact_end",
-                time,
-                contact.triangle,
-                tuple(contact.barycentric),
-                tip_speed=self.tip_speed,
-                detail="tip withdrawn above the surface",
-            )
+            event = self._let_go(time, "contact_end", contact, "tip withdrawn above the surface")
             return FemStep(np.zeros(3), np.zeros(0, dtype=np.int64), np.zeros((0, 3)), [event])
         displacement = tip - contact.point
         intended = np.outer(contact.barycentric, displacement)

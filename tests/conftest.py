@@ -33,3 +33,16 @@ def top_centre_triangle(mesh):
     normals = mesh.surface_normals
     candidates = np.flatnonzero(np.any(mesh.surface_triangles == node, axis=1) & (normals[:, 2] > 0.99))
     return mesh.surface_triangles[candidates[0]]
+
+
+@pytest.fixture(scope="session")
+def wall_patch_biphase():
+    """A precomputed biphase 1.5 mm wall patch (12 x 10 mm) held on three sides; its free x1
+    edge is the wound edge the scripted suturing pass bites near."""
+    from sim.fem import BiphaseTissue
+
+    mesh = box_mesh((0.012, 0.01, 0.0015), (12, 10, 3))
+    fixed = np.concatenate([mesh.node_sets[k] for k in ("x0", "y0", "y1")])
+    tissue = BiphaseTissue.build(mesh, fixed)
+    tissue.precompute(use_cache=False)
+    return tissue

@@ -7,21 +7,15 @@ from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder, quaternion_of
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import quaternion_matrix
-from sim.fem import BiphaseTissue
-from sim.mesh import box_mesh
 from sim.needle import Needle, rotation_about
 from sim.runtime import Simulation
 
 
 @pytest.fixture(scope="module")
-def setup():
-    mesh = box_mesh((0.012, 0.01, 0.0015), (12, 10, 3))
-    fixed = np.concatenate([mesh.node_sets[k] for k in ("x0", "y0", "y1")])
-    tissue = BiphaseTissue.build(mesh, fixed)
-    tissue.precompute(use_cache=False)
+def setup(wall_patch_biphase):
     needle = Needle.curved()
     suturing = SuturingPass(needle, [0.0105, 0.0051, 0.0015], [0, 0, 1], [1, 0, 0])
-    return tissue, needle, suturing
+    return wall_patch_biphase, needle, suturing
 
 
 @pytest.mark.parametrize("clock", ["simulated", "realtime"])

@@ -7,8 +7,6 @@ import pytest
 
 from sim.devices import DeviceLostError, ScriptedDevice, SuturingPass
 from sim.devices.base import DeviceLimits
-from sim.fem import BiphaseTissue
-from sim.mesh import box_mesh
 from sim.needle import Needle, Pose
 from sim.runtime import RunResult, RuntimeSettings, SafetySettings, Simulation
 from sim.runtime.safety import ForceSafety
@@ -17,12 +15,8 @@ LIMITS = DeviceLimits(max_force=0.02, max_force_rate=2.0)  # tight, so the pass 
 
 
 @pytest.fixture(scope="module")
-def tissue():
-    mesh = box_mesh((0.012, 0.01, 0.0015), (12, 10, 3))
-    fixed = np.concatenate([mesh.node_sets[k] for k in ("x0", "y0", "y1")])
-    model = BiphaseTissue.build(mesh, fixed)
-    model.precompute(use_cache=False)
-    return model
+def tissue(wall_patch_biphase):
+    return wall_patch_biphase
 
 
 def make(tissue, device_wrapper=None, limits=LIMITS, **settings):
