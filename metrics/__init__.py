@@ -1,1 +1,23 @@
-"""vascsim metrics package."""
+"""The metrics engine: per-session metrics, construct-validity statistics, proficiency, learning curves.
+
+The core imports without the web stack. Public API::
+
+    from metrics import compute_session_metrics, construct_validity, REGISTRY
+    from metrics.datasets import jigsaws
+"""
+
+from metrics.registry import REGISTRY, REGISTRY_VERSION, Metric
+from metrics.session import compute_session_metrics, metrics_of
+from metrics.streams import MetricsError, SessionStreams, from_frame, from_recorded
+
+__all__ = [
+    "REGISTRY",
+    "REGISTRY_VERSION",
+    "Metric",
+    "MetricsError",
+    "SessionStreams",
+    "compute_session_metrics",
+    "from_frame",
+    "from_recorded",
+    "metrics_of",
+]

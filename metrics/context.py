@@ -1,0 +1,105 @@
+"""Derived quantities shared by several metrics, computed once per session on first use."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+
+from metrics.kinematics import Movements, UniformMotion, find_movements
+from metrics.streams import SessionStreams
+
+MOTION_RATE_HZ = 100.0
+"""Speed-based metrics resample the path to at most 100 Hz (smoothing cuts at 6 Hz; 1 kHz adds nothing)."""
+
+
+@dataclass(frozen=True)
+class Insertion:
+    """One needle insertion: pierce time, the end of its passage, the episode's first contact."""
+
+    contact_time: float
+    pierce_time: float
+    end_time: float
+    entry_angle_deg: float
+
+
+class SessionContext:
+    """Lazily derived views of one session's streams, shared by the registered metrics."""
+
+    def __init__(self, streams: SessionStreams, insertion_radius: float = 0.005) -> None:
+        self.streams = streams
+        self.insertion_radius = insertion_radius
+
+    @cached_property
+    def motion(self) -> UniformMotion:
+        rate = min(MOTION_RATE_HZ, self.streams.sample_rate)
+        return UniformMotion.of(self.streams.time, self.streams.tool_position, rate)
+
+    @cached_property
+    def movements(self) -> Movements:
+        return find_movements(self.motion)
+
+    @cached_property
+    def insertions(self) -> list[Insertion]:
+        """Pierce events with their episode's first contact and the passage's end (exit, release or end)."""
+        events = self.streams.events
+        kinds = events["kind"].to_numpy()
+        times = events["time"].to_numpy(dtype=np.float64)
+        angles = events["entry_angle_deg"].to_numpy(dtype=np.float64)
+        result = []
+        episode_start = math.nan
+        for k, kind in enumerate(kinds):
+            if kind == "contact_start" and math.isnan(episode_start):
+                episode_start = times[k]
+            elif kind == "pierce":
+                later = np.flatnonzero(
+                    (times > times[k]) & np.isin(kinds, ("exit", "pull_through", "pierce"))
+                )
+                end = times[later[0]] if later.size else self.streams.time[-1]
+                start = episode_start if not math.isnan(episode_start) else times[k]
+                result.append(Insertion(start, times[k], float(end), angles[k]))
+                episode_start = math.nan
+            elif kind == "contact_end":
+                episode_start = math.nan
+        return result
+
+    @cached_property
+    def insertion_point(self) -> NDArray[np.float64] | None:
+        """Where the needle first pierced (m): the session's attribute, else the tip at the first pierce."""
+        given = self.streams.attributes.get("insertion_point")
+        if given is not None:
+            return np.asarray(given, dtype=np.float64)
+        if not self.insertions or self.streams.tip_position is None:
+            return None
+        return self.tip_at(self.insertions[0].pierce_time)
+
+    def tip_at(self, time: float) -> NDArray[np.float64]:
+        tip = self.streams.tip_position
+        return np.array([np.interp(time, self.streams.time, tip[:, k]) for k in range(3)])
+
+    @cached_property
+    def tip_speed(self) -> NDArray[np.float64] | None:
+        tip = self.streams.tip_position
+        if tip is None:
+            return None
+        return np.linalg.norm(np.gradient(tip, self.streams.time, axis=0), axis=1)
+
+    @cached_property
+    def force_magnitude(self) -> NDArray[np.float64] | None:
+        force = self.streams.force
+        return None if force is None else np.linalg.norm(force, axis=1)
+
+    @cached_property
+    def in_tissue(self) -> NDArray[np.bool_]:
+        """Samples where the needle touches or is inside the tissue (all samples without a state stream)."""
+        state = self.streams.needle_state
+        if state is None:
+            return np.ones(self.streams.time.size, dtype=bool)
+        return state > 0
+
+    def window(self, start: float, end: float) -> NDArray[np.bool_]:
+        time = self.streams.time
+        return (time >= start) & (time <= end)

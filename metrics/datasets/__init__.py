@@ -1,0 +1,1 @@
+"""Importers for public surgical-motion data sets, mapped onto the same metric pipeline."""

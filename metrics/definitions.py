@@ -1,0 +1,509 @@
+"""The registered per-session metrics. Importing this module fills :data:`metrics.registry.REGISTRY`.
+
+Thresholds are module constants, documented in docs/metrics.md; changing one means
+bumping :data:`metrics.registry.REGISTRY_VERSION`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from metrics import kinematics
+from metrics.context import SessionContext
+from metrics.registry import HIGHER, LOWER, metric
+
+NAN = math.nan
+STRAIN_LIMIT_STRETCH = 1.3
+"""Principal stretch above which arterial tissue is taken to be damaged (~30 % strain; Holzapfel 2005)."""
+HIGH_STRESS_PA = 100e3
+"""Surface von Mises stress counted as high: the simulator's default puncture stress (100 kPa)."""
+STRESS_RADIUS_M = 0.005
+"""Stress localisation looks at the surface within 5 mm of the insertion point."""
+FORCE_RATE_WINDOW_S = 0.01
+"""Force rate is taken over 10 ms differences of the force vector (device-rate noise averages out)."""
+
+MOTION_REF = "Oropesa et al. 2013, Surg Endosc 27:1029 (motion analysis review)"
+SMOOTH_REF = "Balasubramanian et al. 2015, J NeuroEng Rehabil 12:112"
+PAPER_REF = "the vascsim source paper (haptic simulator for suturing in vascular surgery), section 10"
+
+
+# -- motion --------------------------------------------------------------------------
+@metric(
+    "task_time",
+    unit="s",
+    definition="Time from the first to the last sample of the session.",
+    better=LOWER,
+    reference=MOTION_REF,
+    group="motion",
+)
+def task_time(context: SessionContext) -> float:
+    return context.streams.duration
+
+
+@metric(
+    "path_length",
+    unit="m",
+    definition="Length of the dominant tool's path: sum of distances between consecutive samples.",
+    better=LOWER,
+    reference=MOTION_REF,
+    group="motion",
+)
+def path_length(context: SessionContext) -> float:
+    return kinematics.path_length(context.streams.tool_position)
+
+
+@metric(
+    "movement_count",
+    unit="1",
+    definition=(
+        "Number of submovements: peaks of the tool's speed (resampled to <= 100 Hz, 6 Hz zero-phase "
+        "low-pass) above 2 mm/s, rising >= 20 % of the session's peak speed above their valleys, "
+        ">= 0.1 s apart."
+    ),
+    better=LOWER,
+    reference=MOTION_REF,
+    group="motion",
+)
+def movement_count(context: SessionContext) -> float:
+    return float(context.movements.count)
+
+
+@metric(
+    "economy_of_motion",
+    unit="1",
+    definition=(
+        "Sum over submovements of the straight-line distance from onset to end (speed below 10 % of the "
+        "movement's peak) divided by the path length within them; 1 when every movement is straight."
+    ),
+    better=HIGHER,
+    reference=MOTION_REF,
+    group="motion",
+)
+def economy_of_motion(context: SessionContext) -> float:
+    return kinematics.economy_of_motion(context.motion, context.movements)
+
+
+@metric(
+    "log_dimensionless_jerk",
+    unit="1",
+    definition=(
+        "-ln((T^3 / v_peak^2) * integral of |jerk|^2 dt) over the whole session on the smoothed tool path "
+        "(speed-normalised LDLJ); closer to zero is smoother, a minimum-jerk reach scores -5.32."
+    ),
+    better=HIGHER,
+    reference=SMOOTH_REF,
+    group="motion",
+)
+def log_dimensionless_jerk(context: SessionContext) -> float:
+    return kinematics.log_dimensionless_jerk(context.motion)
+
+
+@metric(
+    "spectral_arc_length",
+    unit="1",
+    definition=(
+        "SPARC of the tool's speed profile: arc length of its normalised Fourier magnitude up to the last "
+        "frequency <= 10 Hz above 5 % magnitude (zero-padded 2^4 times); closer to zero is smoother."
+    ),
+    better=HIGHER,
+    reference=SMOOTH_REF,
+    group="motion",
+)
+def spectral_arc_length(context: SessionContext) -> float:
+    return kinematics.spectral_arc_length(context.motion.speed, context.motion.rate)
+
+
+@metric(
+    "idle_time",
+    unit="s",
+    definition="Total time in stretches of >= 0.25 s with the tool's smoothed speed below 5 mm/s.",
+    better=LOWER,
+    reference=MOTION_REF,
+    group="motion",
+)
+def idle_time(context: SessionContext) -> float:
+    return kinematics.idle_time(context.motion)
+
+
+# -- insertion -----------------------------------------------------------------------
+def _tip_speed_near(context: SessionContext, after: bool) -> float:
+    speed = context.tip_speed
+    point = context.insertion_point
+    if speed is None or point is None or not context.insertions:
+        return NAN
+    tip = context.streams.tip_position
+    near = np.linalg.norm(tip - point, axis=1) <= context.insertion_radius
+    values = []
+    previous_end = context.streams.time[0]
+    for insertion in context.insertions:
+        if after:
+            window = context.window(insertion.pierce_time, insertion.end_time)
+        else:
+            window = context.window(previous_end, insertion.pierce_time)
+        previous_end = insertion.end_time
+        selected = speed[window & near]
+        if selected.size:
+            values.append(float(selected.mean()))
+    return float(np.mean(values)) if values else NAN
+
+
+@metric(
+    "tip_speed_before_pierce",
+    unit="m/s",
+    definition=(
+        "Mean needle-tip speed within 5 mm of the insertion point (the tip at the first pierce) before each "
+        "pierce, averaged over insertions."
+    ),
+    streams=("tip_position", "events"),
+    better=LOWER,
+    reference=PAPER_REF,
+    group="insertion",
+)
+def tip_speed_before_pierce(context: SessionContext) -> float:
+    return _tip_speed_near(context, after=False)
+
+
+@metric(
+    "tip_speed_after_pierce",
+    unit="m/s",
+    definition=(
+        "Mean needle-tip speed within 5 mm of the insertion point from each pierce to the end of its "
+        "passage (exit, pull-through or next pierce), averaged over insertions."
+    ),
+    streams=("tip_position", "events"),
+    better=LOWER,
+    reference=PAPER_REF,
+    group="insertion",
+)
+def tip_speed_after_pierce(context: SessionContext) -> float:
+    return _tip_speed_near(context, after=True)
+
+
+@metric(
+    "entry_angle_error_deg",
+    unit="deg",
+    definition=(
+        "Angle between the needle tip's direction and the inward surface normal at each pierce "
+        "(0 = perpendicular, the ideal bite), averaged over insertions."
+    ),
+    streams=("events",),
+    better=LOWER,
+    reference="Moorthy et al. 2003, BMJ 327:1032 (needle entry perpendicular to tissue)",
+    group="insertion",
+)
+def entry_angle_error_deg(context: SessionContext) -> float:
+    angles = [abs(i.entry_angle_deg) for i in context.insertions if not math.isnan(i.entry_angle_deg)]
+    return float(np.mean(angles)) if angles else NAN
+
+
+@metric(
+    "attempts",
+    unit="1",
+    definition="Contact episodes (contact start to contact end) that ended without the needle piercing.",
+    streams=("events",),
+    better=LOWER,
+    reference=PAPER_REF,
+    group="insertion",
+)
+def attempts(context: SessionContext) -> float:
+    kinds = context.streams.events["kind"].to_numpy()
+    failed = 0
+    open_episode = False
+    pierced = False
+    for kind in kinds:
+        if kind == "contact_start":
+            open_episode, pierced = True, False
+        elif kind == "pierce":
+            pierced = True
+        elif kind == "contact_end" and open_episode:
+            failed += not pierced
+            open_episode = False
+    return float(failed)
+
+
+@metric(
+    "regrabs",
+    unit="1",
+    definition="Times the needle holder let go of the needle and took it again (one per stitch is usual).",
+    streams=("events",),
+    better=LOWER,
+    reference="Reznick et al. 1997, Am J Surg 173:226 (OSATS instrument handling)",
+    group="insertion",
+)
+def regrabs(context: SessionContext) -> float:
+    return float(np.sum(context.streams.events["kind"].to_numpy() == "regrab"))
+
+
+@metric(
+    "contact_to_pierce_time",
+    unit="s",
+    definition="Time from the first contact of an episode to its pierce, averaged over insertions.",
+    streams=("events",),
+    better=LOWER,
+    reference=PAPER_REF,
+    group="insertion",
+)
+def contact_to_pierce_time(context: SessionContext) -> float:
+    values = [i.pierce_time - i.contact_time for i in context.insertions]
+    return float(np.mean(values)) if values else NAN
+
+
+# -- force ---------------------------------------------------------------------------
+@metric(
+    "peak_force",
+    unit="N",
+    definition="Largest magnitude of the force sent to the device (the tissue's reaction).",
+    streams=("force",),
+    better=LOWER,
+    reference="O'Toole et al. 1999, J Am Coll Surg 189:114",
+    group="force",
+)
+def peak_force(context: SessionContext) -> float:
+    magnitude = context.force_magnitude
+    return NAN if magnitude is None else float(magnitude.max())
+
+
+def _contact_force(context: SessionContext):
+    magnitude = context.force_magnitude
+    if magnitude is None:
+        return None
+    selected = magnitude[context.in_tissue]
+    return selected if selected.size else None
+
+
+@metric(
+    "mean_force",
+    unit="N",
+    definition="Mean force magnitude over samples with the needle touching or inside the tissue.",
+    streams=("force",),
+    better=LOWER,
+    reference="O'Toole et al. 1999, J Am Coll Surg 189:114",
+    group="force",
+)
+def mean_force(context: SessionContext) -> float:
+    selected = _contact_force(context)
+    return NAN if selected is None else float(selected.mean())
+
+
+@metric(
+    "rms_force",
+    unit="N",
+    definition="Root-mean-square force magnitude over samples with the needle touching or inside the tissue.",
+    streams=("force",),
+    better=LOWER,
+    reference="O'Toole et al. 1999, J Am Coll Surg 189:114",
+    group="force",
+)
+def rms_force(context: SessionContext) -> float:
+    selected = _contact_force(context)
+    return NAN if selected is None else float(np.sqrt(np.mean(selected * selected)))
+
+
+@metric(
+    "force_at_insertion",
+    unit="N",
+    definition="Force magnitude at the instant of each pierce (interpolated), averaged over insertions.",
+    streams=("force", "events"),
+    better=LOWER,
+    reference="Moody et al. 2003 (grip forces at insertion); " + PAPER_REF,
+    group="force",
+)
+def force_at_insertion(context: SessionContext) -> float:
+    magnitude = context.force_magnitude
+    if magnitude is None or not context.insertions:
+        return NAN
+    times = [i.pierce_time for i in context.insertions]
+    return float(np.mean(np.interp(times, context.streams.time, magnitude)))
+
+
+@metric(
+    "peak_force_rate",
+    unit="N/s",
+    definition="Largest |F(t + 10 ms) - F(t)| / 10 ms of the force vector (resampled to 1 kHz).",
+    streams=("force",),
+    better=LOWER,
+    reference="Trejos et al. 2014, Surg Endosc 28:2530 (force derivatives in skill assessment)",
+    group="force",
+)
+def peak_force_rate(context: SessionContext) -> float:
+    force = context.streams.force
+    if force is None:
+        return NAN
+    grid, uniform = kinematics.resample_uniform(context.streams.time, force, rate=1000.0)
+    lag = max(1, int(round(FORCE_RATE_WINDOW_S * 1000.0)))
+    if uniform.shape[0] <= lag:
+        return NAN
+    change = np.linalg.norm(uniform[lag:] - uniform[:-lag], axis=1)
+    return float(change.max() / (grid[lag] - grid[0]))
+
+
+@metric(
+    "force_clamp_hits",
+    unit="1",
+    definition="Times the runtime's safety layer clamped the force to the device's rated maximum.",
+    streams=("events",),
+    better=LOWER,
+    reference="vascsim runtime safety (docs/runtime.md)",
+    group="force",
+)
+def force_clamp_hits(context: SessionContext) -> float:
+    return float(np.sum(context.streams.events["kind"].to_numpy() == "force_clamped"))
+
+
+# -- tissue --------------------------------------------------------------------------
+def _stress_near(context: SessionContext):
+    field = context.streams.stress_field
+    point = context.insertion_point
+    if field is None or point is None or len(field) == 0:
+        return None
+    centres = field[["x", "y", "z"]].to_numpy(dtype=np.float64)
+    near = np.linalg.norm(centres - point, axis=1) <= STRESS_RADIUS_M
+    if not near.any():
+        return None
+    return field["area"].to_numpy(dtype=np.float64)[near], field["von_mises"].to_numpy(dtype=np.float64)[near]
+
+
+@metric(
+    "high_stress_area",
+    unit="m^2",
+    definition=(
+        "Tissue surface within 5 mm of the insertion point whose von Mises stress at the moment of insertion "
+        "exceeds 100 kPa (the puncture stress): how widely the bite loads the wall."
+    ),
+    streams=("stress_field",),
+    better=LOWER,
+    reference=PAPER_REF + " (stress localisation)",
+    group="tissue",
+)
+def high_stress_area(context: SessionContext) -> float:
+    near = _stress_near(context)
+    if near is None:
+        return NAN
+    area, stress = near
+    return float(area[stress > HIGH_STRESS_PA].sum())
+
+
+@metric(
+    "stress_concentration",
+    unit="1",
+    definition=(
+        "Area-weighted mean von Mises stress within 5 mm of the insertion point divided by its peak there, "
+        "at the moment of insertion: near 0 when the load is focused on the bite, 1 when it is spread."
+    ),
+    streams=("stress_field",),
+    better=LOWER,
+    reference=PAPER_REF + " (stress localisation)",
+    group="tissue",
+)
+def stress_concentration(context: SessionContext) -> float:
+    near = _stress_near(context)
+    if near is None:
+        return NAN
+    area, stress = near
+    peak = float(stress.max())
+    if peak <= 0 or area.sum() <= 0:
+        return NAN
+    return float(np.sum(area * stress) / area.sum() / peak)
+
+
+@metric(
+    "peak_stretch",
+    unit="1",
+    definition="Largest principal stretch of the tissue around the contact over the session.",
+    streams=("stretch",),
+    better=LOWER,
+    reference="Holzapfel et al. 2005, Am J Physiol Heart 289:H2048 (arterial failure stretch)",
+    group="tissue",
+)
+def peak_stretch(context: SessionContext) -> float:
+    stretch = context.streams.stretch
+    if stretch is None or np.all(np.isnan(stretch)):
+        return NAN
+    return float(np.nanmax(stretch))
+
+
+@metric(
+    "time_above_strain_limit",
+    unit="s",
+    definition="Time with the principal stretch around the contact above 1.3 (tissue damage).",
+    streams=("stretch",),
+    better=LOWER,
+    reference="Holzapfel et al. 2005, Am J Physiol Heart 289:H2048 (arterial failure stretch)",
+    group="tissue",
+)
+def time_above_strain_limit(context: SessionContext) -> float:
+    stretch = context.streams.stretch
+    if stretch is None or np.all(np.isnan(stretch)):
+        return NAN
+    dt = np.diff(context.streams.time)
+    above = np.nan_to_num(stretch[:-1], nan=0.0) > STRAIN_LIMIT_STRETCH
+    return float(np.sum(dt[above]))
+
+
+# -- subordinate hand ----------------------------------------------------------------
+def _insertion_mask(context: SessionContext):
+    if not context.insertions:
+        return None
+    mask = np.zeros(context.streams.time.size, dtype=bool)
+    for insertion in context.insertions:
+        mask |= context.window(insertion.pierce_time, insertion.end_time)
+    return mask
+
+
+@metric(
+    "subordinate_displacement",
+    unit="m",
+    definition=(
+        "Largest displacement of the subordinate hand from where it was at each pierce, during the "
+        "insertions (it should hold the tissue still)."
+    ),
+    streams=("subordinate_displacement", "events"),
+    better=LOWER,
+    reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
+    group="subordinate",
+)
+def subordinate_displacement(context: SessionContext) -> float:
+    moved = context.streams.subordinate_displacement
+    if moved is None or not context.insertions:
+        return NAN
+    largest = 0.0
+    for insertion in context.insertions:
+        window = context.window(insertion.pierce_time, insertion.end_time)
+        if window.any():
+            segment = moved[window]
+            largest = max(largest, float(np.linalg.norm(segment - segment[0], axis=1).max()))
+    return largest
+
+
+@metric(
+    "subordinate_activity",
+    unit="m",
+    definition="Path length of the subordinate hand during the insertions (pierce to end of passage).",
+    streams=("subordinate_displacement", "events"),
+    better=LOWER,
+    reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
+    group="subordinate",
+)
+def subordinate_activity(context: SessionContext) -> float:
+    moved = context.streams.subordinate_displacement
+    mask = _insertion_mask(context)
+    if moved is None or mask is None:
+        return NAN
+    steps = np.linalg.norm(np.diff(moved, axis=0), axis=1)
+    return float(steps[mask[1:] & mask[:-1]].sum())
+
+
+@metric(
+    "subordinate_path_length",
+    unit="m",
+    definition="Path length of the subordinate hand over the whole session.",
+    streams=("subordinate_displacement",),
+    better=LOWER,
+    reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
+    group="subordinate",
+)
+def subordinate_path_length(context: SessionContext) -> float:
+    moved = context.streams.subordinate_displacement
+    return NAN if moved is None else kinematics.path_length(moved)

@@ -1,0 +1,100 @@
+"""Proficiency-based progression: benchmarks from the expert group, pass/fail per session.
+
+Benchmark rules (per metric, from one value per expert: the median of their sessions):
+
+- ``"mean"``: the expert mean (Gallagher et al. 2005, Ann Surg 241:364): a trainee
+  passes a metric when at least as good as the average expert;
+- ``"median"``: the expert median;
+- ``"percentile:Q"``: the value that Q % of experts reach, e.g. ``"percentile:80"``.
+
+A session passes a metric when its value is on the better side of (or equal to) the
+benchmark; it passes overall when it passes every benchmarked metric it has. A
+trainee is proficient after ``consecutive`` overall passes in a row (default 2,
+Gallagher's criterion).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from metrics.registry import REGISTRY
+from metrics.streams import MetricsError
+
+
+def _rule_value(values: np.ndarray, rule: str, better: str) -> float:
+    if rule == "mean":
+        return float(np.mean(values))
+    if rule == "median":
+        return float(np.median(values))
+    if rule.startswith("percentile:"):
+        try:
+            share = float(rule.split(":", 1)[1])
+        except ValueError:
+            share = math.nan
+        if not 0 < share <= 100:
+            raise MetricsError(f"percentile rule needs a share in (0, 100]; got {rule!r}")
+        # the value that share % of experts reach: worse-side quantile
+        q = share / 100 if better == "lower" else 1 - share / 100
+        return float(np.quantile(values, q))
+    raise MetricsError(f"benchmark rule must be 'mean', 'median' or 'percentile:Q'; got {rule!r}")
+
+
+def proficiency_benchmarks(
+    table: pd.DataFrame,
+    metrics: Sequence[str],
+    group_col: str = "label",
+    expert_group: str = "expert",
+    cluster_col: str = "participant_id",
+    rule: str = "mean",
+) -> pd.DataFrame:
+    """One row per metric: ``metric``, ``benchmark``, ``better``, ``rule``, ``experts`` (count)."""
+    experts = table[table[group_col] == expert_group]
+    if experts.empty:
+        raise MetricsError(f"no sessions with {group_col} == {expert_group!r} to set benchmarks from")
+    per_expert = experts.groupby(cluster_col)[list(metrics)].median()
+    rows = []
+    for name in metrics:
+        if name not in REGISTRY:
+            raise MetricsError(f"unknown metric {name!r}: benchmarks need the registry's direction")
+        better = REGISTRY[name].better
+        values = per_expert[name].dropna().to_numpy()
+        benchmark = _rule_value(values, rule, better) if values.size else math.nan
+        rows.append(
+            {"metric": name, "benchmark": benchmark, "better": better, "rule": rule, "experts": values.size}
+        )
+    return pd.DataFrame(rows)
+
+
+def assess_proficiency(table: pd.DataFrame, benchmarks: pd.DataFrame) -> pd.DataFrame:
+    """Pass/fail per session and benchmarked metric (``pass_<metric>``) and overall (``passed``)."""
+    result = pd.DataFrame(index=table.index)
+    passes = []
+    for row in benchmarks.itertuples():
+        if math.isnan(row.benchmark):
+            continue
+        values = table[row.metric].to_numpy(dtype=np.float64)
+        ok = values <= row.benchmark if row.better == "lower" else values >= row.benchmark
+        column = pd.array(np.where(np.isnan(values), pd.NA, ok), dtype="boolean")
+        result[f"pass_{row.metric}"] = column
+        passes.append(f"pass_{row.metric}")
+    if passes:
+        result["passed"] = result[passes].fillna(True).all(axis=1) & result[passes].notna().any(axis=1)
+    else:
+        result["passed"] = False
+    return result
+
+
+def trials_to_proficiency(passed: Sequence[bool], consecutive: int = 2) -> int | None:
+    """1-based trial at which the ``consecutive``-th pass in a row happened, or None."""
+    if consecutive < 1:
+        raise MetricsError(f"consecutive must be at least 1; got {consecutive}")
+    run = 0
+    for index, ok in enumerate(passed, start=1):
+        run = run + 1 if ok else 0
+        if run >= consecutive:
+            return index
+    return None

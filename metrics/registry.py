@@ -1,0 +1,128 @@
+"""The one registry of per-session metrics: name, unit, definition, streams, direction, reference.
+
+Every metric is a function of a :class:`metrics.context.SessionContext`; registering
+it here is what makes it part of ``compute_session_metrics``, the reports and the
+catalog. ``REGISTRY_VERSION`` is stored with every metric result: bump it when a
+definition or a threshold changes, so old and new numbers are never mixed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from metrics.streams import MetricsError
+
+if TYPE_CHECKING:
+    from metrics.context import SessionContext
+
+REGISTRY_VERSION = "1"
+
+LOWER, HIGHER = "lower", "higher"
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One per-session metric.
+
+    better: ``"lower"`` or ``"higher"``, which values indicate more skill.
+    streams: the session streams it needs (``SessionStreams`` attribute names, or
+    ``"events"``); without them the value is NaN.
+    """
+
+    name: str
+    unit: str
+    definition: str
+    streams: tuple[str, ...]
+    better: str
+    reference: str
+    group: str
+    compute: Callable[[SessionContext], float]
+
+    def __post_init__(self) -> None:
+        if self.better not in (LOWER, HIGHER):
+            raise MetricsError(
+                f"metric {self.name!r}: better must be 'lower' or 'higher'; got {self.better!r}"
+            )
+
+    @property
+    def sign(self) -> int:
+        """+1 when higher values are better, -1 when lower values are better."""
+        return 1 if self.better == HIGHER else -1
+
+
+class Registry:
+    """Ordered collection of metrics, looked up by name."""
+
+    def __init__(self) -> None:
+        self._metrics: dict[str, Metric] = {}
+
+    def add(self, metric: Metric) -> Metric:
+        if metric.name in self._metrics:
+            raise MetricsError(f"metric {metric.name!r} is registered twice")
+        self._metrics[metric.name] = metric
+        return metric
+
+    def __getitem__(self, name: str) -> Metric:
+        try:
+            return self._metrics[name]
+        except KeyError:
+            known = ", ".join(self._metrics)
+            raise MetricsError(f"unknown metric {name!r}; known metrics: {known}") from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._metrics
+
+    def __iter__(self) -> Iterator[Metric]:
+        return iter(self._metrics.values())
+
+    def __len__(self) -> int:
+        return len(self._metrics)
+
+    def names(self) -> list[str]:
+        return list(self._metrics)
+
+    def select(self, names: list[str] | None) -> list[Metric]:
+        return list(self) if names is None else [self[n] for n in names]
+
+    def describe(self):
+        """The registry as a DataFrame (name, unit, better, streams, group, definition, reference)."""
+        import pandas as pd
+
+        return pd.DataFrame(
+            [
+                {
+                    "name": m.name,
+                    "unit": m.unit,
+                    "better": m.better,
+                    "group": m.group,
+                    "streams": ", ".join(m.streams),
+                    "definition": m.definition,
+                    "reference": m.reference,
+                }
+                for m in self
+            ]
+        )
+
+
+REGISTRY = Registry()
+
+
+def metric(
+    name: str,
+    *,
+    unit: str,
+    definition: str,
+    streams: tuple[str, ...] = (),
+    better: str,
+    reference: str,
+    group: str,
+) -> Callable[[Callable[[SessionContext], float]], Callable[[SessionContext], float]]:
+    """Decorator registering a metric function in :data:`REGISTRY`."""
+
+    def register(function: Callable[[SessionContext], float]) -> Callable[[SessionContext], float]:
+        REGISTRY.add(Metric(name, unit, definition, streams, better, reference, group, function))
+        return function
+
+    return register

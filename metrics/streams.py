@@ -1,0 +1,215 @@
+"""What the metrics read: one session's streams as arrays, from any source.
+
+A :class:`SessionStreams` holds the time base and the dominant tool's positions
+(always), and whatever else the source has: needle tip, force, tissue stress and
+stretch, needle state, subordinate hand, grip, events. Metrics that need a stream
+the session lacks are NaN for it, never guessed.
+
+Builders: :func:`from_recorded` (a recorder session), :func:`from_frame` (any table
+with time and tool positions, e.g. a CSV from another simulator).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from sim.errors import VascsimError
+
+EVENT_COLUMNS = ("time", "kind", "entry_angle_deg", "tip_speed", "triangle")
+
+
+class MetricsError(VascsimError, ValueError):
+    """A stream, table or parameter given to the metrics engine is unusable; the message names it."""
+
+
+def _empty_events() -> pd.DataFrame:
+    return pd.DataFrame(
+        {
+            "time": pd.Series(dtype=float),
+            "kind": pd.Series(dtype=str),
+            "entry_angle_deg": pd.Series(dtype=float),
+            "tip_speed": pd.Series(dtype=float),
+            "triangle": pd.Series(dtype=int),
+        }
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class SessionStreams:
+    """One session's samples (SI units) and events.
+
+    time: (n,) s, non-decreasing. tool_position: (n, 3) m, the dominant hand's
+    needle holder. Optional (n,)-aligned arrays: tip_position (n, 3) m; force (n, 3) N
+    sent to the device (the tissue's reaction); needle_state (n,) 0 free, 1 contact,
+    2 pierced, 3 exited; local_stress (n,) Pa; stretch (n,) principal stretch;
+    subordinate_displacement (n, 3) m from the subordinate hand's start; grip (n,)
+    1 closed. events: DataFrame with at least time and kind. stress_field: optional
+    table of the tissue surface at the moment of insertion (columns x, y, z, area,
+    von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known.
+    """
+
+    session_id: str
+    time: NDArray[np.float64]
+    tool_position: NDArray[np.float64]
+    participant_id: str | None = None
+    label: str | None = None
+    tip_position: NDArray[np.float64] | None = None
+    force: NDArray[np.float64] | None = None
+    needle_state: NDArray[np.int8] | None = None
+    local_stress: NDArray[np.float64] | None = None
+    stretch: NDArray[np.float64] | None = None
+    subordinate_displacement: NDArray[np.float64] | None = None
+    grip: NDArray[np.int8] | None = None
+    events: pd.DataFrame = field(default_factory=_empty_events)
+    stress_field: pd.DataFrame | None = None
+    force_limit: float | None = None
+    attributes: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        time = np.ascontiguousarray(self.time, dtype=np.float64)
+        if time.ndim != 1 or time.size < 2:
+            raise MetricsError(
+                f"session {self.session_id!r}: time needs at least 2 samples; got {time.shape}"
+            )
+        if not np.all(np.isfinite(time)):
+            raise MetricsError(f"session {self.session_id!r}: time has non-finite values")
+        if np.any(np.diff(time) < 0):
+            k = int(np.flatnonzero(np.diff(time) < 0)[0])
+            raise MetricsError(f"session {self.session_id!r}: time goes backwards at sample {k + 1}")
+        object.__setattr__(self, "time", time)
+        n = time.size
+        for name, width in (
+            ("tool_position", 3),
+            ("tip_position", 3),
+            ("force", 3),
+            ("subordinate_displacement", 3),
+            ("needle_state", 1),
+            ("local_stress", 1),
+            ("stretch", 1),
+            ("grip", 1),
+        ):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            array = np.asarray(value)
+            expected = (n, width) if width > 1 else (n,)
+            if array.shape != expected:
+                raise MetricsError(
+                    f"session {self.session_id!r}: {name} has shape {array.shape}, expected {expected}"
+                )
+            object.__setattr__(self, name, np.ascontiguousarray(array))
+        events = self.events
+        missing = [c for c in ("time", "kind") if c not in events.columns]
+        if missing:
+            raise MetricsError(f"session {self.session_id!r}: events lack column(s) {', '.join(missing)}")
+        events = events.sort_values("time", kind="stable").reset_index(drop=True)
+        for column in EVENT_COLUMNS:
+            if column not in events.columns:
+                events[column] = -1 if column == "triangle" else np.nan
+        object.__setattr__(self, "events", events)
+
+    @property
+    def duration(self) -> float:
+        return float(self.time[-1] - self.time[0])
+
+    @property
+    def sample_rate(self) -> float:
+        """Median sampling rate (Hz)."""
+        return float(1.0 / np.median(np.diff(self.time)))
+
+    def event_times(self, kind: str) -> NDArray[np.float64]:
+        return self.events.loc[self.events["kind"] == kind, "time"].to_numpy(dtype=np.float64)
+
+    def has(self, stream: str) -> bool:
+        if stream == "events":
+            return len(self.events) > 0
+        if stream in ("time", "tool_position"):
+            return True
+        return getattr(self, stream) is not None
+
+
+def from_recorded(session, participant_id: str | None = None, label: str | None = None) -> SessionStreams:
+    """Streams of a :class:`recorder.Session` (header ``session_id``/``participant``/``label`` if present)."""
+    samples = session.samples
+    header = dict(session.header)
+
+    def columns(*names: str) -> NDArray[np.float64]:
+        return np.column_stack([samples.column(n).to_numpy() for n in names]).astype(np.float64)
+
+    def column(name: str) -> NDArray:
+        return samples.column(name).to_numpy()
+
+    events = session.events.to_pandas()
+    metadata = header
+    stress = column("local_stress").astype(np.float64)
+    stretch = column("stretch").astype(np.float64)
+    return SessionStreams(
+        session_id=str(header.get("session_id", session.path.name)),
+        participant_id=participant_id or metadata.get("participant_id"),
+        label=label or metadata.get("label"),
+        time=column("time").astype(np.float64),
+        tool_position=columns("tool_x", "tool_y", "tool_z"),
+        tip_position=columns("tip_x", "tip_y", "tip_z"),
+        force=columns("force_x", "force_y", "force_z"),
+        needle_state=column("pierced").astype(np.int8),
+        local_stress=None if np.all(np.isnan(stress)) else stress,
+        stretch=None if np.all(np.isnan(stretch)) else stretch,
+        subordinate_displacement=columns("sub_dx", "sub_dy", "sub_dz"),
+        grip=column("grip").astype(np.int8),
+        events=events,
+        force_limit=metadata.get("force_limit"),
+        attributes=metadata,
+    )
+
+
+def from_frame(
+    frame: pd.DataFrame,
+    session_id: str,
+    *,
+    time: str = "time",
+    tool_position: Sequence[str] = ("tool_x", "tool_y", "tool_z"),
+    tip_position: Sequence[str] | None = None,
+    force: Sequence[str] | None = None,
+    subordinate_position: Sequence[str] | None = None,
+    participant_id: str | None = None,
+    label: str | None = None,
+    events: pd.DataFrame | None = None,
+    position_scale: float = 1.0,
+) -> SessionStreams:
+    """Streams from any table with a time column and tool positions (other columns optional).
+
+    position_scale converts the table's length unit to metres (e.g. 1e-3 for mm).
+    subordinate_position: absolute positions of the other hand; stored as displacement
+    from its first sample.
+    """
+    missing = [c for c in (time, *tool_position) if c not in frame.columns]
+    for group in (tip_position, force, subordinate_position):
+        missing += [c for c in (group or ()) if c not in frame.columns]
+    if missing:
+        raise MetricsError(f"session {session_id!r}: table lacks column(s) {', '.join(missing)}")
+
+    def block(names: Sequence[str] | None, scale: float = 1.0) -> NDArray[np.float64] | None:
+        if names is None:
+            return None
+        return frame[list(names)].to_numpy(dtype=np.float64) * scale
+
+    subordinate = block(subordinate_position, position_scale)
+    if subordinate is not None:
+        subordinate = subordinate - subordinate[0]
+    return SessionStreams(
+        session_id=session_id,
+        participant_id=participant_id,
+        label=label,
+        time=frame[time].to_numpy(dtype=np.float64),
+        tool_position=block(tool_position, position_scale),
+        tip_position=block(tip_position, position_scale),
+        force=block(force),
+        subordinate_displacement=subordinate,
+        events=events if events is not None else _empty_events(),
+    )
