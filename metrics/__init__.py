@@ -9,14 +9,17 @@ The core imports without the web stack. Public API::
 from metrics.registry import REGISTRY, REGISTRY_VERSION, Metric
 from metrics.session import compute_session_metrics, metrics_of
 from metrics.streams import MetricsError, SessionStreams, from_frame, from_recorded
+from metrics.validity import ConstructValidityResult, construct_validity
 
 __all__ = [
     "REGISTRY",
     "REGISTRY_VERSION",
+    "ConstructValidityResult",
     "Metric",
     "MetricsError",
     "SessionStreams",
     "compute_session_metrics",
+    "construct_validity",
     "from_frame",
     "from_recorded",
     "metrics_of",

@@ -18,7 +18,12 @@ MOTION_RATE_HZ = 100.0
 
 @dataclass(frozen=True)
 class Insertion:
-    """One needle insertion: pierce time, the end of its passage, the episode's first contact."""
+    """One needle insertion: pierce time, the end of its passage, the episode's first contact.
+
+    entry_angle_deg: the needle tip's angle to the inward normal when it first touched
+    the tissue in this episode (the bite's entry angle; the pierce comes after the
+    wrist has already turned the needle further).
+    """
 
     contact_time: float
     pierce_time: float
@@ -50,20 +55,21 @@ class SessionContext:
         times = events["time"].to_numpy(dtype=np.float64)
         angles = events["entry_angle_deg"].to_numpy(dtype=np.float64)
         result = []
-        episode_start = math.nan
+        episode_start = episode_angle = math.nan
         for k, kind in enumerate(kinds):
             if kind == "contact_start" and math.isnan(episode_start):
-                episode_start = times[k]
+                episode_start, episode_angle = times[k], angles[k]
             elif kind == "pierce":
                 later = np.flatnonzero(
                     (times > times[k]) & np.isin(kinds, ("exit", "pull_through", "pierce"))
                 )
                 end = times[later[0]] if later.size else self.streams.time[-1]
                 start = episode_start if not math.isnan(episode_start) else times[k]
-                result.append(Insertion(start, times[k], float(end), angles[k]))
-                episode_start = math.nan
+                angle = episode_angle if not math.isnan(episode_angle) else angles[k]
+                result.append(Insertion(start, times[k], float(end), angle))
+                episode_start = episode_angle = math.nan
             elif kind == "contact_end":
-                episode_start = math.nan
+                episode_start = episode_angle = math.nan
         return result
 
     @cached_property

@@ -118,7 +118,7 @@ def spectral_arc_length(context: SessionContext) -> float:
 @metric(
     "idle_time",
     unit="s",
-    definition="Total time in stretches of >= 0.25 s with the tool's smoothed speed below 5 mm/s.",
+    definition="Total time in stretches of >= 0.25 s with the tool's smoothed speed below 1 mm/s.",
     better=LOWER,
     reference=MOTION_REF,
     group="motion",
@@ -185,8 +185,8 @@ def tip_speed_after_pierce(context: SessionContext) -> float:
     "entry_angle_error_deg",
     unit="deg",
     definition=(
-        "Angle between the needle tip's direction and the inward surface normal at each pierce "
-        "(0 = perpendicular, the ideal bite), averaged over insertions."
+        "Angle between the needle tip's direction and the inward surface normal when it first touches the "
+        "tissue in each episode that ends in a pierce (0 = perpendicular, the ideal bite), averaged."
     ),
     streams=("events",),
     better=LOWER,

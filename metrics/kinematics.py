@@ -201,8 +201,8 @@ def spectral_arc_length(
     return -float(np.sum(np.sqrt(df * df + dm * dm)))
 
 
-IDLE_SPEED = 0.005
-"""Below 5 mm/s the hand counts as still."""
+IDLE_SPEED = 0.001
+"""Below 1 mm/s the hand counts as still (needle insertion itself runs at a few mm/s)."""
 IDLE_MIN_DURATION = 0.25
 """Stillness shorter than 0.25 s is part of a movement, not idling."""
 

@@ -82,7 +82,8 @@ def assess_proficiency(table: pd.DataFrame, benchmarks: pd.DataFrame) -> pd.Data
         result[f"pass_{row.metric}"] = column
         passes.append(f"pass_{row.metric}")
     if passes:
-        result["passed"] = result[passes].fillna(True).all(axis=1) & result[passes].notna().any(axis=1)
+        passed = result[passes].fillna(True).all(axis=1) & result[passes].notna().any(axis=1)
+        result["passed"] = passed.astype(bool)
     else:
         result["passed"] = False
     return result
