@@ -97,10 +97,10 @@ def test_bad_rows_name_the_file_and_line(task):
     lines = path.read_bytes().split(b"\r\n")
     lines[3] = b" ".join(lines[3].split()[:75])
     path.write_bytes(b"\r\n".join(lines))
-    with pytest.raises(MetricsError, match="Suturing_C001.txt"):
+    with pytest.raises(MetricsError, match=r"Suturing_C001\.txt"):
         jigsaws.load(folder, meta)
     meta.write_bytes(b"Suturing_B001\t\tX\t13\t\t1\t1\t1\t1\t1\t1\r\n")
-    with pytest.raises(MetricsError, match="line 1: skill level must be N, I or E"):
+    with pytest.raises(MetricsError, match=r"line 1: skill level must be N, I or E"):
         jigsaws.read_meta(meta)
     with pytest.raises(MetricsError, match="does not exist"):
         jigsaws.load(folder / "nowhere", meta)
