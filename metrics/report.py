@@ -1,0 +1,371 @@
+"""The study report: HTML and Markdown, CSV tables, PNG and SVG figures, in one folder.
+
+Readable without the dashboard: ``report.html`` embeds nothing remote, the figures
+sit beside it, and every choice (label validated against, analysis level, benchmark
+rule) is stated in the text. Reports on synthetic participants say so at the top.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from jinja2 import Environment
+from markupsafe import Markup
+from sklearn.metrics import roc_curve
+
+from metrics.registry import REGISTRY, REGISTRY_VERSION
+from metrics.study import StudyAnalysis, metric_unit, oriented
+from metrics.validity import aggregate_by_participant
+
+FIGURE_FORMATS = ("png", "svg")
+
+
+def _save(figure, folder: Path, name: str) -> str:
+    for kind in FIGURE_FORMATS:
+        figure.savefig(folder / f"{name}.{kind}", dpi=110, bbox_inches="tight")
+    plt.close(figure)
+    return f"figures/{name}.png"
+
+
+def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
+    settings = analysis.settings
+    metrics = analysis.validity.table["metric"].tolist()
+    columns = 4
+    rows = max(1, math.ceil(len(metrics) / columns))
+    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.6 * rows), squeeze=False)
+    data = analysis.sessions
+    practice = (
+        data["phase"].fillna("practice") != "retention" if "phase" in data else np.ones(len(data), bool)
+    )
+    per_participant = aggregate_by_participant(
+        data[practice & data[settings.group_col].isin(settings.groups)],
+        settings.group_col,
+        settings.cluster_col,
+        metrics,
+    )
+    significant = set(analysis.validity.discriminating())
+    for axis, metric in zip(axes.ravel(), metrics, strict=False):
+        groups = [
+            per_participant.loc[per_participant[settings.group_col] == g, metric].dropna()
+            for g in settings.groups
+        ]
+        axis.boxplot(groups, tick_labels=list(settings.groups), widths=0.5)
+        for k, values in enumerate(groups, start=1):
+            axis.scatter(
+                np.full(len(values), k) + np.linspace(-0.08, 0.08, len(values)), values, s=8, alpha=0.6
+            )
+        axis.set_title(metric + (" *" if metric in significant else ""), fontsize=9)
+        axis.set_ylabel(metric_unit(metric), fontsize=8)
+        axis.tick_params(labelsize=7)
+    for axis in axes.ravel()[len(metrics) :]:
+        axis.set_visible(False)
+    figure.suptitle(
+        f"Per-participant medians by {settings.group_col} (* discriminates after Holm)", fontsize=10
+    )
+    figure.tight_layout()
+    return _save(figure, folder, "box_plots")
+
+
+def _roc(analysis: StudyAnalysis, folder: Path) -> str:
+    settings = analysis.settings
+    table = analysis.validity.table.dropna(subset=["auc"])
+    ranked = table.assign(effect=(table["auc"] - 0.5).abs()).sort_values("effect", ascending=False).head(6)
+    data = analysis.sessions
+    practice = (
+        data["phase"].fillna("practice") != "retention" if "phase" in data else np.ones(len(data), bool)
+    )
+    per_participant = aggregate_by_participant(
+        data[practice & data[settings.group_col].isin(settings.groups)],
+        settings.group_col,
+        settings.cluster_col,
+        ranked["metric"].tolist(),
+    )
+    skilled = (per_participant[settings.group_col] == settings.skilled_group).to_numpy()
+    figure, axis = plt.subplots(figsize=(5, 5))
+    for metric in ranked["metric"]:
+        values = oriented(per_participant[metric], metric)
+        keep = ~np.isnan(values)
+        if keep.sum() < 2 or len(set(skilled[keep])) < 2:
+            continue
+        fpr, tpr, _ = roc_curve(skilled[keep], values[keep])
+        area = float(np.trapezoid(tpr, fpr))
+        axis.plot(fpr, tpr, label=f"{metric} (AUC {area:.2f})")
+    composite = analysis.validity.composite
+    if composite is not None and not math.isnan(composite.auc):
+        scores = composite.scores.dropna(subset=["score"])
+        fpr, tpr, _ = roc_curve(scores["group"] == settings.skilled_group, scores["score"])
+        axis.plot(fpr, tpr, "k", linewidth=2.5, label=f"composite, out of fold (AUC {composite.auc:.2f})")
+    axis.plot([0, 1], [0, 1], ":", color="grey")
+    axis.set_xlabel("false positive rate")
+    axis.set_ylabel(f"true positive rate ({settings.skilled_group})")
+    axis.set_title("ROC, participant level, metrics oriented better = higher", fontsize=9)
+    axis.legend(fontsize=7, loc="lower right")
+    return _save(figure, folder, "roc")
+
+
+def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
+    settings = analysis.settings
+    data = analysis.sessions
+    practice = (
+        data["phase"].fillna("practice") != "retention" if "phase" in data else np.ones(len(data), bool)
+    )
+    trainees = data[
+        (data[settings.group_col] != settings.skilled_group) & data[settings.group_col].isin(settings.groups)
+    ]
+    paths = []
+    for bench in analysis.benchmarks.itertuples():
+        figure, axis = plt.subplots(figsize=(6, 3.6))
+        participants = trainees[settings.cluster_col].unique()
+        for participant in participants[:40]:
+            rows = trainees[(trainees[settings.cluster_col] == participant) & practice.loc[trainees.index]]
+            line = axis.plot(rows["trial"], rows[bench.metric], "o", markersize=3, alpha=0.7)
+            curve = analysis.learning_curves
+            fitted = curve[
+                (curve.get("participant_id") == participant) & (curve.get("metric") == bench.metric)
+            ]
+            if not fitted.empty:
+                f = fitted.iloc[0]
+                n = np.linspace(1, rows["trial"].max(), 60)
+                model = f["plateau"] + f["amplitude"] * (
+                    n ** -f["rate"] if f["model"] == "power" else np.exp(-f["rate"] * (n - 1))
+                )
+                axis.plot(n, model, "-", color=line[0].get_color(), alpha=0.7, linewidth=1)
+            delayed = trainees[
+                (trainees[settings.cluster_col] == participant) & ~practice.loc[trainees.index]
+            ]
+            if not delayed.empty:
+                axis.plot(
+                    delayed["trial"], delayed[bench.metric], "s", color=line[0].get_color(), markersize=5
+                )
+        axis.axhline(
+            bench.benchmark,
+            color="k",
+            linestyle="--",
+            label=f"benchmark ({bench.rule} of {settings.skilled_group}s)",
+        )
+        axis.set_xlabel("trial (squares: retention)")
+        axis.set_ylabel(f"{bench.metric} [{metric_unit(bench.metric)}]")
+        axis.legend(fontsize=7)
+        axis.set_title(f"Learning curves: {bench.metric} ({bench.better} is better)", fontsize=9)
+        paths.append(_save(figure, folder, f"learning_{bench.metric}"))
+    return paths
+
+
+def _fmt(value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, bool | np.bool_):
+        return "yes" if value else "no"
+    if isinstance(value, float | np.floating):
+        return f"{value:.3g}"
+    return str(value)
+
+
+def _markdown_table(frame: pd.DataFrame) -> str:
+    header = "| " + " | ".join(map(str, frame.columns)) + " |"
+    rule = "| " + " | ".join("---" for _ in frame.columns) + " |"
+    body = ["| " + " | ".join(_fmt(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    return "\n".join([header, rule, *body])
+
+
+def _html_table(frame: pd.DataFrame) -> Markup:
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(_fmt(v))}</td>" for v in row) + "</tr>"
+        for row in frame.itertuples(index=False)
+    )
+    return Markup(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+
+
+def summary_table(analysis: StudyAnalysis) -> pd.DataFrame:
+    """The validity table's headline columns, in the order a reader scans them."""
+    groups = analysis.settings.groups
+    table = analysis.validity.table
+    columns = [
+        "metric",
+        "unit",
+        f"median_{groups[0]}",
+        f"median_{groups[1]}",
+        "auc",
+        "auc_ci_low",
+        "auc_ci_high",
+    ]
+    columns += ["cliffs_delta", "p_value", "p_holm", "discriminates", "direction", "as_expected"]
+    return table[columns]
+
+
+TEMPLATE = """<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>{{ title }}</title>
+<style>
+body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 1em 0; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.5em; text-align: right; }
+th { background: #f3f3f3; } td:first-child, th:first-child { text-align: left; }
+.warning { background: #fff3cd; border: 1px solid #e0c060; padding: 0.6em 1em; }
+img { max-width: 100%; }
+</style></head><body>
+<h1>{{ title }}</h1>
+{% if synthetic %}<p class="warning"><strong>Synthetic data.</strong> Some or all participants in this
+study are synthetic (scripted profiles run through the simulator), labelled so in the catalog. These numbers
+demonstrate the pipeline; they are not evidence about people.</p>{% endif %}
+<h2>How this was analysed</h2>
+<ul>{% for line in method %}<li>{{ line }}</li>{% endfor %}</ul>
+{% if notes %}<h2>Read this first</h2>
+<ul>{% for note in notes %}<li class="warning">{{ note }}</li>{% endfor %}</ul>{% endif %}
+<h2>Construct validity</h2>
+{{ validity_table }}
+<p><img src="{{ box_plots }}" alt="box plots per group"></p>
+<h2>Composite skill score</h2>
+<p>{{ composite_text }}</p>
+{{ composite_table }}
+<p><img src="{{ roc }}" alt="ROC curves"></p>
+<h2>Proficiency benchmarks</h2>
+{{ benchmark_table }}
+<h2>Trainees</h2>
+{{ trainee_table }}
+{% for path in learning %}<p><img src="{{ path }}" alt="learning curve"></p>{% endfor %}
+<h2>Learning-curve fits</h2>
+{{ curve_table }}
+<h2>Metric definitions (registry version {{ registry_version }})</h2>
+{{ registry_table }}
+<p>Tables as CSV: {% for name in csv %}<a href="tables/{{ name }}">{{ name }}</a> {% endfor %}</p>
+</body></html>
+"""
+
+
+def _method_lines(analysis: StudyAnalysis) -> list[str]:
+    s = analysis.settings
+    validity = analysis.validity
+    counts = ", ".join(
+        f"{g}: {validity.n_participants[g]} participants, {validity.n_sessions[g]} sessions" for g in s.groups
+    )
+    return [
+        f"Label validated against: column '{s.group_col}', {s.groups[0]} vs {s.groups[1]} ({counts}); "
+        f"skilled group: {s.skilled_group}.",
+        f"Analysis level: {validity.level}"
+        + (
+            " (one value per participant: the median of their practice sessions)."
+            if validity.level == "participant"
+            else "."
+        ),
+        "Tests: two-sided Mann-Whitney U (exact permutation p up to 60 values, else normal approximation), "
+        f"Holm correction across {len(validity.table)} metrics at alpha = {s.alpha}; "
+        "effect size Cliff's delta; "
+        f"AUC = P({s.groups[0]} > {s.groups[1]}) with a {s.n_boot}-resample bootstrap 95 % interval.",
+        "Composite: weighted mean of z-scores, weights = rank-biserial correlation with the skilled group, "
+        "all fitted without the left-out participant (leave-one-participant-out).",
+        f"Benchmarks: rule '{s.benchmark_rule}' over {s.skilled_group} participants' medians; a session "
+        "passes when every benchmarked metric is at least as good; proficient after "
+        f"{s.consecutive_passes} consecutive passes.",
+        f"Learning curves: {s.learning_model} law per trainee and benchmarked metric; "
+        "CUSUM on failed sessions "
+        f"with acceptable failure rate {s.cusum_p0} and unacceptable {s.cusum_p1} (alpha = beta = 0.1).",
+    ]
+
+
+def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vascsim study report") -> Path:
+    """Write the report folder; returns the path of ``report.html`` (``report.md`` sits beside it)."""
+    folder = Path(folder)
+    figures = folder / "figures"
+    tables = folder / "tables"
+    figures.mkdir(parents=True, exist_ok=True)
+    tables.mkdir(parents=True, exist_ok=True)
+
+    csv = {
+        "session_metrics.csv": analysis.sessions,
+        "construct_validity.csv": analysis.validity.table,
+        "benchmarks.csv": analysis.benchmarks,
+        "proficiency.csv": analysis.proficiency,
+        "trainees.csv": analysis.trainees,
+        "learning_curves.csv": analysis.learning_curves,
+        "registry.csv": REGISTRY.describe(),
+    }
+    if analysis.validity.composite is not None:
+        csv["composite_scores.csv"] = analysis.validity.composite.scores
+        csv["composite_weights.csv"] = analysis.validity.composite.weights.rename_axis("metric").reset_index()
+    for name, frame in csv.items():
+        frame.to_csv(tables / name, index=False)
+
+    box_plots = _box_plots(analysis, figures)
+    roc = _roc(analysis, figures)
+    learning = _learning_curves(analysis, figures)
+    composite = analysis.validity.composite
+    if composite is None:
+        composite_text = "Too few participants for leave-one-participant-out validation."
+        weights = pd.DataFrame(columns=["metric", "weight"])
+    else:
+        low, high = composite.auc_ci
+        composite_text = (
+            f"Out-of-fold AUC {composite.auc:.3f} (95 % CI {low:.3f} to {high:.3f}) over {composite.folds} "
+            "participants, each scored by a model fitted without them."
+        )
+        weights = composite.weights.rename_axis("metric").reset_index()
+        weights = weights[weights["weight"].abs() > 0].sort_values("weight", key=np.abs, ascending=False)
+    notes = [*analysis.validity.notes[1:], *analysis.notes]
+    summary = summary_table(analysis)
+    registry = REGISTRY.describe()[["name", "unit", "better", "definition", "reference"]]
+    trainees = analysis.trainees
+    curves = analysis.learning_curves
+
+    context = {
+        "title": title,
+        "synthetic": analysis.synthetic,
+        "method": _method_lines(analysis),
+        "notes": notes,
+        "validity_table": _html_table(summary),
+        "box_plots": box_plots,
+        "composite_text": composite_text,
+        "composite_table": _html_table(weights),
+        "roc": roc,
+        "benchmark_table": _html_table(analysis.benchmarks),
+        "trainee_table": _html_table(trainees),
+        "learning": learning,
+        "curve_table": _html_table(curves),
+        "registry_version": REGISTRY_VERSION,
+        "registry_table": _html_table(registry),
+        "csv": list(csv),
+    }
+    page = Environment(autoescape=True).from_string(TEMPLATE).render(**context)
+    (folder / "report.html").write_text(page, encoding="utf-8")
+
+    lines = [f"# {title}", ""]
+    if analysis.synthetic:
+        lines += [
+            "> **Synthetic data.** Some or all participants are synthetic scripted profiles; "
+            "these numbers demonstrate the pipeline and are not evidence about people.",
+            "",
+        ]
+    lines += ["## How this was analysed", "", *[f"- {m}" for m in _method_lines(analysis)], ""]
+    if notes:
+        lines += ["## Read this first", "", *[f"- {n}" for n in notes], ""]
+    lines += ["## Construct validity", "", _markdown_table(summary), "", f"![box plots]({box_plots})", ""]
+    lines += [
+        "## Composite skill score",
+        "",
+        composite_text,
+        "",
+        _markdown_table(weights),
+        "",
+        f"![ROC]({roc})",
+        "",
+    ]
+    lines += ["## Proficiency benchmarks", "", _markdown_table(analysis.benchmarks), ""]
+    lines += ["## Trainees", "", _markdown_table(trainees), ""]
+    lines += [f"![learning curve]({p})" for p in learning] + [""]
+    lines += ["## Learning-curve fits", "", _markdown_table(curves), ""]
+    lines += [
+        f"## Metric definitions (registry version {REGISTRY_VERSION})",
+        "",
+        _markdown_table(registry),
+        "",
+    ]
+    (folder / "report.md").write_text("\n".join(lines), encoding="utf-8")
+    return folder / "report.html"

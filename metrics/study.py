@@ -1,0 +1,177 @@
+"""A whole study's analysis: construct validity, benchmarks, proficiency, learning curves, retention.
+
+Input is the per-session metrics table (``compute_session_metrics``) with the
+columns ``participant_id``, a group label, ``trial`` (1-based order of a
+participant's sessions) and optionally ``phase`` (``"practice"`` or ``"retention"``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from metrics.learning import cusum, fit_learning_curve, retention
+from metrics.proficiency import assess_proficiency, proficiency_benchmarks, trials_to_proficiency
+from metrics.registry import REGISTRY
+from metrics.streams import MetricsError
+from metrics.validity import ConstructValidityResult, construct_validity
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """How a study is analysed; every choice here is printed in the report."""
+
+    group_col: str = "label"
+    groups: tuple[str, str] = ("expert", "trainee")
+    skilled_group: str = "expert"
+    cluster_col: str = "participant_id"
+    level: str = "participant"
+    metrics: tuple[str, ...] | None = None  # metrics validated (default: every metric with values)
+    benchmark_rule: str = "mean"
+    benchmark_metrics: tuple[str, ...] | None = None  # default: the discriminating metrics
+    consecutive_passes: int = 2
+    learning_model: str = "power"
+    cusum_p0: float = 0.2
+    cusum_p1: float = 0.5
+    alpha: float = 0.05
+    n_boot: int = 2000
+    seed: int = 0
+
+
+@dataclass
+class StudyAnalysis:
+    settings: StudySettings
+    sessions: pd.DataFrame
+    validity: ConstructValidityResult
+    benchmarks: pd.DataFrame
+    proficiency: pd.DataFrame  # per session: pass_<metric>, passed
+    trainees: pd.DataFrame  # per trainee: status, trials to proficiency, retention, CUSUM
+    learning_curves: pd.DataFrame  # per trainee and benchmark metric
+    synthetic: bool = False
+    notes: list[str] = field(default_factory=list)
+
+
+def _practice(table: pd.DataFrame) -> pd.Series:
+    if "phase" not in table.columns:
+        return pd.Series(True, index=table.index)
+    return table["phase"].fillna("practice") != "retention"
+
+
+def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) -> StudyAnalysis:
+    """Everything the study report shows, from one table of per-session metrics."""
+    settings = settings or StudySettings()
+    if "trial" not in table.columns:
+        raise MetricsError(
+            "the sessions table needs a 'trial' column (1-based order of each participant's sessions)"
+        )
+    table = table.sort_values([settings.cluster_col, "trial"], kind="stable").reset_index(drop=True)
+    practice = _practice(table)
+    validity = construct_validity(
+        table[practice],
+        settings.group_col,
+        settings.groups,
+        settings.cluster_col,
+        settings.level,
+        metrics=list(settings.metrics) if settings.metrics else None,
+        skilled_group=settings.skilled_group,
+        alpha=settings.alpha,
+        n_boot=settings.n_boot,
+        seed=settings.seed,
+    )
+    chosen = list(settings.benchmark_metrics or validity.discriminating())
+    notes = []
+    if not chosen:
+        # without discriminating metrics, benchmark on the largest effects but say so
+        ranked = validity.table.assign(effect=lambda t: (t["auc"] - 0.5).abs()).sort_values(
+            "effect", ascending=False
+        )
+        chosen = ranked["metric"].head(3).tolist()
+        notes.append(
+            "No metric discriminated after correction; proficiency benchmarks use the three metrics with the "
+            f"largest effect sizes ({', '.join(chosen)}) and are provisional."
+        )
+    benchmarks = proficiency_benchmarks(
+        table[practice],
+        chosen,
+        settings.group_col,
+        settings.skilled_group,
+        settings.cluster_col,
+        settings.benchmark_rule,
+    )
+    proficiency = assess_proficiency(table, benchmarks)
+    proficiency.insert(0, "session_id", table["session_id"])
+    trainees, curves = _per_trainee(table, practice, proficiency, benchmarks, settings)
+    synthetic = (
+        bool(table["synthetic"].fillna(False).astype(bool).any()) if "synthetic" in table.columns else False
+    )
+    return StudyAnalysis(
+        settings, table, validity, benchmarks, proficiency, trainees, curves, synthetic, notes
+    )
+
+
+def _per_trainee(table, practice, proficiency, benchmarks, settings):
+    others = [g for g in settings.groups if g != settings.skilled_group]
+    rows, curves = [], []
+    for participant, rows_of in table[table[settings.group_col].isin(others)].groupby(settings.cluster_col):
+        in_practice = rows_of[practice.loc[rows_of.index]]
+        delayed = rows_of[~practice.loc[rows_of.index]]
+        passed = proficiency.loc[in_practice.index, "passed"].to_numpy(dtype=bool)
+        reached = trials_to_proficiency(passed, settings.consecutive_passes)
+        chart = cusum(~passed, settings.cusum_p0, settings.cusum_p1)
+        record = {
+            "participant_id": participant,
+            "group": rows_of[settings.group_col].iloc[0],
+            "practice_sessions": len(in_practice),
+            "passes": int(passed.sum()),
+            "proficient": reached is not None,
+            "trials_to_proficiency": reached,
+            "cusum_final": float(chart.values[-1]) if chart.values.size else math.nan,
+            "cusum_competent_at": chart.competent_at,
+        }
+        if not delayed.empty:
+            retained = bool(proficiency.loc[delayed.index[-1], "passed"])
+            record["retention_passed"] = retained
+            changes = []
+            for bench in benchmarks.itertuples():
+                kept = retention(
+                    in_practice[bench.metric], float(delayed[bench.metric].iloc[-1]), bench.better
+                )
+                changes.append(kept.worse)
+                record[f"retention_change_{bench.metric}"] = kept.change
+            record["retention_worse_metrics"] = int(np.sum(changes))
+        rows.append(record)
+        for bench in benchmarks.itertuples():
+            values = in_practice[bench.metric].to_numpy(dtype=np.float64)
+            trials = in_practice["trial"].to_numpy(dtype=np.float64)
+            try:
+                curve = fit_learning_curve(values, trials, settings.learning_model, bench.benchmark)
+            except MetricsError:
+                continue
+            curves.append(
+                {
+                    "participant_id": participant,
+                    "metric": bench.metric,
+                    "model": curve.model,
+                    "plateau": curve.plateau,
+                    "amplitude": curve.amplitude,
+                    "rate": curve.rate,
+                    "r_squared": curve.r_squared,
+                    "benchmark": bench.benchmark,
+                    "trials_to_benchmark": curve.trials_to_benchmark,
+                }
+            )
+    return pd.DataFrame(rows), pd.DataFrame(curves)
+
+
+def metric_unit(name: str) -> str:
+    return REGISTRY[name].unit if name in REGISTRY else ""
+
+
+def oriented(values: Sequence[float], metric: str) -> np.ndarray:
+    """Values signed so that higher is better (for ROC curves and composites)."""
+    sign = REGISTRY[metric].sign if metric in REGISTRY else 1
+    return sign * np.asarray(values, dtype=np.float64)

@@ -1,0 +1,42 @@
+"""The study report from a synthetic study: files, numbers matching the tables, synthetic label."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from metrics import compute_session_metrics
+from metrics.report import write_report
+from metrics.study import StudySettings, analyse_study
+from metrics.synthetic import synthetic_study
+
+PRIMARY = ("path_length", "spectral_arc_length", "entry_angle_error_deg", "force_at_insertion")
+
+
+@pytest.fixture(scope="module")
+def analysis():
+    table = compute_session_metrics(synthetic_study(experts=5, trainees=6, duration=24, rate=250))
+    return analyse_study(table, StudySettings(metrics=PRIMARY, n_boot=300))
+
+
+def test_report_files_and_synthetic_label(analysis, tmp_path):
+    page = write_report(analysis, tmp_path / "report", title="Demo study")
+    folder = page.parent
+    for name in ("report.html", "report.md", "tables/construct_validity.csv", "tables/session_metrics.csv",
+                 "tables/benchmarks.csv", "tables/trainees.csv", "figures/box_plots.png", "figures/box_plots.svg",
+                 "figures/roc.png", "figures/roc.svg"):  # fmt: skip
+        assert (folder / name).is_file(), name
+    assert list(folder.glob("figures/learning_*.png"))
+    text = page.read_text()
+    assert "Synthetic data" in text and "Analysis level: participant" in text
+    assert "Synthetic data" in (folder / "report.md").read_text()
+    validity = pd.read_csv(folder / "tables/construct_validity.csv")
+    np.testing.assert_allclose(validity["auc"], analysis.validity.table["auc"])
+    assert set(validity["metric"]) == set(PRIMARY)
+
+
+def test_primary_metrics_discriminate_and_trainees_get_a_status(analysis):
+    assert set(analysis.validity.discriminating()) == set(PRIMARY)  # 5 v 6, 4 metrics: attainable after Holm
+    assert len(analysis.trainees) == 6
+    assert set(analysis.benchmarks["metric"]) == set(PRIMARY)
+    assert "retention_passed" in analysis.trainees.columns
+    assert analysis.validity.composite.auc == pytest.approx(1.0)
