@@ -15,7 +15,6 @@ failure rate is acceptable, p0) and h1 = ln((1-beta)/alpha) / (P + Q) above
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -69,23 +68,51 @@ def fit_learning_curve(
     if y.size < 3:
         raise MetricsError(f"a learning curve needs at least 3 trials with values; got {y.size}")
     function = MODELS[model]
-    spread = float(np.ptp(y)) or 1.0
-    start = (float(y[-1]), float(y[0] - y[-1]), 0.5)
-    bounds = ([-np.inf, -np.inf, 1e-3], [np.inf, np.inf, 10.0])
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optimize.OptimizeWarning)
-            parameters, _ = optimize.curve_fit(
-                function, n, y, p0=start, bounds=bounds, x_scale=(spread, spread, 1.0)
-            )
-    except RuntimeError:
-        parameters = np.array([float(np.mean(y)), 0.0, 1e-3])
-    plateau, amplitude, rate = (float(v) for v in parameters)
+    plateau, amplitude, rate = _fit(model, n, y)
     residual = y - function(n, plateau, amplitude, rate)
     total = float(np.sum((y - y.mean()) ** 2))
     r_squared = 1.0 - float(np.sum(residual**2)) / total if total > 0 else math.nan
     reach = _trials_to(model, plateau, amplitude, rate, benchmark) if benchmark is not None else None
     return LearningCurve(model, plateau, amplitude, rate, r_squared, reach, int(y.size))
+
+
+RATE_GRID = np.geomspace(1e-3, 10.0, 240)
+
+
+def _linear_part(model: str, n: NDArray, y: NDArray, rates: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """For each rate: least-squares plateau and amplitude (closed form) and the residual sum of squares."""
+    shape = (
+        np.power(n[None, :], -rates[:, None])
+        if model == "power"
+        else np.exp(-rates[:, None] * (n[None, :] - 1))
+    )
+    g_mean = shape.mean(axis=1, keepdims=True)
+    y_mean = y.mean()
+    centred = shape - g_mean
+    variance = np.sum(centred * centred, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        amplitude = np.where(variance > 0, centred @ (y - y_mean) / variance, 0.0)
+    plateau = y_mean - amplitude * g_mean[:, 0]
+    residual = y[None, :] - plateau[:, None] - amplitude[:, None] * shape
+    return plateau, amplitude, np.sum(residual * residual, axis=1)
+
+
+def _fit(model: str, n: NDArray, y: NDArray) -> tuple[float, float, float]:
+    """Variable projection: plateau and amplitude are linear given the rate, so search the rate only
+    (a log-spaced grid, then a bounded scalar refinement around the best grid point)."""
+    _, _, sse = _linear_part(model, n, y, RATE_GRID)
+    best = int(np.argmin(sse))
+    low = RATE_GRID[max(best - 1, 0)]
+    high = RATE_GRID[min(best + 1, RATE_GRID.size - 1)]
+    refined = optimize.minimize_scalar(
+        lambda log_rate: float(_linear_part(model, n, y, np.array([math.exp(log_rate)]))[2][0]),
+        bounds=(math.log(low), math.log(high)),
+        method="bounded",
+        options={"xatol": 1e-10},
+    )
+    rate = math.exp(refined.x) if refined.fun <= sse[best] else float(RATE_GRID[best])
+    plateau, amplitude, _ = _linear_part(model, n, y, np.array([rate]))
+    return float(plateau[0]), float(amplitude[0]), rate
 
 
 def _trials_to(model: str, plateau: float, amplitude: float, rate: float, benchmark: float) -> float | None:

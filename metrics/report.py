@@ -30,7 +30,7 @@ FIGURE_FORMATS = ("png", "svg")
 
 def _save(figure, folder: Path, name: str) -> str:
     for kind in FIGURE_FORMATS:
-        figure.savefig(folder / f"{name}.{kind}", dpi=110, bbox_inches="tight")
+        figure.savefig(folder / f"{name}.{kind}", dpi=100)
     plt.close(figure)
     return f"figures/{name}.png"
 
@@ -108,55 +108,55 @@ def _roc(analysis: StudyAnalysis, folder: Path) -> str:
     axis.set_ylabel(f"true positive rate ({settings.skilled_group})")
     axis.set_title("ROC, participant level, metrics oriented better = higher", fontsize=9)
     axis.legend(fontsize=7, loc="lower right")
+    figure.tight_layout()
     return _save(figure, folder, "roc")
 
 
+MAX_LEARNING_PANELS = 8
+MAX_TRAINEES_DRAWN = 24
+
+
 def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
+    """A panel per benchmarked metric (up to 8): trainees' trials, fitted curves, retention, benchmark."""
     settings = analysis.settings
     data = analysis.sessions
     practice = (
-        data["phase"].fillna("practice") != "retention" if "phase" in data else np.ones(len(data), bool)
+        data["phase"].fillna("practice") != "retention" if "phase" in data else pd.Series(True, data.index)
     )
     trainees = data[
         (data[settings.group_col] != settings.skilled_group) & data[settings.group_col].isin(settings.groups)
     ]
-    paths = []
-    for bench in analysis.benchmarks.itertuples():
-        figure, axis = plt.subplots(figsize=(6, 3.6))
-        participants = trainees[settings.cluster_col].unique()
-        for participant in participants[:40]:
-            rows = trainees[(trainees[settings.cluster_col] == participant) & practice.loc[trainees.index]]
-            line = axis.plot(rows["trial"], rows[bench.metric], "o", markersize=3, alpha=0.7)
-            curve = analysis.learning_curves
-            fitted = curve[
-                (curve.get("participant_id") == participant) & (curve.get("metric") == bench.metric)
-            ]
-            if not fitted.empty:
-                f = fitted.iloc[0]
-                n = np.linspace(1, rows["trial"].max(), 60)
-                model = f["plateau"] + f["amplitude"] * (
-                    n ** -f["rate"] if f["model"] == "power" else np.exp(-f["rate"] * (n - 1))
-                )
-                axis.plot(n, model, "-", color=line[0].get_color(), alpha=0.7, linewidth=1)
-            delayed = trainees[
-                (trainees[settings.cluster_col] == participant) & ~practice.loc[trainees.index]
-            ]
-            if not delayed.empty:
-                axis.plot(
-                    delayed["trial"], delayed[bench.metric], "s", color=line[0].get_color(), markersize=5
-                )
-        axis.axhline(
-            bench.benchmark,
-            color="k",
-            linestyle="--",
-            label=f"benchmark ({bench.rule} of {settings.skilled_group}s)",
-        )
-        axis.set_xlabel("trial (squares: retention)")
-        axis.set_ylabel(f"{bench.metric} [{metric_unit(bench.metric)}]")
+    benchmarks = list(analysis.benchmarks.itertuples())[:MAX_LEARNING_PANELS]
+    if not benchmarks or trainees.empty:
+        return []
+    columns = min(2, len(benchmarks))
+    rows = math.ceil(len(benchmarks) / columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(6 * columns, 3.4 * rows), squeeze=False)
+    curves = analysis.learning_curves
+    fitted = {(r.participant_id, r.metric): r for r in curves.itertuples()} if not curves.empty else {}
+    participants = trainees[settings.cluster_col].unique()[:MAX_TRAINEES_DRAWN]
+    for axis, bench in zip(axes.ravel(), benchmarks, strict=False):
+        for participant in participants:
+            mine = trainees[trainees[settings.cluster_col] == participant]
+            done = mine[practice.loc[mine.index]]
+            line = axis.plot(done["trial"], done[bench.metric], "o", markersize=3, alpha=0.7)
+            colour = line[0].get_color()
+            fit = fitted.get((participant, bench.metric))
+            if fit is not None:
+                n = np.linspace(1, done["trial"].max(), 60)
+                shape = n**-fit.rate if fit.model == "power" else np.exp(-fit.rate * (n - 1))
+                axis.plot(n, fit.plateau + fit.amplitude * shape, "-", color=colour, alpha=0.7, linewidth=1)
+            delayed = mine[~practice.loc[mine.index]]
+            axis.plot(delayed["trial"], delayed[bench.metric], "s", color=colour, markersize=5)
+        axis.axhline(bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")
+        axis.set_xlabel("trial (squares: retention)", fontsize=8)
+        axis.set_ylabel(f"{bench.metric} [{metric_unit(bench.metric)}]", fontsize=8)
+        axis.set_title(f"{bench.metric} ({bench.better} is better)", fontsize=9)
         axis.legend(fontsize=7)
-        axis.set_title(f"Learning curves: {bench.metric} ({bench.better} is better)", fontsize=9)
-        paths.append(_save(figure, folder, f"learning_{bench.metric}"))
-    return paths
+    for axis in axes.ravel()[len(benchmarks) :]:
+        axis.set_visible(False)
+    figure.tight_layout()
+    return [_save(figure, folder, "learning_curves")]
 
 
 def _fmt(value) -> str:

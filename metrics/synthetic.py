@@ -82,7 +82,9 @@ def synthetic_session(
         ramp = np.clip((time - contact_t) / (pierce_t - contact_t), 0, 1)
         peak = 1.0 + 1.5 * hesitation + rng.normal(0, 0.1)
         magnitude = np.where(
-            inside, peak * np.where(time < pierce_t, ramp, np.exp(-(time - pierce_t) * 2)), 0.0
+            inside,
+            peak * np.where(time < pierce_t, ramp, np.exp(-np.clip(time - pierce_t, 0, None) * 2)),
+            0.0,
         )
         force[:, 2] += magnitude
         tip[window] = position[window] - np.array([0.0, 0.0, 0.004])
