@@ -38,7 +38,8 @@ def main() -> None:
     """vascsim: a haptic vascular-suturing simulator and assessment platform.
 
     Run `vascsim demo` for a tour on built-in data; `vascsim COMMAND --help`
-    explains each command.
+    explains each command. Data lives in VASCSIM_HOME (default
+    ~/.local/share/vascsim); VASCSIM_DATABASE_URL selects a PostgreSQL catalog.
     """
 
 
@@ -59,7 +60,7 @@ def main() -> None:
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of a table.")
 @user_errors
-def demo(max_strain: float, steps: int, as_json: bool) -> None:
+def indentation(max_strain: float, steps: int, as_json: bool) -> None:
     """Press a scripted needle into the paper's test cube and print force vs stretch.
 
     Builds the 10 mm cube (729 nodes, 3072 tetrahedra) held on its base,
@@ -167,3 +168,578 @@ def recover(session_dir: str, as_json: bool) -> None:
         f"recovered {session_dir}: {rows} samples kept ({kept}); at most "
         f"{header.get('lost_at_most_s')} s after that was lost"
     )
+
+
+# -- catalog-backed commands ------------------------------------------------------------
+def _catalog():
+    from sessions.catalog import Catalog
+    from sessions.config import data_home, database_url
+
+    home = data_home()
+    catalog = Catalog(database_url(home))
+    click.get_current_context().call_on_close(catalog.close)  # no pooled connection outlives the command
+    return catalog, home
+
+
+def _progress():
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[last]}"),
+        transient=False,
+        console=_stderr_console(),
+    )
+
+
+def _stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def _print_frame(frame, title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    for column in frame.columns:
+        table.add_column(str(column))
+    for row in frame.itertuples(index=False):
+        table.add_row(*[_cell(v) for v in row])
+    Console().print(table)
+
+
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return "" if value != value else f"{value:.4g}"
+    if isinstance(value, bool | np.bool_):
+        return "yes" if value else "no"
+    return str(value)
+
+
+def _json(data) -> None:
+    click.echo(json.dumps(data, indent=2, default=_json_default))
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+@main.command()
+@click.option(
+    "--small",
+    is_flag=True,
+    help="A reduced study (2 experts x 2, 3 trainees x 3 + retention) for a quick look.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@user_errors
+def demo(small: bool, as_json: bool) -> None:
+    """Run a small synthetic study end to end and print what it found.
+
+    With no hardware and no configuration: builds the vessel-wall patch scenario,
+    runs 4 synthetic experts x 3 sessions and 6 synthetic trainees x 6 practice
+    sessions + 1 retention session as scripted stitches through the real simulator
+    (simulated time), records each session, catalogues it, scores every metric,
+    then prints which metrics discriminate (primary set declared in advance),
+    effect sizes, each trainee's proficiency status, and the path of the full
+    report (HTML, Markdown, CSV, figures). Re-running replaces the previous demo
+    study; participants are labelled synthetic everywhere.
+    """
+    from sessions.demo import DemoSize, run_demo
+
+    catalog, home = _catalog()
+    size = DemoSize(2, 2, 3, 3, True) if small else DemoSize()
+    with _progress() as progress:
+        task = progress.add_task("synthetic sessions", total=size.sessions, last="")
+        result = run_demo(
+            catalog, home, size, advance=lambda text: progress.update(task, advance=1, last=text)
+        )
+    analysis = result.analysis
+    validity = analysis.validity
+    groups = analysis.settings.groups
+    summary = validity.table[
+        [
+            "metric",
+            "unit",
+            f"median_{groups[0]}",
+            f"median_{groups[1]}",
+            "auc",
+            "cliffs_delta",
+            "p_holm",
+            "discriminates",
+        ]
+    ]
+    trainees = analysis.trainees[["participant_id", "passes", "proficient", "trials_to_proficiency"]].copy()
+    if "retention_passed" in analysis.trainees:
+        trainees["retention_passed"] = analysis.trainees["retention_passed"]
+    if as_json:
+        _json(
+            {
+                "sessions": result.sessions,
+                "seconds": result.seconds,
+                "report": str(result.report),
+                "metrics": summary.to_dict(orient="records"),
+                "trainees": trainees.to_dict(orient="records"),
+                "notes": validity.notes + analysis.notes,
+                "composite_auc": None if validity.composite is None else validity.composite.auc,
+                "synthetic": True,
+            }
+        )
+        return
+    _print_frame(
+        summary, f"Construct validity, {groups[0]} vs {groups[1]}, participant level (SYNTHETIC participants)"
+    )
+    _print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)")
+    for note in validity.notes + analysis.notes:
+        click.echo(f"note: {note}")
+    if validity.composite is not None:
+        low, high = validity.composite.auc_ci
+        click.echo(
+            f"composite score, leave-one-participant-out AUC {validity.composite.auc:.2f} "
+            f"({low:.2f}-{high:.2f})"
+        )
+    click.echo(f"{result.sessions} sessions in {result.seconds:.0f} s; full report: {result.report}")
+
+
+@main.group()
+def studies() -> None:
+    """Studies and courses in the catalog."""
+
+
+@studies.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def studies_list(as_json: bool) -> None:
+    """List studies with their participant and session counts."""
+    import pandas as pd
+
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        from sqlalchemy import select
+
+        from sessions.models import Study
+
+        rows = [
+            {
+                "study": s.name,
+                "participants": len(s.participants),
+                "sessions": sum(len(p.sessions) for p in s.participants),
+                "synthetic": any(p.synthetic for p in s.participants),
+                "description": s.description,
+            }
+            for s in orm.scalars(select(Study).order_by(Study.name))
+        ]
+    if as_json:
+        _json(rows)
+        return
+    _print_frame(
+        pd.DataFrame(rows, columns=["study", "participants", "sessions", "synthetic", "description"]),
+        "Studies",
+    )
+
+
+@studies.command("add")
+@click.argument("name")
+@click.option("--description", default="", help="Free text shown in listings and reports.")
+@user_errors
+def studies_add(name: str, description: str) -> None:
+    """Create a study (or course) called NAME."""
+    from sessions.catalog import CatalogError
+
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        from sqlalchemy import select
+
+        from sessions.models import Study
+
+        if orm.scalar(select(Study).where(Study.name == name)) is not None:
+            raise CatalogError(f"study {name!r} already exists")
+        catalog.study(orm, name, create=True, description=description)
+    click.echo(f"study {name} created")
+
+
+@main.group()
+def participants() -> None:
+    """Pseudonymous participants of a study."""
+
+
+@participants.command("add")
+@click.argument("code")
+@click.option("--study", required=True, help="Study the participant joins.")
+@click.option("--level", default="", help="Self-reported level, e.g. expert, trainee, novice.")
+@click.option("--group", "group_label", default="", help="Group label analysed (default: the level).")
+@click.option("--years", type=click.FloatRange(0, 80), default=None, help="Years of surgical experience.")
+@click.option(
+    "--handedness", type=click.Choice(["right", "left", "ambidextrous"]), default="right", show_default=True
+)
+@user_errors
+def participants_add(code: str, study: str, level: str, group_label: str, years, handedness: str) -> None:
+    """Add participant CODE (a pseudonym; never a name) to a study."""
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        found = catalog.study(orm, study)
+        catalog.add_participant(orm, found, code, level, group_label, years, handedness)
+    click.echo(f"participant {code} added to {study}")
+
+
+@participants.command("list")
+@click.option("--study", required=True, help="Study to list.")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def participants_list(study: str, as_json: bool) -> None:
+    """List a study's participants."""
+    import pandas as pd
+
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        found = catalog.study(orm, study)
+        rows = [
+            {
+                "code": p.code,
+                "level": p.level,
+                "group": p.group_label,
+                "years": p.years_experience,
+                "handedness": p.handedness,
+                "synthetic": p.synthetic,
+                "sessions": len(p.sessions),
+            }
+            for p in sorted(found.participants, key=lambda p: p.code)
+        ]
+    if as_json:
+        _json(rows)
+        return
+    _print_frame(pd.DataFrame(rows), f"Participants of {study}")
+
+
+@main.command()
+@click.option("--study", required=True, help="Study the session belongs to.")
+@click.option("--participant", required=True, help="Participant code.")
+@click.option("--task", default="wall-stitch", show_default=True, help="Task / scenario.")
+@click.option(
+    "--device",
+    default="scripted",
+    show_default=True,
+    help="scripted, spacemouse, openhaptics, or replay:SESSION to play a recorded session back.",
+)
+@click.option(
+    "--skill",
+    type=click.FloatRange(0, 1),
+    default=0.9,
+    show_default=True,
+    help="Scripted device: skill of the pass (0-1).",
+)
+@click.option("--phase", type=click.Choice(["practice", "retention"]), default="practice", show_default=True)
+@click.option(
+    "--duration", type=click.FloatRange(0.1, 7200), default=None, help="Seconds (needed for live devices)."
+)
+@click.option(
+    "--realtime", is_flag=True, help="Real-time clock (a person at the device); default simulated time."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the session's metrics as JSON.")
+@user_errors
+def run(study, participant, task, device, skill, phase, duration, realtime, as_json) -> None:
+    """Run one session: device + simulator + recorder + catalog entry, then scoring.
+
+    The catalog row is written as 'running' first and becomes 'complete' only when
+    the streams are closed and checksummed; Ctrl-C or an error keeps the data and
+    marks the session 'failed'; after a crash, `vascsim recover` restores it.
+    """
+    from sqlalchemy import func, select
+
+    from sessions.models import Session
+    from sessions.runner import SessionPlan, run_session
+    from sessions.synthetic import pass_parameters
+
+    catalog, home = _catalog()
+    with catalog.session() as orm:
+        person = catalog.participant(orm, catalog.study(orm, study), participant)
+        trial = (
+            orm.scalar(select(func.max(Session.trial)).where(Session.participant_id == person.id)) or 0
+        ) + 1
+    clock = "realtime" if realtime or device in ("spacemouse", "openhaptics") else "simulated"
+    plan = SessionPlan(study, participant, task, trial, phase, device, clock)
+    parameters = pass_parameters(skill, seed=trial) if device == "scripted" else None
+    with _stderr_console().status(f"running {participant} trial {trial} on {device}..."):
+        uid = run_session(catalog, home, plan, parameters, duration)
+    values = _session_metrics(catalog, uid)
+    if as_json:
+        _json({"session": uid, "trial": trial, "metrics": values})
+        return
+    click.echo(f"session {uid} ({participant}, trial {trial}) complete and scored")
+    for name, value in values.items():
+        click.echo(f"  {name:28s} {_cell(value)}")
+
+
+def _session_metrics(catalog, uid: str) -> dict:
+    from sqlalchemy import select
+
+    from metrics import REGISTRY_VERSION
+    from sessions.models import Session
+
+    with catalog.session() as orm:
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        return {
+            m.metric: m.value
+            for m in sorted(row.metrics, key=lambda m: m.id)
+            if m.registry_version == REGISTRY_VERSION
+        }
+
+
+@main.group()
+def sessions() -> None:
+    """Recorded sessions: list, show, delete."""
+
+
+@sessions.command("list")
+@click.option("--study", default=None, help="Only this study.")
+@click.option("--status", type=click.Choice(["running", "complete", "recovered", "failed"]), default=None)
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def sessions_list(study, status, as_json) -> None:
+    """List sessions (newest last)."""
+    import pandas as pd
+    from sqlalchemy import select
+
+    from sessions.models import Participant, Session, Study
+
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        query = (
+            select(
+                Session.uid,
+                Study.name,
+                Participant.code,
+                Session.trial,
+                Session.phase,
+                Session.device,
+                Session.status,
+            )
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(Study, Participant.study_id == Study.id)
+            .order_by(Session.id)
+        )
+        if study:
+            catalog.study(orm, study)
+            query = query.where(Study.name == study)
+        if status:
+            query = query.where(Session.status == status)
+        rows = [
+            dict(
+                zip(("session", "study", "participant", "trial", "phase", "device", "status"), r, strict=True)
+            )
+            for r in orm.execute(query)
+        ]
+    if as_json:
+        _json(rows)
+        return
+    _print_frame(
+        pd.DataFrame(rows, columns=["session", "study", "participant", "trial", "phase", "device", "status"]),
+        "Sessions",
+    )
+
+
+@sessions.command("show")
+@click.argument("uid")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def sessions_show(uid: str, as_json: bool) -> None:
+    """Show one session: who, what, when, files with checksums, metrics."""
+    from sqlalchemy import select
+
+    from sessions.catalog import CatalogError
+    from sessions.models import Session
+
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        if row is None:
+            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        data = {
+            "session": row.uid,
+            "study": row.participant.study.name,
+            "participant": row.participant.code,
+            "synthetic": row.participant.synthetic,
+            "task": row.task.name,
+            "device": row.device,
+            "clock": row.clock,
+            "trial": row.trial,
+            "phase": row.phase,
+            "status": row.status,
+            "started": row.started_at.isoformat(),
+            "ended": row.ended_at.isoformat() if row.ended_at else None,
+            "directory": row.directory,
+            "error": row.error,
+            "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
+        }
+    data["metrics"] = _session_metrics(catalog, uid)
+    if as_json:
+        _json(data)
+        return
+    for key, value in data.items():
+        if key == "files":
+            for f in value:
+                click.echo(f"  file {f['name']:18s} {f['bytes']:>10d} B  sha256 {f['sha256']}")
+        elif key == "metrics":
+            for name, metric in value.items():
+                click.echo(f"  {name:28s} {_cell(metric)}")
+        else:
+            click.echo(f"{key:12s} {value}")
+
+
+@sessions.command("delete")
+@click.argument("uid")
+@click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
+@user_errors
+def sessions_delete(uid: str, yes: bool) -> None:
+    """Delete a session's catalog rows and its stream files."""
+    import shutil
+
+    from sqlalchemy import select
+
+    from sessions.catalog import CatalogError
+    from sessions.models import Session
+
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        if row is None:
+            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        if not yes:
+            click.confirm(f"delete session {uid} and its files?", abort=True)
+        directory = row.directory
+        orm.delete(row)
+    if directory and _is_session_dir(directory):
+        shutil.rmtree(directory, ignore_errors=True)
+    click.echo(f"session {uid} deleted")
+
+
+def _is_session_dir(directory: str) -> bool:
+    from pathlib import Path
+
+    return (Path(directory) / "header.json").is_file()
+
+
+@main.command()
+@click.argument("uids", nargs=-1)
+@click.option("--study", default=None, help="Score every complete session of this study.")
+@click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
+@user_errors
+def score(uids, study, as_json) -> None:
+    """(Re)compute every metric of the given sessions, or of a whole study."""
+    from sqlalchemy import select
+
+    from sessions.catalog import CatalogError
+    from sessions.models import Participant, Session, Study
+    from sessions.runner import score_session
+
+    catalog, _ = _catalog()
+    targets = list(uids)
+    if study:
+        with catalog.session() as orm:
+            catalog.study(orm, study)
+            targets += list(
+                orm.scalars(
+                    select(Session.uid)
+                    .join(Participant, Session.participant_id == Participant.id)
+                    .join(Study, Participant.study_id == Study.id)
+                    .where(
+                        Study.name == study,
+                        Session.status.in_(("complete", "recovered")),
+                        Session.device != "jigsaws",
+                    )
+                )
+            )
+    if not targets:
+        raise CatalogError("nothing to score: give session ids or --study")
+    results = {}
+    with _progress() as progress:
+        task = progress.add_task("scoring", total=len(targets), last="")
+        for uid in targets:
+            results[uid] = score_session(catalog, uid)
+            progress.update(task, advance=1, last=uid)
+    if as_json:
+        _json(results)
+    else:
+        click.echo(f"scored {len(results)} session(s)")
+
+
+@main.command()
+@click.option("--study", required=True, help="Study to report on.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Folder (default VASCSIM_HOME/reports/STUDY).",
+)
+@click.option(
+    "--groups", default="expert,trainee", show_default=True, help="The two groups compared, skilled first."
+)
+@click.option(
+    "--level", type=click.Choice(["participant", "trial"]), default="participant", show_default=True
+)
+@click.option(
+    "--metrics",
+    "metric_names",
+    default=None,
+    help="Comma-separated primary metrics (default: all with values).",
+)
+@click.option(
+    "--rule", default="mean", show_default=True, help="Benchmark rule: mean, median or percentile:Q."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
+@user_errors
+def report(study, out, groups, level, metric_names, rule, as_json) -> None:
+    """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures)."""
+    from pathlib import Path
+
+    from metrics.report import write_report
+    from metrics.study import StudySettings, analyse_study
+    from sessions.catalog import CatalogError
+    from sessions.runner import study_table
+
+    names = tuple(groups.split(","))
+    if len(names) != 2:
+        raise CatalogError(f"--groups needs two comma-separated groups, skilled first; got {groups!r}")
+    catalog, home = _catalog()
+    table = study_table(catalog, study)
+    settings = StudySettings(
+        groups=names,
+        skilled_group=names[0],
+        level=level,
+        metrics=tuple(metric_names.split(",")) if metric_names else None,
+        benchmark_rule=rule,
+    )
+    with _stderr_console().status("analysing and writing the report..."):
+        analysis = analyse_study(table, settings)
+        page = write_report(analysis, Path(out) if out else home / "reports" / study, title=f"Study {study}")
+    if as_json:
+        _json({"report": str(page), "validity": analysis.validity.table.to_dict(orient="records")})
+        return
+    click.echo(f"report: {page}")
+
+
+@main.command("import")
+@click.argument("kinematics_dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("meta_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--study", required=True, help="Study to import into (created if missing).")
+@user_errors
+def import_jigsaws(kinematics_dir: str, meta_file: str, study: str) -> None:
+    """Import a JIGSAWS task (kinematics folder + meta file) as a scored study.
+
+    Surgeons become participants (labels novice/intermediate/expert from the
+    self-reported level; GRS totals stored as ratings); trials become sessions
+    whose files are the kinematics files, with checksums.
+    """
+    from sessions.importing import import_jigsaws as run_import
+
+    catalog, _ = _catalog()
+    count = run_import(catalog, kinematics_dir, meta_file, study)
+    click.echo(f"imported {count} JIGSAWS trial(s) into study {study}")

@@ -13,8 +13,8 @@ from sim.experiments import indentation_curve
 VASCSIM = Path(sys.executable).with_name("vascsim")
 
 
-def test_demo_json_matches_the_core():
-    result = CliRunner().invoke(main, ["demo", "--steps", "5", "--max-strain", "0.4", "--json"])
+def test_indentation_json_matches_the_core():
+    result = CliRunner().invoke(main, ["indentation", "--steps", "5", "--max-strain", "0.4", "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     curve = indentation_curve(np.linspace(0, 0.4, 5))
@@ -25,10 +25,10 @@ def test_demo_json_matches_the_core():
     assert data["force_biphase"][-1] > data["force_linear"][-1]  # stiff phase above 0.2
 
 
-def test_demo_prints_table_through_the_console_script():
+def test_indentation_prints_table_through_the_console_script():
     env = dict(os.environ, COLUMNS="160")
     result = subprocess.run(
-        [str(VASCSIM), "demo", "--steps", "3"],
+        [str(VASCSIM), "indentation", "--steps", "3"],
         capture_output=True,
         text=True,
         env=env,
@@ -43,7 +43,7 @@ def test_demo_prints_table_through_the_console_script():
 
 def test_bad_option_is_one_line_and_nonzero():
     result = subprocess.run(
-        [str(VASCSIM), "demo", "--steps", "1"], capture_output=True, text=True, timeout=60, check=False
+        [str(VASCSIM), "indentation", "--steps", "1"], capture_output=True, text=True, timeout=60, check=False
     )
     assert result.returncode == 2
     assert "Invalid value for '--steps'" in result.stderr
@@ -54,8 +54,9 @@ def test_help_explains_commands():
     result = CliRunner().invoke(main, ["--help"])
     assert result.exit_code == 0
     assert "demo" in result.output
-    demo_help = CliRunner().invoke(main, ["demo", "--help"])
+    demo_help = CliRunner().invoke(main, ["indentation", "--help"])
     assert "729 nodes" in demo_help.output and "--max-strain" in demo_help.output
+    assert "synthetic study" in CliRunner().invoke(main, ["demo", "--help"]).output
 
 
 def test_devices_lists_the_always_available_drivers():

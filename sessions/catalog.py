@@ -1,0 +1,184 @@
+"""The catalog: one object over a SQLAlchemy engine, SQLite by default or PostgreSQL by URL.
+
+SQLite runs in WAL mode with a busy timeout and foreign keys on, so several
+processes (a station recording, a supervisor scoring) can write at once. The
+schema is created and upgraded by the Alembic migrations in ``sessions/migrations``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import create_engine, event, select
+from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
+from sqlalchemy.orm import Session as OrmSession
+from sqlalchemy.orm import sessionmaker
+
+from sessions.models import Participant, Study, Task
+from sim.errors import VascsimError
+
+MIGRATIONS = Path(__file__).with_name("migrations")
+SQLITE_BUSY_TIMEOUT_MS = 30_000
+
+
+class CatalogError(VascsimError):
+    """The catalog cannot be opened, or a request names something it does not hold."""
+
+
+def now() -> datetime:
+    return datetime.now(UTC).replace(tzinfo=None)
+
+
+def new_uid(prefix: str = "S") -> str:
+    return f"{prefix}-{uuid.uuid4().hex[:12]}"
+
+
+def _normalise(url: str) -> str:
+    if url.startswith("postgresql://") or url.startswith("postgres://"):
+        return "postgresql+psycopg://" + url.split("://", 1)[1]
+    return url
+
+
+def make_engine(url: str) -> Engine:
+    try:
+        parsed = make_url(_normalise(url))
+    except ArgumentError:
+        raise CatalogError(
+            f"database URL {url!r} is not valid; use sqlite:///path/catalog.sqlite or postgresql://user@host/db"
+        ) from None
+    if parsed.get_backend_name() not in ("sqlite", "postgresql"):
+        raise CatalogError(f"database URL {url!r}: only sqlite and postgresql catalogs are supported")
+    try:
+        if parsed.get_backend_name() == "sqlite":
+            if parsed.database:
+                Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
+            engine = create_engine(parsed, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000})
+
+            @event.listens_for(engine, "connect")
+            def _sqlite_pragmas(connection, _record):
+                cursor = connection.cursor()
+                cursor.execute("PRAGMA journal_mode=WAL")
+                cursor.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+                cursor.execute("PRAGMA foreign_keys=ON")
+                cursor.execute("PRAGMA synchronous=NORMAL")
+                cursor.close()
+
+            return engine
+        return create_engine(parsed, pool_pre_ping=True)
+    except NoSuchModuleError as error:
+        raise CatalogError(f"database URL {url!r}: {error}") from None
+
+
+def alembic_config(engine_connection) -> Config:
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS))
+    config.attributes["connection"] = engine_connection
+    return config
+
+
+class Catalog:
+    """Open (and migrate to the newest schema) the catalog at ``url``."""
+
+    def __init__(self, url: str, migrate: bool = True) -> None:
+        self.url = url
+        self.engine = make_engine(url)
+        self._sessions = sessionmaker(self.engine, expire_on_commit=False)
+        if migrate:
+            self.upgrade()
+
+    def upgrade(self) -> None:
+        try:
+            with self.engine.begin() as connection:
+                command.upgrade(alembic_config(connection), "head")
+        except OperationalError as error:
+            reason = str(error.orig).strip().splitlines()[0] if error.orig else str(error)
+            raise CatalogError(f"cannot open the catalog at {self.display_url}: {reason}") from None
+
+    @property
+    def display_url(self) -> str:
+        return make_url(_normalise(self.url)).render_as_string(hide_password=True)
+
+    @contextmanager
+    def session(self) -> Iterator[OrmSession]:
+        """A transaction: committed on success, rolled back on any error."""
+        with self._sessions() as orm, orm.begin():
+            yield orm
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    # -- lookups and creation ----------------------------------------------------------
+    def study(self, orm: OrmSession, name: str, create: bool = False, description: str = "") -> Study:
+        found = orm.scalar(select(Study).where(Study.name == name))
+        if found is None:
+            if not create:
+                raise CatalogError(f"no study named {name!r}; list them with `vascsim studies`")
+            found = Study(name=name, description=description, created_at=now())
+            orm.add(found)
+            orm.flush()
+        return found
+
+    def participant(self, orm: OrmSession, study: Study, code: str) -> Participant:
+        found = orm.scalar(
+            select(Participant).where(Participant.study_id == study.id, Participant.code == code)
+        )
+        if found is None:
+            raise CatalogError(
+                f"no participant {code!r} in study {study.name!r}; add one with `vascsim participants add`"
+            )
+        return found
+
+    def add_participant(
+        self,
+        orm: OrmSession,
+        study: Study,
+        code: str,
+        level: str = "",
+        group_label: str = "",
+        years_experience: float | None = None,
+        handedness: str = "right",
+        synthetic: bool = False,
+    ) -> Participant:
+        if orm.scalar(select(Participant).where(Participant.study_id == study.id, Participant.code == code)):
+            raise CatalogError(f"participant {code!r} already exists in study {study.name!r}")
+        participant = Participant(
+            study_id=study.id,
+            code=code,
+            level=level,
+            group_label=group_label or level,
+            years_experience=years_experience,
+            handedness=handedness,
+            synthetic=synthetic,
+            created_at=now(),
+        )
+        orm.add(participant)
+        orm.flush()
+        return participant
+
+    def task(
+        self, orm: OrmSession, name: str, scenario: str | None = None, parameters: dict | None = None
+    ) -> Task:
+        found = orm.scalar(select(Task).where(Task.name == name))
+        if found is None:
+            if scenario is None:
+                raise CatalogError(f"no task named {name!r}; known tasks come from `vascsim run --help`")
+            found = Task(name=name, scenario=scenario, parameters=parameters or {})
+            orm.add(found)
+            orm.flush()
+        return found
+
+
+def file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

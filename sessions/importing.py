@@ -1,0 +1,99 @@
+"""Importing public data into the catalog: JIGSAWS trials as scored sessions of a study."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from sqlalchemy import select
+
+from metrics import REGISTRY_VERSION, metrics_of
+from metrics.datasets import jigsaws
+from sessions.catalog import Catalog, CatalogError, file_sha256, now
+from sessions.models import MetricResult, Participant, Rating, Session, StreamFile
+
+
+def import_jigsaws(
+    catalog: Catalog, kinematics_dir: str | Path, meta_file: str | Path, study_name: str
+) -> int:
+    """Load and score every trial first (any error leaves the catalog untouched), then store them in
+    one transaction. Returns the number of trials imported."""
+    trials = jigsaws.load(kinematics_dir, meta_file)
+    folder = Path(kinematics_dir)
+    nested = folder / "kinematics" / "AllGestures"
+    folder = nested if nested.is_dir() else folder
+    scored = [(trial, metrics_of(trial.to_streams())) for trial in trials]
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name, create=True, description="Imported from JIGSAWS")
+        task = catalog.task(orm, f"jigsaws-{trials[0].task.lower()}", "jigsaws", {"task": trials[0].task})
+        people: dict[str, Participant] = {}
+        for trial, values in scored:
+            uid = f"J-{study.id}-{trial.trial_id}"
+            if orm.scalar(select(Session).where(Session.uid == uid)) is not None:
+                raise CatalogError(f"trial {trial.trial_id} is already in study {study_name!r}")
+            person = people.get(trial.participant_id)
+            if person is None:
+                person = orm.scalar(
+                    select(Participant).where(
+                        Participant.study_id == study.id, Participant.code == trial.participant_id
+                    )
+                )
+                if person is None:
+                    person = catalog.add_participant(
+                        orm,
+                        study,
+                        trial.participant_id,
+                        level=trial.skill_label,
+                        group_label=trial.skill_label,
+                    )
+                people[trial.participant_id] = person
+            path = folder / f"{trial.trial_id}.txt"
+            session = Session(
+                uid=uid,
+                participant_id=person.id,
+                task_id=task.id,
+                device="jigsaws",
+                clock="recorded",
+                trial=trial.trial,
+                phase="practice",
+                status="complete",
+                started_at=now(),
+                ended_at=now(),
+                directory=str(path.resolve()),
+            )
+            orm.add(session)
+            orm.flush()
+            orm.add(
+                StreamFile(
+                    session_id=session.id, name=path.name, sha256=file_sha256(path), bytes=path.stat().st_size
+                )
+            )
+            orm.add(
+                Rating(
+                    session_id=session.id,
+                    rater="JIGSAWS",
+                    instrument="GRS",
+                    item="total",
+                    score=trial.grs,
+                    created_at=now(),
+                )
+            )
+            for item, value in trial.grs_items.items():
+                orm.add(
+                    Rating(
+                        session_id=session.id,
+                        rater="JIGSAWS",
+                        instrument="GRS",
+                        item=item,
+                        score=value,
+                        created_at=now(),
+                    )
+                )
+            for name, value in values.items():
+                stored = None if math.isnan(value) else float(value)
+                orm.add(
+                    MetricResult(
+                        session_id=session.id, metric=name, value=stored, registry_version=REGISTRY_VERSION
+                    )
+                )
+    return len(trials)

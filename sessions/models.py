@@ -1,0 +1,133 @@
+"""The catalog's tables (SQLAlchemy 2). Migrations in ``sessions/migrations`` must match these exactly."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+SESSION_STATUSES = ("running", "complete", "recovered", "failed")
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class Study(Base):
+    """A study or course: the set of participants and sessions analysed together."""
+
+    __tablename__ = "studies"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    description: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    participants: Mapped[list[Participant]] = relationship(
+        back_populates="study", cascade="all, delete-orphan"
+    )
+
+
+class Participant(Base):
+    """A pseudonymous participant: ``code`` is the only identifier stored."""
+
+    __tablename__ = "participants"
+    __table_args__ = (UniqueConstraint("study_id", "code", name="uq_participant_code"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    code: Mapped[str] = mapped_column(String(64))
+    level: Mapped[str] = mapped_column(String(32), default="")  # self-reported: expert, trainee, novice...
+    years_experience: Mapped[float | None] = mapped_column(Float, nullable=True)
+    handedness: Mapped[str] = mapped_column(String(8), default="right")
+    group_label: Mapped[str] = mapped_column(String(64), default="")
+    synthetic: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    study: Mapped[Study] = relationship(back_populates="participants")
+    sessions: Mapped[list[Session]] = relationship(back_populates="participant", cascade="all, delete-orphan")
+
+
+class Task(Base):
+    """A task / scenario: mesh, materials, model parameters (as JSON)."""
+
+    __tablename__ = "tasks"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(100), unique=True)
+    scenario: Mapped[str] = mapped_column(String(100))
+    parameters: Mapped[dict] = mapped_column(JSON, default=dict)
+
+
+class Session(Base):
+    """One attempt: who, what, when, how, and where its streams are."""
+
+    __tablename__ = "sessions"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    uid: Mapped[str] = mapped_column(String(64), unique=True)
+    participant_id: Mapped[int] = mapped_column(ForeignKey("participants.id", ondelete="CASCADE"), index=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id"), index=True)
+    device: Mapped[str] = mapped_column(String(100))
+    clock: Mapped[str] = mapped_column(String(16))
+    trial: Mapped[int] = mapped_column(Integer)
+    phase: Mapped[str] = mapped_column(String(16), default="practice")
+    status: Mapped[str] = mapped_column(String(16), index=True)
+    started_at: Mapped[datetime] = mapped_column(DateTime)
+    ended_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+    directory: Mapped[str] = mapped_column(Text)
+    error: Mapped[str] = mapped_column(Text, default="")
+    participant: Mapped[Participant] = relationship(back_populates="sessions")
+    task: Mapped[Task] = relationship()
+    files: Mapped[list[StreamFile]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
+    metrics: Mapped[list[MetricResult]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
+    ratings: Mapped[list[Rating]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
+    annotations: Mapped[list[Annotation]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
+
+
+class StreamFile(Base):
+    __tablename__ = "stream_files"
+    __table_args__ = (UniqueConstraint("session_id", "name", name="uq_stream_file"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(200))
+    sha256: Mapped[str] = mapped_column(String(64))
+    bytes: Mapped[int] = mapped_column(Integer)
+
+
+class MetricResult(Base):
+    __tablename__ = "metric_results"
+    __table_args__ = (UniqueConstraint("session_id", "metric", "registry_version", name="uq_metric_result"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"), index=True)
+    metric: Mapped[str] = mapped_column(String(100))
+    value: Mapped[float | None] = mapped_column(Float, nullable=True)
+    registry_version: Mapped[str] = mapped_column(String(16))
+
+
+class Rating(Base):
+    """A rating of a session by a named rater, e.g. OSATS or GRS items and totals."""
+
+    __tablename__ = "ratings"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"), index=True)
+    rater: Mapped[str] = mapped_column(String(100))
+    instrument: Mapped[str] = mapped_column(String(32))
+    item: Mapped[str] = mapped_column(String(100))
+    score: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class Annotation(Base):
+    __tablename__ = "annotations"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"), index=True)
+    author: Mapped[str] = mapped_column(String(100))
+    time_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    text: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)

@@ -1,0 +1,229 @@
+"""Running a session: device + simulator runtime + recorder + catalog row, then scoring.
+
+The catalog row is committed as ``running`` before the first sample; it becomes
+``complete`` only after the recorder has closed its files and their SHA-256 are
+stored. An exception or Ctrl-C closes the recorder (the data is kept) and marks the
+row ``failed`` with the reason; a hard crash leaves ``running`` plus a journal that
+``vascsim recover`` turns into a ``recovered`` session.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+from sqlalchemy import delete, select
+
+from metrics import REGISTRY_VERSION, from_recorded, metrics_of
+from recorder import SessionWriter, open_session
+from recorder.runtime import RuntimeRecorder
+from sessions.catalog import Catalog, CatalogError, file_sha256, new_uid, now
+from sessions.models import MetricResult, Participant, Session, StreamFile, Study
+from sessions.tasks import task_spec, tissue_for
+from sim.devices import ScriptedDevice, SuturingPass
+from sim.devices.scripted import SuturingPassParameters
+from sim.needle import Needle
+from sim.runtime import Simulation
+
+
+@dataclass(frozen=True)
+class SessionPlan:
+    study: str
+    participant: str
+    task: str
+    trial: int
+    phase: str = "practice"
+    device: str = "scripted"
+    clock: str = "simulated"
+
+
+def _header(plan: SessionPlan, uid: str, participant: Participant) -> dict:
+    return {
+        "session_id": uid,
+        "participant_id": participant.code,
+        "label": participant.group_label,
+        "trial": plan.trial,
+        "phase": plan.phase,
+        "synthetic": participant.synthetic,
+        "task": plan.task,
+        "device": plan.device,
+        "clock": plan.clock,
+    }
+
+
+def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: SuturingPassParameters | None):
+    """The device named by ``--device`` and the session's duration (s, None = until stopped)."""
+    task = task_spec(plan.task)
+    if spec == "scripted":
+        suturing = SuturingPass(Needle.curved(), task.entry, task.normal, task.bite_direction, parameters)
+        return ScriptedDevice(suturing.pose_and_grip), suturing.duration
+    if spec.startswith("replay:"):
+        from sim.devices import ReplayDevice
+
+        uid = spec.split(":", 1)[1]
+        with catalog.session() as orm:
+            row = orm.scalar(select(Session).where(Session.uid == uid))
+            if row is None:
+                raise CatalogError(f"no session {uid!r} to replay; list them with `vascsim sessions list`")
+            directory = row.directory
+        recorded = open_session(directory).samples_frame()
+        device = ReplayDevice(
+            recorded["time"],
+            recorded[["tool_x", "tool_y", "tool_z"]].to_numpy(),
+            recorded[["tool_qw", "tool_qx", "tool_qy", "tool_qz"]].to_numpy(),
+            recorded["grip"].to_numpy(),
+            session=uid,
+        )
+        return device, float(recorded["time"].iloc[-1])
+    if spec == "spacemouse":
+        from sim.devices.spacemouse import SpaceMouse
+
+        return SpaceMouse(), None
+    if spec == "openhaptics":
+        from sim.devices.openhaptics import OpenHapticsDevice
+
+        return OpenHapticsDevice(), None
+    raise CatalogError(f"unknown device {spec!r}; use scripted, spacemouse, openhaptics or replay:SESSION")
+
+
+def run_session(
+    catalog: Catalog,
+    home: Path,
+    plan: SessionPlan,
+    parameters: SuturingPassParameters | None = None,
+    duration: float | None = None,
+    score: bool = True,
+) -> str:
+    """Run, record and catalogue one session; returns its uid."""
+    device, natural = open_device(plan.device, plan, catalog, parameters)
+    duration = duration if duration is not None else natural
+    if duration is None:
+        raise CatalogError(f"--duration is needed with device {plan.device!r}")
+    spec = task_spec(plan.task)
+    uid = new_uid()
+    directory = home / "sessions" / uid
+    with catalog.session() as orm:
+        study = catalog.study(orm, plan.study)
+        participant = catalog.participant(orm, study, plan.participant)
+        task = catalog.task(orm, spec.name, spec.scenario, spec.parameters)
+        row = Session(
+            uid=uid,
+            participant_id=participant.id,
+            task_id=task.id,
+            device=plan.device,
+            clock=plan.clock,
+            trial=plan.trial,
+            phase=plan.phase,
+            status="running",
+            started_at=now(),
+            directory=str(directory),
+        )
+        orm.add(row)
+        header = _header(plan, uid, participant)
+    writer = SessionWriter(directory, header, flush_interval=0.1)
+    tissue = tissue_for(plan.task, home / "cache")
+    simulation = RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device))
+    try:
+        if plan.clock == "simulated":
+            simulation.run_simulated(duration)
+        else:
+            simulation.run_realtime(duration)
+    except BaseException as error:
+        writer.close()
+        _finish(catalog, uid, directory, "failed", f"{type(error).__name__}: {error}".strip())
+        raise
+    writer.close()
+    _finish(catalog, uid, directory, "complete")
+    if score:
+        score_session(catalog, uid)
+    return uid
+
+
+def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str = "") -> None:
+    with catalog.session() as orm:
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        orm.execute(delete(StreamFile).where(StreamFile.session_id == row.id))
+        for path in sorted(p for p in directory.iterdir() if p.is_file()):
+            orm.add(
+                StreamFile(
+                    session_id=row.id, name=path.name, sha256=file_sha256(path), bytes=path.stat().st_size
+                )
+            )
+        row.status = status
+        row.error = error
+        row.ended_at = now()
+
+
+def score_session(catalog: Catalog, uid: str) -> dict[str, float]:
+    """Compute every registered metric of a stored session and store it with the registry version."""
+    with catalog.session() as orm:
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        if row is None:
+            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        if row.status not in ("complete", "recovered"):
+            raise CatalogError(
+                f"session {uid} is {row.status}; only complete or recovered sessions are scored"
+            )
+        directory = row.directory
+    values = metrics_of(from_recorded(open_session(directory)))
+    with catalog.session() as orm:
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        orm.execute(
+            delete(MetricResult).where(
+                MetricResult.session_id == row.id, MetricResult.registry_version == REGISTRY_VERSION
+            )
+        )
+        for name, value in values.items():
+            stored = None if math.isnan(value) else float(value)
+            orm.add(
+                MetricResult(session_id=row.id, metric=name, value=stored, registry_version=REGISTRY_VERSION)
+            )
+    return values
+
+
+def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
+    """One row per scored session of a study: ids, label, trial, phase, synthetic flag, every metric."""
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        rows = orm.execute(
+            select(
+                Session.uid,
+                Participant.code,
+                Participant.group_label,
+                Session.trial,
+                Session.phase,
+                Participant.synthetic,
+                MetricResult.metric,
+                MetricResult.value,
+            )
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(MetricResult, MetricResult.session_id == Session.id)
+            .where(
+                Participant.study_id == study.id,
+                Session.status.in_(("complete", "recovered")),
+                MetricResult.registry_version == REGISTRY_VERSION,
+            )
+        ).all()
+    columns = ["session_id", "participant_id", "label", "trial", "phase", "synthetic", "metric", "value"]
+    long = pd.DataFrame(rows, columns=columns)
+    if long.empty:
+        raise CatalogError(f"study {study_name!r} has no scored sessions; run `vascsim score` first")
+    ids = columns[:6]
+    wide = long.set_index([*ids, "metric"])["value"].unstack("metric").reset_index()
+    wide.columns.name = None
+    from metrics import REGISTRY
+
+    names = [m.name for m in REGISTRY if m.name in wide.columns]
+    wide = wide[[*ids, *names]].sort_values(["participant_id", "trial"], kind="stable").reset_index(drop=True)
+    wide[names] = wide[names].astype(float)
+    wide["trial"] = wide["trial"].astype(int)
+    wide["synthetic"] = wide["synthetic"].astype(bool)
+    wide.attrs["registry_version"] = REGISTRY_VERSION
+    return wide
+
+
+def studies(catalog: Catalog) -> list[Study]:
+    with catalog.session() as orm:
+        return list(orm.scalars(select(Study).order_by(Study.name)))

@@ -1,0 +1,95 @@
+"""The catalog-backed CLI: enrol, run, list, show, score, report, import, and its one-line errors."""
+
+import json
+import sys
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from sessions.cli import main
+from tests.metrics.test_jigsaws import TRIALS, write_trial
+
+
+def invoke(*args):
+    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+
+
+def test_enrol_run_show_score_delete(home):
+    assert invoke("studies", "add", "course-1", "--description", "Basic skills").exit_code == 0
+    assert invoke("participants", "add", "P01", "--study", "course-1", "--level", "trainee").exit_code == 0
+    result = invoke("run", "--study", "course-1", "--participant", "P01", "--skill", "0.5", "--json")
+    assert result.exit_code == 0, result.output
+    ran = json.loads(result.stdout)
+    uid = ran["session"]
+    assert ran["trial"] == 1 and ran["metrics"]["regrabs"] == 1.0
+    listed = json.loads(invoke("sessions", "list", "--study", "course-1", "--json").stdout)
+    assert [(r["session"], r["status"]) for r in listed] == [(uid, "complete")]
+    shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
+    assert {f["name"] for f in shown["files"]} >= {"samples.parquet", "events.parquet", "header.json"}
+    assert shown["metrics"] == ran["metrics"]
+    rescored = json.loads(invoke("score", uid, "--json").stdout)
+    assert rescored[uid]["path_length"] == ran["metrics"]["path_length"]
+    directory = Path(shown["directory"])
+    assert invoke("sessions", "delete", uid, "--yes").exit_code == 0
+    assert not directory.exists()
+    assert json.loads(invoke("sessions", "list", "--json").stdout) == []
+
+
+def test_user_errors_are_one_line_and_change_nothing(home):
+    invoke("studies", "add", "s")
+    cases = [
+        (("run", "--study", "s", "--participant", "GHOST"), "no participant 'GHOST'"),
+        (("participants", "list", "--study", "nope"), "no study named 'nope'"),
+        (("sessions", "show", "S-000"), "no session 'S-000'"),
+        (("report", "--study", "s"), "has no scored sessions"),
+        (("run", "--study", "s", "--participant", "GHOST", "--device", "replay:S-1"), "no participant"),
+    ]
+    for args, message in cases:
+        result = CliRunner().invoke(main, list(args))
+        assert result.exit_code == 1, (args, result.output)
+        assert message in result.output and "Traceback" not in result.output
+        assert result.output.count("\n") == 1
+    assert json.loads(invoke("sessions", "list", "--json").stdout) == []
+    missing = CliRunner().invoke(main, ["import", "/no/such/folder", "/no/meta.txt", "--study", "j"])
+    assert missing.exit_code == 2 and "does not exist" in missing.output
+
+
+def test_bad_database_url_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setenv("VASCSIM_HOME", str(tmp_path))
+    monkeypatch.setenv("VASCSIM_DATABASE_URL", "oracle://x")
+    result = CliRunner().invoke(main, ["studies", "list"])
+    assert result.exit_code == 1
+    assert (
+        result.output.strip()
+        == "vascsim: error: database URL 'oracle://x': only sqlite and postgresql catalogs are supported"
+    )
+
+
+def test_import_jigsaws_then_report(home, tmp_path):
+    folder = tmp_path / "Suturing" / "kinematics" / "AllGestures"
+    folder.mkdir(parents=True)
+    lines = []
+    for surgeon, (skill, grs, count) in TRIALS.items():
+        for trial in range(1, count + 1):
+            name = f"Suturing_{surgeon}00{trial}"
+            write_trial(folder / f"{name}.txt", 90 + 30 * trial, 0.01 + 0.002 * trial, trial)
+            lines.append(f"{name}\t\t{skill}\t{grs}\t\t2\t2\t2\t2\t2\t2")
+    meta = tmp_path / "Suturing" / "meta_file_Suturing.txt"
+    meta.write_bytes(("\r\n".join(lines) + "\r\n").encode())
+    result = invoke("import", str(tmp_path / "Suturing"), str(meta), "--study", "jigsaws")
+    assert result.exit_code == 0 and "imported 7" in result.output
+    again = CliRunner().invoke(main, ["import", str(tmp_path / "Suturing"), str(meta), "--study", "jigsaws"])
+    assert again.exit_code == 1 and "already in study" in again.output
+    assert (
+        len(json.loads(invoke("sessions", "list", "--json").stdout)) == 7
+    )  # the failed import added nothing
+    out = tmp_path / "report"
+    report = invoke("report", "--study", "jigsaws", "--groups", "expert,novice", "--out", str(out), "--json")
+    assert report.exit_code == 0, report.output
+    assert (out / "report.html").is_file()
+    validity = json.loads(report.stdout)["validity"]
+    assert {row["metric"] for row in validity} >= {"path_length", "task_time"}
+
+
+def test_console_script_exists():
+    assert Path(sys.executable).with_name("vascsim").is_file()
