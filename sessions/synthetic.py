@@ -28,7 +28,7 @@ class Profile:
     def skill(self, trial: int, phase: str = "practice") -> float:
         if self.kind == "expert":
             return self.start_skill
-        skill = self.start_skill + (0.92 - self.start_skill) * (
+        skill = self.start_skill + (0.99 - self.start_skill) * (
             1 - math.exp(-self.learning_rate * (trial - 1))
         )
         return skill - (0.08 if phase == "retention" else 0.0)
@@ -39,7 +39,7 @@ def profile_for(kind: str, seed: int) -> Profile:
     if kind == "expert":
         return Profile("expert", float(rng.uniform(0.85, 0.97)), 0.0)
     if kind == "trainee":
-        return Profile("trainee", float(rng.uniform(0.05, 0.3)), float(rng.uniform(0.35, 0.7)))
+        return Profile("trainee", float(rng.uniform(0.05, 0.3)), float(rng.uniform(0.5, 0.9)))
     raise ValueError(f"synthetic profile must be one of {', '.join(PROFILES)}; got {kind!r}")
 
 
