@@ -21,8 +21,9 @@ from jinja2 import Environment
 from markupsafe import Markup
 from sklearn.metrics import roc_curve
 
+from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.study import StudyAnalysis, metric_unit, oriented
+from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
 from metrics.validity import aggregate_by_participant
 
 FIGURE_FORMATS = ("png", "svg")
@@ -35,22 +36,21 @@ def _save(figure, folder: Path, name: str) -> str:
     return f"figures/{name}.png"
 
 
+def _participant_medians(analysis: StudyAnalysis, metrics: list[str]) -> pd.DataFrame:
+    """One row per participant of the compared groups: the median of their practice sessions."""
+    settings = analysis.settings
+    data = analysis.sessions
+    compared = data[practice_mask(data) & data[settings.group_col].isin(settings.groups)]
+    return aggregate_by_participant(compared, settings.group_col, settings.cluster_col, metrics)
+
+
 def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
     settings = analysis.settings
     metrics = analysis.validity.table["metric"].tolist()
     columns = 4
     rows = max(1, math.ceil(len(metrics) / columns))
     figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.6 * rows), squeeze=False)
-    data = analysis.sessions
-    practice = (
-        data["phase"].fillna("practice") != "retention" if "phase" in data else np.ones(len(data), bool)
-    )
-    per_participant = aggregate_by_participant(
-        data[practice & data[settings.group_col].isin(settings.groups)],
-        settings.group_col,
-        settings.cluster_col,
-        metrics,
-    )
+    per_participant = _participant_medians(analysis, metrics)
     significant = set(analysis.validity.discriminating())
     for axis, metric in zip(axes.ravel(), metrics, strict=False):
         groups = [
@@ -78,16 +78,7 @@ def _roc(analysis: StudyAnalysis, folder: Path) -> str:
     settings = analysis.settings
     table = analysis.validity.table.dropna(subset=["auc"])
     ranked = table.assign(effect=(table["auc"] - 0.5).abs()).sort_values("effect", ascending=False).head(6)
-    data = analysis.sessions
-    practice = (
-        data["phase"].fillna("practice") != "retention" if "phase" in data else np.ones(len(data), bool)
-    )
-    per_participant = aggregate_by_participant(
-        data[practice & data[settings.group_col].isin(settings.groups)],
-        settings.group_col,
-        settings.cluster_col,
-        ranked["metric"].tolist(),
-    )
+    per_participant = _participant_medians(analysis, ranked["metric"].tolist())
     skilled = (per_participant[settings.group_col] == settings.skilled_group).to_numpy()
     figure, axis = plt.subplots(figsize=(5, 5))
     for metric in ranked["metric"]:
@@ -120,9 +111,7 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
     """A panel per benchmarked metric (up to 8): trainees' trials, fitted curves, retention, benchmark."""
     settings = analysis.settings
     data = analysis.sessions
-    practice = (
-        data["phase"].fillna("practice") != "retention" if "phase" in data else pd.Series(True, data.index)
-    )
+    practice = practice_mask(data)
     trainees = data[
         (data[settings.group_col] != settings.skilled_group) & data[settings.group_col].isin(settings.groups)
     ]
@@ -144,8 +133,8 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
             fit = fitted.get((participant, bench.metric))
             if fit is not None:
                 n = np.linspace(1, done["trial"].max(), 60)
-                shape = n**-fit.rate if fit.model == "power" else np.exp(-fit.rate * (n - 1))
-                axis.plot(n, fit.plateau + fit.amplitude * shape, "-", color=colour, alpha=0.7, linewidth=1)
+                fitted_values = LEARNING_MODELS[fit.model](n, fit.plateau, fit.amplitude, fit.rate)
+                axis.plot(n, fitted_values, "-", color=colour, alpha=0.7, linewidth=1)
             delayed = mine[~practice.loc[mine.index]]
             axis.plot(delayed["trial"], delayed[bench.metric], "s", color=colour, markersize=5)
         axis.axhline(bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")

@@ -55,7 +55,8 @@ class StudyAnalysis:
     notes: list[str] = field(default_factory=list)
 
 
-def _practice(table: pd.DataFrame) -> pd.Series:
+def practice_mask(table: pd.DataFrame) -> pd.Series:
+    """True for practice sessions (rows without a ``phase`` column all count as practice)."""
     if "phase" not in table.columns:
         return pd.Series(True, index=table.index)
     return table["phase"].fillna("practice") != "retention"
@@ -69,7 +70,7 @@ def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) ->
             "the sessions table needs a 'trial' column (1-based order of each participant's sessions)"
         )
     table = table.sort_values([settings.cluster_col, "trial"], kind="stable").reset_index(drop=True)
-    practice = _practice(table)
+    practice = practice_mask(table)
     validity = construct_validity(
         table[practice],
         settings.group_col,

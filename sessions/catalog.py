@@ -7,7 +7,6 @@ schema is created and upgraded by the Alembic migrations in ``sessions/migration
 
 from __future__ import annotations
 
-import hashlib
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -22,7 +21,7 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
-from sessions.models import Participant, Study, Task
+from sessions.models import Participant, Session, Study, Task
 from sim.errors import VascsimError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
@@ -126,6 +125,13 @@ class Catalog:
             orm.flush()
         return found
 
+    def recorded_session(self, orm: OrmSession, uid: str) -> Session:
+        """The session with this uid; a CatalogError naming it when there is none."""
+        found = orm.scalar(select(Session).where(Session.uid == uid))
+        if found is None:
+            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        return found
+
     def participant(self, orm: OrmSession, study: Study, code: str) -> Participant:
         found = orm.scalar(
             select(Participant).where(Participant.study_id == study.id, Participant.code == code)
@@ -174,11 +180,3 @@ class Catalog:
             orm.add(found)
             orm.flush()
         return found
-
-
-def file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()

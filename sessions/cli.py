@@ -479,13 +479,11 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
 
 
 def _session_metrics(catalog, uid: str) -> dict:
-    from sqlalchemy import select
 
     from metrics import REGISTRY_VERSION
-    from sessions.models import Session
 
     with catalog.session() as orm:
-        row = orm.scalar(select(Session).where(Session.uid == uid))
+        row = catalog.recorded_session(orm, uid)
         return {
             m.metric: m.value
             for m in sorted(row.metrics, key=lambda m: m.id)
@@ -552,16 +550,10 @@ def sessions_list(study, status, as_json) -> None:
 @user_errors
 def sessions_show(uid: str, as_json: bool) -> None:
     """Show one session: who, what, when, files with checksums, metrics."""
-    from sqlalchemy import select
-
-    from sessions.catalog import CatalogError
-    from sessions.models import Session
 
     catalog, _ = _catalog()
     with catalog.session() as orm:
-        row = orm.scalar(select(Session).where(Session.uid == uid))
-        if row is None:
-            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        row = catalog.recorded_session(orm, uid)
         data = {
             "session": row.uid,
             "study": row.participant.study.name,
@@ -602,16 +594,9 @@ def sessions_delete(uid: str, yes: bool) -> None:
     """Delete a session's catalog rows and its stream files."""
     import shutil
 
-    from sqlalchemy import select
-
-    from sessions.catalog import CatalogError
-    from sessions.models import Session
-
     catalog, _ = _catalog()
     with catalog.session() as orm:
-        row = orm.scalar(select(Session).where(Session.uid == uid))
-        if row is None:
-            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        row = catalog.recorded_session(orm, uid)
         if not yes:
             click.confirm(f"delete session {uid} and its files?", abort=True)
         directory = row.directory

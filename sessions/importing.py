@@ -9,7 +9,8 @@ from sqlalchemy import select
 
 from metrics import REGISTRY_VERSION, metrics_of
 from metrics.datasets import jigsaws
-from sessions.catalog import Catalog, CatalogError, file_sha256, now
+from recorder.writer import sha256_of
+from sessions.catalog import Catalog, CatalogError, now
 from sessions.models import MetricResult, Participant, Rating, Session, StreamFile
 
 
@@ -65,7 +66,7 @@ def import_jigsaws(
             orm.flush()
             orm.add(
                 StreamFile(
-                    session_id=session.id, name=path.name, sha256=file_sha256(path), bytes=path.stat().st_size
+                    session_id=session.id, name=path.name, sha256=sha256_of(path), bytes=path.stat().st_size
                 )
             )
             orm.add(

@@ -19,7 +19,8 @@ from sqlalchemy import delete, select
 from metrics import REGISTRY_VERSION, from_recorded, metrics_of
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from sessions.catalog import Catalog, CatalogError, file_sha256, new_uid, now
+from recorder.writer import sha256_of
+from sessions.catalog import Catalog, CatalogError, new_uid, now
 from sessions.models import MetricResult, Participant, Session, StreamFile, Study
 from sessions.tasks import task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
@@ -64,9 +65,7 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
 
         uid = spec.split(":", 1)[1]
         with catalog.session() as orm:
-            row = orm.scalar(select(Session).where(Session.uid == uid))
-            if row is None:
-                raise CatalogError(f"no session {uid!r} to replay; list them with `vascsim sessions list`")
+            row = catalog.recorded_session(orm, uid)
             directory = row.directory
         recorded = open_session(directory).samples_frame()
         device = ReplayDevice(
@@ -143,12 +142,12 @@ def run_session(
 
 def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str = "") -> None:
     with catalog.session() as orm:
-        row = orm.scalar(select(Session).where(Session.uid == uid))
+        row = catalog.recorded_session(orm, uid)
         orm.execute(delete(StreamFile).where(StreamFile.session_id == row.id))
         for path in sorted(p for p in directory.iterdir() if p.is_file()):
             orm.add(
                 StreamFile(
-                    session_id=row.id, name=path.name, sha256=file_sha256(path), bytes=path.stat().st_size
+                    session_id=row.id, name=path.name, sha256=sha256_of(path), bytes=path.stat().st_size
                 )
             )
         row.status = status
@@ -159,9 +158,7 @@ def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str
 def score_session(catalog: Catalog, uid: str) -> dict[str, float]:
     """Compute every registered metric of a stored session and store it with the registry version."""
     with catalog.session() as orm:
-        row = orm.scalar(select(Session).where(Session.uid == uid))
-        if row is None:
-            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+        row = catalog.recorded_session(orm, uid)
         if row.status not in ("complete", "recovered"):
             raise CatalogError(
                 f"session {uid} is {row.status}; only complete or recovered sessions are scored"
@@ -169,7 +166,7 @@ def score_session(catalog: Catalog, uid: str) -> dict[str, float]:
         directory = row.directory
     values = metrics_of(from_recorded(open_session(directory)))
     with catalog.session() as orm:
-        row = orm.scalar(select(Session).where(Session.uid == uid))
+        row = catalog.recorded_session(orm, uid)
         orm.execute(
             delete(MetricResult).where(
                 MetricResult.session_id == row.id, MetricResult.registry_version == REGISTRY_VERSION
