@@ -145,27 +145,34 @@ def devices(as_json: bool) -> None:
 
 
 @main.command()
-@click.argument("session_dir", type=click.Path(file_okay=False, path_type=str))
+@click.argument("session")
+@click.option("--score/--no-score", default=True, show_default=True, help="Score the session once recovered.")
 @click.option("--json", "as_json", is_flag=True, help="Print the recovered session's header as JSON.")
 @user_errors
-def recover(session_dir: str, as_json: bool) -> None:
-    """Recover a session a crash left unfinished (SESSION_DIR holds its journal).
+def recover(session: str, score: bool, as_json: bool) -> None:
+    """Recover a session a crash left unfinished: SESSION is its id or its directory.
 
     Every complete batch of the journal becomes the session's Parquet files; the
     header is marked recovered with the time up to which data was kept (at most one
-    flush interval, 100 ms by default, was lost).
+    flush interval, 100 ms by default, was lost). A catalogued session becomes
+    `recovered`, with its files' checksums, and is scored. Find candidates with
+    `vascsim sessions list --status running`.
     """
-    from recorder import recover as recover_session
+    from sessions.runner import recover_session, score_session
 
-    header = recover_session(session_dir)
+    catalog, _ = _catalog()
+    uid, header = recover_session(catalog, session)
+    if uid is not None and score and header["samples"]["rows"]:
+        score_session(catalog, uid)
     if as_json:
-        click.echo(json.dumps(header, indent=2, sort_keys=True))
+        click.echo(json.dumps(dict(header, catalog_session=uid), indent=2, sort_keys=True))
         return
     rows = header["samples"]["rows"]
     until = header.get("recovered_until_s")
     kept = f"up to {until:.3f} s" if until is not None else "no samples"
+    name = uid or session
     click.echo(
-        f"recovered {session_dir}: {rows} samples kept ({kept}); at most "
+        f"recovered {name}: {rows} samples kept ({kept}); at most "
         f"{header.get('lost_at_most_s')} s after that was lost"
     )
 
@@ -181,17 +188,20 @@ def _catalog():
     return catalog, home
 
 
-def _progress():
+def _progress(transient: bool = False):
+    """A progress bar on stderr; a transient one vanishes when done and stays silent off a terminal."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    console = _stderr_console()
     return Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         TextColumn("{task.fields[last]}"),
-        transient=False,
-        console=_stderr_console(),
+        transient=transient,
+        disable=transient and not console.is_terminal,
+        console=console,
     )
 
 
@@ -709,6 +719,69 @@ def report(study, out, groups, level, metric_names, rule, as_json) -> None:
         _json({"report": str(page), "validity": analysis.validity.table.to_dict(orient="records")})
         return
     click.echo(f"report: {page}")
+
+
+@main.command("export")
+@click.option("--study", required=True, help="Study to export.")
+@click.option(
+    "-o",
+    "--out",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Archive to write (default: STUDY.vascsim.zip in the current directory).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@user_errors
+def export_bundle(study: str, out: str | None, as_json: bool) -> None:
+    """Write a study as one self-contained archive (catalog rows + stream files + checksums).
+
+    The archive moves a study between machines or catalogs (SQLite <-> PostgreSQL);
+    `vascsim import-bundle` reads it back. Every file is checked against its
+    recorded SHA-256 on the way out.
+    """
+    from sessions.bundle import export_study
+
+    catalog, _ = _catalog()
+    target = out or f"{study}.vascsim.zip"
+    with _progress(transient=True) as progress:
+        task = progress.add_task("exporting", total=None, last="")
+        summary = export_study(
+            catalog, study, target, lambda name: progress.update(task, advance=1, last=name)
+        )
+    if as_json:
+        _json(summary)
+    else:
+        click.echo(
+            f"exported study {study}: {summary['sessions']} session(s), {summary['files']} file(s) "
+            f"-> {summary['bundle']}"
+        )
+
+
+@main.command("import-bundle")
+@click.argument("bundle", type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@user_errors
+def import_bundle_command(bundle: str, as_json: bool) -> None:
+    """Add a study exported by `vascsim export` to this catalog.
+
+    Every checksum is verified first; a corrupted bundle, a study name already in
+    use, or a session id already catalogued is refused and nothing is changed.
+    """
+    from sessions.bundle import import_bundle
+
+    catalog, home = _catalog()
+    with _progress(transient=True) as progress:
+        task = progress.add_task("verifying", total=None, last="")
+        summary = import_bundle(
+            catalog, home, bundle, lambda name: progress.update(task, advance=1, last=name)
+        )
+    if as_json:
+        _json(summary)
+    else:
+        click.echo(
+            f"imported study {summary['study']}: {summary['participants']} participant(s), "
+            f"{summary['sessions']} session(s)"
+        )
 
 
 @main.command("import")

@@ -155,6 +155,34 @@ def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str
         row.ended_at = now()
 
 
+def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
+    """Recover a session a crash left ``running``: ``target`` is its uid or its directory.
+
+    The recorder turns the journal into verified Parquet files (header marked recovered);
+    the catalog row, when there is one, becomes ``recovered`` with the files' SHA-256 and
+    can then be scored. Returns (uid or None for an uncatalogued directory, header)."""
+    from recorder import recover as recover_files
+
+    folder = Path(target)
+    with catalog.session() as orm:
+        row = None
+        if folder.is_dir():
+            resolved = str(folder.resolve())
+            row = orm.scalar(select(Session).where(Session.directory.in_((target, resolved))))
+        else:
+            row = catalog.recorded_session(orm, target)
+            folder = Path(row.directory)
+        if row is not None and row.status != "running":
+            raise CatalogError(
+                f"session {row.uid} is {row.status}; only sessions left running by a crash are recovered"
+            )
+        uid = row.uid if row is not None else None
+    header = recover_files(folder)
+    if uid is not None:
+        _finish(catalog, uid, folder, "recovered", "recovered after a crash")
+    return uid, header
+
+
 def score_session(catalog: Catalog, uid: str) -> dict[str, float]:
     """Compute every registered metric of a stored session and store it with the registry version."""
     with catalog.session() as orm:

@@ -191,27 +191,6 @@ def test_time_going_backwards_is_rejected(tmp_path):
         open_session(tmp_path / "s")
 
 
-def test_recover_command(tmp_path):
-    from click.testing import CliRunner
-
-    from sessions.cli import main
-
-    session = tmp_path / "s"
-    writer = SessionWriter(session, {}, flush_interval=10.0)
-    for row in rows(300):
-        writer.record(row)
-    writer.flush()
-    writer._stop.set()
-    writer._thread.join()
-    writer._sample_sink.close()
-    writer._event_sink.close()
-    result = CliRunner().invoke(main, ["recover", str(session)])
-    assert result.exit_code == 0, result.output
-    assert "300 samples kept (up to 0.299 s)" in result.output
-    again = CliRunner().invoke(main, ["recover", str(session)])
-    assert again.exit_code == 1 and "has no journal to recover" in again.output
-
-
 def test_record_block_wraps_around_the_ring(tmp_path):
     writer = SessionWriter(tmp_path / "s", {}, flush_interval=10.0, capacity=100)
     data = rows(250)
