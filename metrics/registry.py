@@ -17,7 +17,7 @@ from metrics.streams import MetricsError
 if TYPE_CHECKING:
     from metrics.context import SessionContext
 
-REGISTRY_VERSION = "1"
+REGISTRY_VERSION = "2"
 
 LOWER, HIGHER = "lower", "higher"
 

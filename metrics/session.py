@@ -68,17 +68,26 @@ def compute_session_metrics(
     sessions_or_trials: Iterable[Any],
     metrics: Sequence[str] | None = None,
     progress: Callable[[int], None] | None = None,
+    tissue: Callable[[SessionStreams], Any] | None = None,
 ) -> pd.DataFrame:
     """One row per session: ``session_id``, ``participant_id``, ``label``, attributes, one column per metric.
 
     sessions_or_trials: SessionStreams, recorder sessions or their directories,
     imported trials (e.g. :func:`metrics.datasets.jigsaws.load`), in any mix.
     metrics: names to compute (default: the whole registry). progress: called with
-    1 after each session. ``frame.attrs["registry_version"]`` records the definitions used.
+    1 after each session. tissue: for simulator sessions, a function giving the tissue
+    model a session ran on (or None), from which :func:`metrics.tissue.with_tissue_fields`
+    derives the tissue streams. ``frame.attrs["registry_version"]`` records the definitions used.
     """
     rows = []
     for item in sessions_or_trials:
-        rows.append(session_row(as_streams(item), metrics))
+        streams = as_streams(item)
+        model = tissue(streams) if tissue is not None else None
+        if model is not None:
+            from metrics.tissue import with_tissue_fields
+
+            streams = with_tissue_fields(streams, model)
+        rows.append(session_row(streams, metrics))
         if progress is not None:
             progress(1)
     names = [m.name for m in REGISTRY.select(list(metrics) if metrics is not None else None)]

@@ -47,7 +47,11 @@ class SessionStreams:
     time: (n,) s, non-decreasing. tool_position: (n, 3) m, the dominant hand's
     needle holder. Optional (n,)-aligned arrays: tip_position (n, 3) m; force (n, 3) N
     sent to the device (the tissue's reaction); needle_state (n,) 0 free, 1 contact,
-    2 pierced, 3 exited; local_stress (n,) Pa; stretch (n,) principal stretch;
+    2 pierced, 3 exited; local_stress (n,) Pa, the largest von Mises stress near the
+    contact; stretch (n,) the paper's stretch statistic lambda = 1 + |d|/h (d the tip's
+    indentation of the wall, h the wall depth under the contact); contact_triangle (n,)
+    exterior triangle touched (-1 none) with contact_barycentric (n, 3) weights of the
+    contact point; tip_speed (n,) m/s;
     subordinate_displacement (n, 3) m from the subordinate hand's start; grip (n,)
     1 closed. events: DataFrame with at least time and kind. stress_field: optional
     table of the tissue surface at the moment of insertion (columns x, y, z, area,
@@ -68,6 +72,9 @@ class SessionStreams:
     grip: NDArray[np.int8] | None = None
     events: pd.DataFrame = field(default_factory=_empty_events)
     stress_field: pd.DataFrame | None = None
+    contact_triangle: NDArray[np.int32] | None = None
+    contact_barycentric: NDArray[np.float64] | None = None
+    tip_speed: NDArray[np.float64] | None = None
     force_limit: float | None = None
     attributes: Mapping[str, Any] = field(default_factory=dict)
 
@@ -93,6 +100,9 @@ class SessionStreams:
             ("local_stress", 1),
             ("stretch", 1),
             ("grip", 1),
+            ("contact_triangle", 1),
+            ("contact_barycentric", 3),
+            ("tip_speed", 1),
         ):
             value = getattr(self, name)
             if value is None:
@@ -162,6 +172,9 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
         stretch=None if np.all(np.isnan(stretch)) else stretch,
         subordinate_displacement=columns("sub_dx", "sub_dy", "sub_dz"),
         grip=column("grip").astype(np.int8),
+        contact_triangle=column("contact_triangle").astype(np.int32),
+        contact_barycentric=columns("bary_0", "bary_1", "bary_2"),
+        tip_speed=column("tip_speed").astype(np.float64),
         events=events,
         force_limit=metadata.get("force_limit"),
         attributes=metadata,

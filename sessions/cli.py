@@ -160,10 +160,10 @@ def recover(session: str, score: bool, as_json: bool) -> None:
     """
     from sessions.runner import recover_session, score_session
 
-    catalog, _ = _catalog()
+    catalog, home = _catalog()
     uid, header = recover_session(catalog, session)
     if uid is not None and score and header["samples"]["rows"]:
-        score_session(catalog, uid)
+        score_session(catalog, uid, home)
     if as_json:
         click.echo(json.dumps(dict(header, catalog_session=uid), indent=2, sort_keys=True))
         return
@@ -635,7 +635,7 @@ def score(uids, study, as_json) -> None:
     from sessions.models import Participant, Session, Study
     from sessions.runner import score_session
 
-    catalog, _ = _catalog()
+    catalog, home = _catalog()
     targets = list(uids)
     if study:
         with catalog.session() as orm:
@@ -658,7 +658,7 @@ def score(uids, study, as_json) -> None:
     with _progress() as progress:
         task = progress.add_task("scoring", total=len(targets), last="")
         for uid in targets:
-            results[uid] = score_session(catalog, uid)
+            results[uid] = score_session(catalog, uid, home)
             progress.update(task, advance=1, last=uid)
     if as_json:
         _json(results)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import shutil
 import time
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,7 +96,9 @@ def run_demo(
             for k in range(1, count + 1):
                 code = f"{kind[0].upper()}{k:02d}"
                 catalog.add_participant(orm, study, code, level=kind, group_label=kind, synthetic=True)
-                profile = profile_for(kind, seed * 1000 + hash(code) % 997)
+                profile = profile_for(
+                    kind, seed * 1000 + zlib.crc32(code.encode()) % 997
+                )  # not hash(): salted per process
                 for trial in range(1, sessions + 1):
                     plans.append((code, trial, "practice", profile.skill(trial)))
                 if kind == "trainee" and size.retention:

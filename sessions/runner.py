@@ -17,12 +17,14 @@ import pandas as pd
 from sqlalchemy import delete, select
 
 from metrics import REGISTRY_VERSION, from_recorded, metrics_of
+from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from recorder.writer import sha256_of
 from sessions.catalog import Catalog, CatalogError, new_uid, now
+from sessions.config import data_home
 from sessions.models import MetricResult, Participant, Session, StreamFile, Study
-from sessions.tasks import task_spec, tissue_for
+from sessions.tasks import session_tissue, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
@@ -136,7 +138,7 @@ def run_session(
     writer.close()
     _finish(catalog, uid, directory, "complete")
     if score:
-        score_session(catalog, uid)
+        score_session(catalog, uid, home)
     return uid
 
 
@@ -183,8 +185,11 @@ def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
     return uid, header
 
 
-def score_session(catalog: Catalog, uid: str) -> dict[str, float]:
-    """Compute every registered metric of a stored session and store it with the registry version."""
+def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[str, float]:
+    """Compute every registered metric of a stored session and store it with the registry version.
+
+    Simulator sessions get their tissue streams derived with the task's model (cached
+    under ``home/cache``; ``home`` defaults to VASCSIM_HOME)."""
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         if row.status not in ("complete", "recovered"):
@@ -192,7 +197,9 @@ def score_session(catalog: Catalog, uid: str) -> dict[str, float]:
                 f"session {uid} is {row.status}; only complete or recovered sessions are scored"
             )
         directory = row.directory
-    values = metrics_of(from_recorded(open_session(directory)))
+    streams = from_recorded(open_session(directory))
+    model = session_tissue(streams, (home or data_home()) / "cache")
+    values = metrics_of(with_tissue_fields(streams, model) if model is not None else streams)
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         orm.execute(

@@ -59,3 +59,10 @@ def tissue_for(task: str, cache_dir: Path | None = None):
     tissue = BiphaseTissue.build(mesh, fixed)
     tissue.precompute(cache_dir=cache_dir)
     return tissue
+
+
+def session_tissue(streams, cache_dir: Path | None = None):
+    """The tissue model a recorded session ran on (from its header's ``task``), or None for
+    sessions of other origins (imported data, unknown tasks)."""
+    task = streams.attributes.get("task")
+    return tissue_for(task, cache_dir) if task in TASKS else None

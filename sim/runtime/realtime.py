@@ -36,7 +36,7 @@ from sim.runtime.shared import (
     SharedHolder,
     SharedTelemetry,
 )
-from sim.runtime.simulation import LAYERS, HapticLog, RunResult, RuntimeEvent, Simulation
+from sim.runtime.simulation import LAYERS, HapticLog, RunResult, RuntimeError_, RuntimeEvent, Simulation
 from sim.runtime.telemetry import LoopTelemetry
 
 SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
@@ -79,7 +79,6 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     display_telemetry = SharedTelemetry(arena, display_capacity)
     display_pid = _start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()
-    control.start = clock.perf_counter() + START_DELAY
     started = clock.perf_counter()
     pid = os.fork()
     if pid == 0:  # the haptic process
@@ -94,6 +93,9 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     os.close(errors_write)
     previous_affinity = _leave_last_core_to_haptics(pin_cpus)
     try:
+        _wait_until_ready(pid, control)
+        # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
+        control.start = clock.perf_counter() + START_DELAY
         _run_other_layers(simulation, duration, control)
     finally:
         control.request_stop()
@@ -132,6 +134,18 @@ def _set_all_threads(cpus: set[int]) -> None:
             continue
 
 
+def _wait_until_ready(pid: int, control: ControlBlock, timeout: float = 60.0) -> None:
+    """Block until the haptic process has finished its set-up (or has died trying)."""
+    deadline = clock.monotonic() + timeout
+    while not control.haptic_ready:
+        finished, _ = os.waitpid(pid, os.WNOHANG)
+        if finished:
+            raise RuntimeError_("haptic: the haptic process exited during its set-up")
+        if clock.monotonic() > deadline:
+            raise RuntimeError_(f"haptic: the haptic process was not ready after {timeout:.0f} s")
+        clock.sleep(0.001)
+
+
 def _start_display_process(
     simulation: Simulation, duration: float, control: ControlBlock, telemetry: SharedTelemetry
 ) -> int | None:
@@ -151,7 +165,7 @@ def _start_display_process(
             os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:-1]))  # off the haptic core
         gc.freeze()
         period = simulation.settings.period("display")
-        start, k = control.start, 0
+        start, k = control.wait_for_start(), 0
         while not control.stop_requested and control.haptic_state == ControlBlock.RUNNING:
             deadline = start + k * period
             wait = deadline - clock.perf_counter()
@@ -205,7 +219,8 @@ def _haptic_process(
         simulation.on_haptic_start()
     simulation.device.read(0.0)  # warm caches and lazy imports before the first deadline
     simulation.forces.at(0.0)
-    start = control.start
+    control.mark_haptic_ready()
+    start = control.wait_for_start()
     step = 0
     now = 0.0
     reported = 0

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import mmap
 import os
+import time
 
 import numpy as np
 from numpy.typing import NDArray
@@ -184,7 +185,9 @@ class SharedEvents:
 
 
 class ControlBlock:
-    """[stop requested, haptic state, start time]: 0 running, 1 finished, 2 device lost, 3 failed."""
+    """[stop requested, haptic state, start time, haptic ready]: states 0 running, 1 finished, 2 device
+    lost, 3 failed. The start time (perf_counter seconds, shared by all processes) is 0 until the
+    parent sets it, which it does only once the haptic process is ready."""
 
     RUNNING, FINISHED, DEVICE_LOST, FAILED = 0.0, 1.0, 2.0, 3.0
 
@@ -213,6 +216,19 @@ class ControlBlock:
     @start.setter
     def start(self, value: float) -> None:
         self._data[2] = value
+
+    @property
+    def haptic_ready(self) -> bool:
+        return self._data[3] != 0.0
+
+    def mark_haptic_ready(self) -> None:
+        self._data[3] = 1.0
+
+    def wait_for_start(self, poll: float = 0.0005) -> float:
+        """The shared start time, once set (0.0 if a stop was requested first)."""
+        while self._data[2] == 0.0 and not self.stop_requested:
+            time.sleep(poll)
+        return float(self._data[2])
 
 
 class SharedGraphics:

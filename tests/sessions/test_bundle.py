@@ -10,11 +10,13 @@ import pytest
 from click.testing import CliRunner
 
 from metrics import from_recorded, metrics_of
+from metrics.tissue import with_tissue_fields
 from recorder import open_session
 from sessions.bundle import export_study, import_bundle
 from sessions.catalog import CatalogError
 from sessions.cli import main
 from sessions.runner import study_table
+from sessions.tasks import session_tissue
 
 
 def invoke(*args):
@@ -57,7 +59,8 @@ def test_export_then_import_elsewhere_reproduces_identical_metrics(small_study, 
     pd.testing.assert_frame_equal(before, after)
     # the imported stream files give exactly the stored metrics again
     for uid in after["session_id"]:
-        direct = metrics_of(from_recorded(open_session(other_home / "sessions" / uid)))
+        streams = from_recorded(open_session(other_home / "sessions" / uid))
+        direct = metrics_of(with_tissue_fields(streams, session_tissue(streams, other_home / "cache")))
         stored = after.set_index("session_id").loc[uid, list(direct)]
         np.testing.assert_array_equal(np.asarray(stored, float), np.asarray(list(direct.values()), float))
     with pytest.raises(CatalogError, match="already exists; this bundle was already imported"):

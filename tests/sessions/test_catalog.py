@@ -13,6 +13,7 @@ from metrics import compute_session_metrics
 from sessions.catalog import Catalog, CatalogError
 from sessions.demo import DemoSize, run_demo
 from sessions.models import Base, Participant, Session
+from sessions.tasks import session_tissue
 
 
 def test_migrations_match_the_models(catalog_url, open_catalog):
@@ -76,7 +77,13 @@ def test_reduced_demo_report_matches_the_stored_streams(catalog_url, tmp_path, o
     with catalog.session() as orm:
         rows = orm.execute(select(Session.uid, Session.directory, Session.status)).all()
     assert {r.status for r in rows} == {"complete"}
-    direct = compute_session_metrics([r.directory for r in rows]).set_index("session_id").sort_index()
+    direct = (
+        compute_session_metrics(
+            [r.directory for r in rows], tissue=lambda streams: session_tissue(streams, tmp_path / "cache")
+        )
+        .set_index("session_id")
+        .sort_index()
+    )
     stored = (
         pd.read_csv(result.report.parent / "tables" / "session_metrics.csv")
         .set_index("session_id")
@@ -90,6 +97,8 @@ def test_reduced_demo_report_matches_the_stored_streams(catalog_url, tmp_path, o
     np.testing.assert_allclose(
         stored[metric_columns].to_numpy(float), direct[metric_columns].to_numpy(float), rtol=1e-9
     )
+    tissue_metrics = ["high_stress_area", "stress_concentration", "peak_stretch", "time_above_strain_limit"]
+    assert np.isfinite(stored[tissue_metrics].to_numpy(float)).all()  # derived for every simulator session
     assert set(stored["participant_id"]) == {"E01", "E02", "T01", "T02", "T03"}
     assert stored["synthetic"].all()
     assert "Synthetic data" in result.report.read_text()

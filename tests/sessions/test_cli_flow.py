@@ -22,6 +22,7 @@ def test_enrol_run_show_score_delete(home):
     ran = json.loads(result.stdout)
     uid = ran["session"]
     assert ran["trial"] == 1 and ran["metrics"]["regrabs"] == 1.0
+    assert ran["metrics"]["peak_stretch"] > 1.0 and ran["metrics"]["stress_concentration"] > 0.0
     listed = json.loads(invoke("sessions", "list", "--study", "course-1", "--json").stdout)
     assert [(r["session"], r["status"]) for r in listed] == [(uid, "complete")]
     shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
