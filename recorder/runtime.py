@@ -7,6 +7,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from recorder.scene import SceneLog
 from recorder.schema import COLUMN, SAMPLE_COLUMNS
 from recorder.writer import SessionWriter
 from sim.devices.base import DeviceSample
@@ -44,7 +45,16 @@ class RuntimeRecorder:
         simulation.on_sample = self.on_sample
         simulation.on_event = self.on_event
         simulation.on_haptic_start = self.writer.prefault
+        simulation.on_graphics = self.on_graphics
+        self.writer.scene = SceneLog()
         return simulation
+
+    def on_graphics(self, now: float, fem: FemSnapshot) -> None:
+        """One scene frame per graphics step: what a replay needs to draw it without re-simulating."""
+        drive = fem.contact if fem.state != "free" else None
+        self.writer.scene.add(
+            now, STATE_CODES.get(fem.state, 0), fem.tip_speed, fem.needle_force, fem.needle_vertices, drive
+        )
 
     def on_sample(
         self, now: float, sample: DeviceSample, force: NDArray[np.float64], fem: FemSnapshot | None

@@ -119,6 +119,7 @@ class SessionWriter:
             os.fsync(sink.fileno())
         self.durable_samples = 0
         self.flush_seconds: list[float] = []
+        self.scene = None  # a recorder.scene.SceneLog, written at close when set
         self._stop = threading.Event()
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="vascsim-recorder", daemon=True)
@@ -252,6 +253,10 @@ class SessionWriter:
         ):
             stream.close()
             sink.close()
+        if self.scene is not None and len(self.scene):
+            from recorder.scene import write_scene
+
+            self.header["scene"] = write_scene(self.directory, self.scene.table())
         write_json_atomically(self.directory / HEADER_FILE, self.header)
         return finalize(self.directory, status)
 

@@ -19,6 +19,14 @@ from sim.errors import VascsimError
 from sim.mesh import TetMesh
 
 STRESS_RANGE_PA = (0.0, 5e3)
+FORCE_ARROW_M_PER_N = 0.4
+"""Force arrows are 4 mm long per 10 mN (the soft wall model's forces are tens of millinewtons)."""
+
+
+def vtk_matrix():
+    from vtkmodules.vtkCommonMath import vtkMatrix4x4
+
+    return vtkMatrix4x4()
 
 
 class RenderError(VascsimError):
@@ -33,6 +41,8 @@ class RenderFrame:
     triangle_stress: (F,) von Mises stress (Pa) of the element under each exterior triangle.
     needle: (S+1, 3) needle vertices, tip first; contact: insertion/contact point or None;
     ghost: (P, 3) path to draw as a ghost (e.g. the expert's needle-tip path) or None.
+    force: (3,) reaction force on the needle (N), drawn as an arrow at the tip, or None.
+    ghost_needle: (S+1, 3) a second needle drawn translucent (e.g. the expert's, aligned) or None.
     """
 
     points: NDArray[np.float64]
@@ -40,6 +50,8 @@ class RenderFrame:
     needle: NDArray[np.float64]
     contact: NDArray[np.float64] | None = None
     ghost: NDArray[np.float64] | None = None
+    force: NDArray[np.float64] | None = None
+    ghost_needle: NDArray[np.float64] | None = None
 
 
 def headless() -> bool:
@@ -55,6 +67,10 @@ class TissueRenderer:
         size: tuple[int, int] = (640, 480),
         offscreen: bool | None = None,
         stress_range: tuple[float, float] = STRESS_RANGE_PA,
+        anti_aliasing: bool = True,
+        scalar_bar: bool = True,
+        force_scale: float = FORCE_ARROW_M_PER_N,
+        zoom: float = 1.0,
     ) -> None:
         offscreen = headless() if offscreen is None else offscreen
         if offscreen:
@@ -66,7 +82,12 @@ class TissueRenderer:
         faces = np.hstack([np.full((len(mesh.surface_triangles), 1), 3), mesh.surface_triangles]).ravel()
         self.surface = pv.PolyData(mesh.points.copy(), faces)
         self.surface.cell_data["von Mises (Pa)"] = np.zeros(len(mesh.surface_triangles))
+        self.size = size
+        self.force_scale = force_scale
+        self.zoom = zoom
         self.plotter = pv.Plotter(off_screen=offscreen, window_size=size)
+        if not anti_aliasing:  # 4x MSAA costs ~3x the frame time under software rendering
+            self.plotter.disable_anti_aliasing()
         self.plotter.set_background("white")
         self.plotter.add_mesh(
             self.surface,
@@ -75,6 +96,7 @@ class TissueRenderer:
             clim=stress_range,
             show_edges=False,
             smooth_shading=False,
+            show_scalar_bar=scalar_bar,
             scalar_bar_args={
                 "title": "von Mises (Pa)",
                 "color": "black",
@@ -94,7 +116,30 @@ class TissueRenderer:
         )
         self.ghost = pv.PolyData(np.zeros((2, 3)), lines=np.array([2, 0, 1]))
         self._ghost_actor = self.plotter.add_mesh(self.ghost, color="limegreen", opacity=0.6, line_width=3)
+        self.ghost_needle = pv.PolyData(np.zeros((2, 3)), lines=np.array([2, 0, 1]))
+        self._ghost_needle_actor = self.plotter.add_mesh(
+            self.ghost_needle, color="limegreen", opacity=0.5, line_width=5
+        )
+        # a unit arrow along +x, placed each frame by a user matrix (no new geometry per frame)
+        self._arrow_actor = self.plotter.add_mesh(
+            pv.Arrow(
+                start=(0.0, 0.0, 0.0),
+                direction=(1.0, 0.0, 0.0),
+                tip_length=0.3,
+                tip_radius=0.12,
+                shaft_radius=0.04,
+            ),
+            color="dodgerblue",
+        )
+        self._arrow_matrix = vtk_matrix()
+        self._arrow_actor.SetUserMatrix(self._arrow_matrix)
+        self._pixels = None
         self._camera_set = False
+
+    def set_camera(self, position, focal_point, view_up) -> None:
+        """Fix the camera (m): replays use one camera for every frame, and for both sides of a comparison."""
+        self.plotter.camera_position = [tuple(position), tuple(focal_point), tuple(view_up)]
+        self._camera_set = True
 
     def render(self, frame: RenderFrame) -> NDArray[np.uint8]:
         """Draw a frame and return its pixels."""
@@ -109,12 +154,49 @@ class TissueRenderer:
         self._ghost_actor.SetVisibility(frame.ghost is not None and len(frame.ghost) > 1)
         if frame.ghost is not None and len(frame.ghost) > 1:
             _set_polyline(self.ghost, frame.ghost)
+        self._ghost_needle_actor.SetVisibility(frame.ghost_needle is not None)
+        if frame.ghost_needle is not None:
+            _set_polyline(self.ghost_needle, frame.ghost_needle)
+        self._place_arrow(frame)
         if not self._camera_set:
             self.plotter.camera_position = "iso"
             self.plotter.reset_camera()
+            self.plotter.renderer.GetActiveCamera().Zoom(self.zoom)
             self._camera_set = True
-        self.plotter.render()
-        return np.asarray(self.plotter.screenshot(return_img=True))
+        return self.read_pixels()
+
+    def read_pixels(self) -> NDArray[np.uint8]:
+        """Render and read the frame straight from the render window: (H, W, 3) uint8, top row first."""
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+        from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
+
+        window = self.plotter.render_window
+        window.Render()
+        if self._pixels is None:
+            self._pixels = vtkUnsignedCharArray()
+        width, height = window.GetSize()
+        window.GetPixelData(0, 0, width - 1, height - 1, 1, self._pixels, 0)
+        return vtk_to_numpy(self._pixels).reshape(height, width, 3)[::-1].copy()
+
+    def _place_arrow(self, frame: RenderFrame) -> None:
+        force = frame.force
+        magnitude = 0.0 if force is None else float(np.linalg.norm(force))
+        self._arrow_actor.SetVisibility(magnitude > 1e-6)
+        if magnitude <= 1e-6:
+            return
+        length = magnitude * self.force_scale
+        x = np.asarray(force, dtype=np.float64) / magnitude
+        helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        y = np.cross(helper, x)
+        y /= np.linalg.norm(y)
+        z = np.cross(x, y)
+        transform = np.eye(4)
+        transform[:3, 0], transform[:3, 1], transform[:3, 2] = x * length, y * length, z * length
+        transform[:3, 3] = frame.needle[0]
+        for row in range(4):
+            for column in range(4):
+                self._arrow_matrix.SetElement(row, column, float(transform[row, column]))
+        self._arrow_matrix.Modified()
 
     def close(self) -> None:
         self.plotter.close()

@@ -106,3 +106,69 @@ class IndentationStress:
                 stress += np.einsum("ta,aeij->teij", d[block] * (1.0 - share[block, None]), self.operators[1])
             out[block] = von_mises_of_stress(stress.reshape(-1, 3, 3)).reshape(len(stress), -1)
         return out
+
+
+class TissueFieldReplay:
+    """The whole tissue's displacement and surface stress for any drive the runtime applied.
+
+    A drive is what the FEM layer sends the tissue each tick: contact nodes, their
+    intended displacements (k, 3) and the needle speed; the tool displacement that
+    sets the biphase strain is the intended displacements' sum (the runtime's own
+    choice, indenting or pierced). Per contact set the full columns of each phase's
+    K0^-1 at the contact dofs are solved once (one multi-right-hand-side solve) and
+    kept, so a frame costs two small matrix products: replaying a session frame by
+    frame gives exactly ``tissue.solve(..., full_field=True, fields=True)``.
+    """
+
+    def __init__(self, tissue: TissueModel | BiphaseTissue, cache_size: int = 16) -> None:
+        self.tissue = tissue
+        self.mesh = tissue.mesh
+        self._surface = self.mesh.surface_elements
+        self._cache: dict[tuple[int, ...], list[tuple[object, NDArray[np.float64]]]] = {}
+        self._cache_size = cache_size
+
+    def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray[np.float64]]]:
+        key = tuple(int(n) for n in nodes)
+        parts = self._cache.get(key)
+        if parts is None:
+            parts = [(model.contact(nodes), model._nodes_columns(nodes)) for model in _phases(self.tissue)]
+            if len(self._cache) >= self._cache_size:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = parts
+        return parts
+
+    def soft_share(
+        self, nodes: NDArray[np.int64], intended: NDArray[np.float64], needle_speed: float
+    ) -> float:
+        if not isinstance(self.tissue, BiphaseTissue):
+            return 1.0
+        p = self.tissue.parameters
+        strain = float(np.linalg.norm(intended.sum(axis=0))) / self.tissue.depth_under(nodes)
+        return p.soft_share(strain, p.strain_limit_at(max(float(needle_speed), 0.0)))
+
+    def state(
+        self, nodes: ArrayLike, intended: ArrayLike, needle_speed: float = 0.0
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(N, 3) displacement of every node (m) and (F,) von Mises stress (Pa) under each exterior
+        triangle, for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s)."""
+        ids = np.asarray(nodes, dtype=np.int64).ravel()
+        drive = np.asarray(intended, dtype=np.float64).reshape(-1, 3)
+        if ids.size == 0:
+            return np.zeros((self.mesh.n_nodes, 3)), np.zeros(len(self._surface))
+        share = self.soft_share(ids, drive, needle_speed)
+        displacement = np.zeros((self.mesh.n_nodes, 3))
+        stress = np.zeros((len(self._surface), 3, 3))
+        for (handle, columns), model, fraction in zip(
+            self._phase_parts(ids), _phases(self.tissue), (share, 1.0 - share), strict=False
+        ):
+            if fraction == 0.0:
+                continue
+            reactions = handle.reaction_forces(fraction * drive)
+            part = (columns @ reactions.reshape(-1)).reshape(-1, 3)
+            displacement += part
+            lam, mu = model._lame
+            grad = displacement_gradients(
+                model._gradients[self._surface], self.mesh.tets[self._surface], part
+            )
+            stress += stress_tensor(small_strain(grad), lam[self._surface], mu[self._surface])
+        return displacement, von_mises_of_stress(stress)

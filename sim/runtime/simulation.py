@@ -291,6 +291,9 @@ class Simulation:
         self.on_event = on_event
         self.on_sample = on_sample  # (now, DeviceSample, force sent, latest FemSnapshot) every haptic tick
         self.on_haptic_start: Callable[[], None] | None = None  # runs in the haptic process before its loop
+        self.on_graphics: Callable[[float, FemSnapshot], None] | None = (
+            None  # each graphics frame (main process)
+        )
         self.stop_reason: str | None = None
         self.error: str | None = None
         self.error_layer: str | None = None
@@ -378,6 +381,8 @@ class Simulation:
             # a needle inside the wall may come out.
             self._prefetcher.near(fem.needle_vertices[0], self.settings.prefetch_radius)
         self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
+        if self.on_graphics is not None:
+            self.on_graphics(now, fem)
 
     def display_step(self, now: float) -> None:
         frame, self._previous_frame = self._previous_frame, self.graphics.get()

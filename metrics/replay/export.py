@@ -1,0 +1,241 @@
+"""A session's replay as video and stills: the 3-D scene with overlays, against an expert reference.
+
+Modes: ``ghost`` draws the reference expert's needle-tip path and, at the aligned
+moment, the expert's needle translucent in the trainee's scene; ``side-by-side``
+shows the trainee (left) and the expert at the aligned moment (right) under one
+camera. Both carry the reaction-force arrow at the tip, the insertion point, the
+stress colour map of the deformed wall and the heads-up panel.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from metrics.alignment import PHASES, phase_starts
+from metrics.replay.hud import HudLine, draw_hud, label_view, value_line
+from metrics.replay.reference import expert_reference
+from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
+from metrics.replay.track import ReplayTrack, session_track
+from metrics.streams import MetricsError, SessionStreams, from_recorded
+from metrics.tissue import with_tissue_fields
+from sim.fem.fields import TissueFieldReplay
+
+MODES = ("ghost", "side-by-side")
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    fps: int = 30
+    size: tuple[int, int] = (1280, 720)
+    mode: str = "ghost"
+    anti_aliasing: bool = False
+    zoom: float = 1.4
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise MetricsError(f"replay mode must be one of {', '.join(MODES)}; got {self.mode!r}")
+        if not 1 <= self.fps <= 120:
+            raise MetricsError(f"frame rate must be 1-120 frames/s; got {self.fps}")
+        width, height = self.size
+        if width % 2 or height % 2 or not (64 <= width <= 3840 and 64 <= height <= 2160):
+            raise MetricsError(f"video size must be even, 64x64 to 3840x2160; got {width}x{height}")
+
+
+@dataclass
+class ReplayResult:
+    path: Path
+    frames: int
+    seconds: float
+    timings: dict[str, float] = field(default_factory=dict)
+    stills: list[Path] = field(default_factory=list)
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("nan")
+
+
+class SceneReplay:
+    """Frames of one re-simulated session: tissue state, needle, force and insertion point per frame."""
+
+    def __init__(self, session, tissue, streams: SessionStreams, fps: int) -> None:
+        self.streams = streams
+        self.track: ReplayTrack = session_track(session, tissue, fps)
+        self.fields = TissueFieldReplay(tissue)
+        self.rest = tissue.mesh.points
+        self.phase_bounds = phase_starts(streams.needle_state, streams.time)
+        pierces = streams.events.loc[streams.events["kind"] == "pierce"]
+        self.pierce_time = float(pierces["time"].iloc[0]) if len(pierces) else None
+        self.entry_angle = float(pierces["entry_angle_deg"].iloc[0]) if len(pierces) else float("nan")
+        self.insertion_point = None
+        if self.pierce_time is not None:
+            k = int(np.searchsorted(self.track.times, self.pierce_time))
+            self.insertion_point = self.track.tip[min(k, len(self.track) - 1)].copy()
+
+    def index_at(self, when: float) -> int:
+        return int(np.clip(np.searchsorted(self.track.times, when - 1e-9), 0, len(self.track) - 1))
+
+    def phase_at(self, when: float) -> str:
+        reached = [
+            k
+            for k in range(len(PHASES))
+            if np.isfinite(self.phase_bounds[k]) and self.phase_bounds[k] <= when
+        ]
+        return PHASES[reached[-1]] if reached else PHASES[0]
+
+    def frame(self, k: int, ghost: NDArray | None = None, ghost_needle: NDArray | None = None):
+        from sim.render import RenderFrame
+
+        track = self.track
+        drive = track.drives[k]
+        if drive is None:
+            displacement, stress = self.fields.state(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+        else:
+            displacement, stress = self.fields.state(drive[0], drive[1], float(track.tip_speed[k]))
+        shown = (
+            self.insertion_point
+            if self.pierce_time is not None and track.times[k] >= self.pierce_time
+            else None
+        )
+        return RenderFrame(
+            self.rest + displacement, stress, track.needle[k], shown, ghost, track.force[k], ghost_needle
+        )
+
+
+def _hud_lines(scene: SceneReplay, k: int, bands: dict[str, dict]) -> tuple[str, list[HudLine]]:
+    when = float(scene.track.times[k])
+    phase = scene.phase_at(when)
+    force_band = bands.get("force", {}).get(phase)
+    speed_band = bands.get("tip_speed", {}).get(phase)
+    lines = [
+        HudLine("phase", phase),
+        value_line("force", float(np.linalg.norm(scene.track.force[k])), "mN", force_band, 1e3),
+        value_line("tip speed", float(scene.track.tip_speed[k]), "mm/s", speed_band, 1e3),
+        HudLine(
+            "entry angle",
+            f"{scene.entry_angle:.0f} deg"
+            if scene.pierce_time is not None and when >= scene.pierce_time
+            else "-",
+        ),
+    ]
+    return f"t = {when:6.2f} s", lines
+
+
+def export_replay(
+    session,
+    tissue,
+    out: str | Path,
+    experts: list | None = None,
+    settings: ReplaySettings | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    stills: str | Path | None = None,
+) -> ReplayResult:
+    """Render ``session`` (a :class:`recorder.Session` on ``tissue``) to ``out`` (.mp4 or .webm).
+
+    experts: recorder sessions of the same task; the medoid is shown (ghost or side by
+    side) and all of them set the HUD's expert bands. progress(done, total) per frame.
+    stills: a folder for ``insertion.png`` (the frame at the pierce), ``stress_insertion.exr``
+    (surface von Mises in Pa seen along the wall normal) and ``signals.png``/``.svg``.
+    """
+    from metrics.replay.video import VideoWriter
+    from sim.render import TissueRenderer
+
+    settings = settings or ReplaySettings()
+    started = time.perf_counter()
+    timings: dict[str, float] = {}
+    streams = with_tissue_fields(from_recorded(session), tissue)
+    scene = SceneReplay(session, tissue, streams, settings.fps)
+    reference = expert_scene = None
+    if experts:
+        expert_streams = [with_tissue_fields(from_recorded(e), tissue) for e in experts]
+        reference = expert_reference(streams, expert_streams)
+        medoid = experts[expert_streams.index(reference.medoid)]
+        expert_scene = SceneReplay(medoid, tissue, reference.medoid, settings.fps)
+    elif settings.mode == "side-by-side":
+        raise MetricsError(
+            "side-by-side needs an expert session to show beside this one (--vs or --vs-group)"
+        )
+    bands = {} if reference is None else {name: reference.phase_band(name) for name in ("force", "tip_speed")}
+    timings["re-simulation"] = time.perf_counter() - started
+    width, height = settings.size
+    split = settings.mode == "side-by-side"
+    view = (width // 2 - (width // 2) % 2, height) if split else (width, height)
+    renderers = [TissueRenderer(tissue.mesh, size=view, offscreen=True, anti_aliasing=settings.anti_aliasing)]
+    if split:
+        renderers.append(
+            TissueRenderer(tissue.mesh, size=view, offscreen=True, anti_aliasing=settings.anti_aliasing)
+        )
+    ghost_path = expert_scene.track.tip if expert_scene is not None and not split else None
+    total = len(scene.track)
+    scale = height / 720
+    insertion = insertion_frame_index(streams, scene.track.times) if stills is not None else None
+    written: list[Path] = []
+    render_time = 0.0
+    try:
+        with VideoWriter(out, settings.size, settings.fps) as writer:
+            for k in range(total):
+                when = float(scene.track.times[k])
+                expert_k = None
+                if expert_scene is not None:
+                    expert_k = expert_scene.index_at(
+                        float(reference.medoid_alignment.reference_time_at(when))
+                    )
+                began = time.perf_counter()
+                ghost_needle = (
+                    expert_scene.track.needle[expert_k] if expert_k is not None and not split else None
+                )
+                pixels = renderers[0].render(scene.frame(k, ghost_path, ghost_needle))
+                if k == 0 and split:
+                    renderers[1].set_camera(*renderers[0].plotter.camera_position)
+                if split:
+                    right = renderers[1].render(expert_scene.frame(expert_k))
+                    label_view(pixels, f"trainee {streams.participant_id or ''}".strip(), scale)
+                    label_view(right, f"expert {reference.medoid.participant_id or ''}".strip(), scale)
+                    pixels = np.hstack([pixels, right])
+                    if pixels.shape[1] != width:
+                        pixels = np.pad(
+                            pixels, ((0, 0), (0, width - pixels.shape[1]), (0, 0)), constant_values=255
+                        )
+                title, lines = _hud_lines(scene, k, bands)
+                draw_hud(pixels, title, lines, scale)
+                if k == insertion:
+                    written += _write_insertion_stills(Path(stills), scene, k, pixels)
+                render_time += time.perf_counter() - began
+                writer.write(pixels)
+                if progress is not None:
+                    progress(k + 1, total)
+    finally:
+        for renderer in renderers:
+            renderer.close()
+    timings["render"] = render_time
+    if stills is not None:
+        from metrics.replay.plots import write_signal_plots
+
+        written += write_signal_plots(streams, stills, reference)
+    seconds = time.perf_counter() - started
+    timings["total"] = seconds
+    return ReplayResult(Path(out), total, seconds, timings, written)
+
+
+def _write_insertion_stills(
+    folder: Path, scene: SceneReplay, k: int, pixels: NDArray[np.uint8]
+) -> list[Path]:
+    from sim.render import write_image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    frame = scene.frame(k)
+    mesh = scene.fields.mesh
+    sample = min(int(np.searchsorted(scene.streams.time, scene.track.times[k])), scene.streams.time.size - 1)
+    triangle = int(scene.streams.contact_triangle[sample])
+    corners = mesh.points[mesh.surface_triangles[max(triangle, 0)]]
+    normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+    image, _, _ = stress_map(frame.points, mesh.surface_triangles, frame.triangle_stress, normal)
+    return [
+        write_image(folder / "insertion.png", pixels),
+        write_stress_map(folder / "stress_insertion.exr", image),
+    ]

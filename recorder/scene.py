@@ -1,0 +1,111 @@
+"""The scene stream: what the graphics layer saw, once per graphics frame (30 Hz by default).
+
+Per frame: time (s), needle state, tip speed (m/s), the reaction force on the needle
+(N), the needle's vertices (m, tip first) and the tissue drive (contact node ids and
+their intended displacements, m). With it a replay renders any frame straight from the
+recording, without re-running the simulation. It is written when the session closes,
+verified and checksummed like the other files; a crashed session has none, and its
+replay re-simulates instead.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+
+from recorder.schema import RecorderError
+
+SCENE_FILE = "scene.parquet"
+SCENE_SCHEMA = pa.schema(
+    [
+        pa.field("time", pa.float64(), metadata={"unit": "s"}),
+        pa.field(
+            "state",
+            pa.int8(),
+            metadata={"unit": "1", "description": "0 free, 1 contact, 2 pierced, 3 exited"},
+        ),
+        pa.field("tip_speed", pa.float64(), metadata={"unit": "m/s"}),
+        pa.field(
+            "force", pa.list_(pa.float64(), 3), metadata={"unit": "N", "description": "reaction on needle"}
+        ),
+        pa.field(
+            "needle", pa.list_(pa.float64()), metadata={"unit": "m", "description": "vertices xyz, tip first"}
+        ),
+        pa.field("drive_nodes", pa.list_(pa.int32()), metadata={"description": "driven tissue node ids"}),
+        pa.field(
+            "drive_intended", pa.list_(pa.float64()), metadata={"unit": "m", "description": "xyz per node"}
+        ),
+    ],
+    metadata={"stream": "scene"},
+)
+
+
+class SceneLog:
+    """Collects scene frames in memory (a 10-minute session at 30 Hz is a few MB)."""
+
+    def __init__(self) -> None:
+        self._rows: list[tuple] = []
+
+    def add(
+        self,
+        time: float,
+        state: int,
+        tip_speed: float,
+        force: NDArray[np.float64],
+        needle: NDArray[np.float64],
+        drive: tuple[NDArray[np.int64], NDArray[np.float64]] | None,
+    ) -> None:
+        nodes, intended = (np.zeros(0, np.int32), np.zeros(0)) if drive is None else drive
+        self._rows.append(
+            (
+                float(time),
+                int(state),
+                float(tip_speed),
+                np.asarray(force, dtype=np.float64).reshape(3).copy(),
+                np.asarray(needle, dtype=np.float64).reshape(-1).copy(),
+                np.asarray(nodes, dtype=np.int32).reshape(-1).copy(),
+                np.asarray(intended, dtype=np.float64).reshape(-1).copy(),
+            )
+        )
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def table(self) -> pa.Table:
+        columns = list(zip(*self._rows, strict=True)) if self._rows else [[] for _ in SCENE_SCHEMA]
+        arrays = [
+            pa.array(list(column), type=field.type)
+            if field.name in ("time", "state", "tip_speed")
+            else pa.array([v.tolist() for v in column], type=field.type)
+            for column, field in zip(columns, SCENE_SCHEMA, strict=True)
+        ]
+        return pa.Table.from_arrays(arrays, schema=SCENE_SCHEMA)
+
+
+def write_scene(directory: Path, table: pa.Table) -> dict[str, Any]:
+    """Write and verify ``scene.parquet``; returns its header record (file, rows, sha256)."""
+    from recorder.writer import sha256_of
+
+    target = directory / SCENE_FILE
+    temporary = directory / (SCENE_FILE + ".tmp")
+    pq.write_table(table, temporary, compression="zstd")
+    if not pq.read_table(temporary).equals(table):
+        temporary.unlink(missing_ok=True)
+        raise RecorderError(f"verification of {temporary} failed")
+    temporary.replace(target)
+    return {"file": SCENE_FILE, "rows": table.num_rows, "sha256": sha256_of(target)}
+
+
+def read_scene(session) -> pa.Table | None:
+    """The verified scene table of a :class:`recorder.Session`, or None if it was recorded without one."""
+    from recorder.reader import _read_checked
+
+    record = session.header.get("scene")
+    if record is None:
+        return None
+    return _read_checked(session.path, SCENE_FILE, record, verify=True)
