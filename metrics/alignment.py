@@ -129,6 +129,8 @@ def _project(points: NDArray, path: NDArray, seeds: NDArray[np.int64], window: i
     fraction = np.clip(np.divide(along, length2, out=np.zeros_like(along), where=length2 > 0), 0.0, 1.0)
     nearest = start + fraction[..., None] * direction
     distance = np.linalg.norm(points[:, None, :] - nearest, axis=-1)
+    # equally near segments (a tip at rest) are told apart by nearness to the DTW seed: 1e-12 m per sample
+    distance += 1e-12 * np.abs(candidates - seeds[:, None])
     best = np.argmin(distance, axis=1)
     rows = np.arange(len(points))
     return candidates[rows, best] + fraction[rows, best]
@@ -157,7 +159,7 @@ def align_paths(
     position = _project(path, reference_path, np.minimum(seeds, m - 2), window)
     # DTW pins a phase's first and last samples to the reference's; search their whole phase instead
     ends = np.unique([0, n - 1])
-    position[ends] = _project(path[ends], reference_path, np.full(len(ends), (m - 1) // 2), m)
+    position[ends] = _project(path[ends], reference_path, np.minimum(seeds[ends], m - 2), m)
     position = np.maximum.accumulate(position)  # time never runs backwards
     matched = np.interp(position, np.arange(m), reference_time)
     nearest = np.column_stack([np.interp(position, np.arange(m), reference_path[:, k]) for k in range(3)])

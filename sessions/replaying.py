@@ -1,0 +1,65 @@
+"""`vascsim replay`: find a session, its task's tissue model and its expert reference in the catalog."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sqlalchemy import select
+
+from recorder import open_session
+from sessions.catalog import Catalog, CatalogError
+from sessions.models import Participant, Session
+from sessions.tasks import TASKS, tissue_for
+
+REPLAYABLE = ("complete", "recovered")
+
+
+def _replayable(row: Session) -> None:
+    if row.device == "jigsaws" or row.task.scenario == "jigsaws":
+        raise CatalogError(f"session {row.uid} was imported (kinematics only); it has no 3-D scene to replay")
+    if row.status not in REPLAYABLE:
+        raise CatalogError(f"session {row.uid} is {row.status}; only complete or recovered sessions replay")
+    if row.task.name not in TASKS:
+        raise CatalogError(f"session {row.uid} ran task {row.task.name!r}, which this vascsim cannot rebuild")
+
+
+def replay_inputs(
+    catalog: Catalog, home: Path, uid: str, versus: str | None = None, versus_group: str | None = None
+):
+    """(session, tissue model, expert sessions) as recorder sessions, checked for a replay."""
+    if versus and versus_group:
+        raise CatalogError("give either --vs SESSION or --vs-group GROUP, not both")
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        _replayable(row)
+        task, directory, study_id = row.task.name, row.directory, row.participant.study_id
+        expert_dirs: list[str] = []
+        if versus:
+            other = catalog.recorded_session(orm, versus)
+            _replayable(other)
+            if other.task.name != task:
+                raise CatalogError(
+                    f"session {versus} ran task {other.task.name!r}, not {task!r}; they cannot be aligned"
+                )
+            expert_dirs.append(other.directory)
+        if versus_group:
+            labels = {versus_group, versus_group.rstrip("s")}  # "experts" finds group "expert"
+            rows = orm.scalars(
+                select(Session)
+                .join(Participant, Session.participant_id == Participant.id)
+                .where(
+                    Participant.study_id == study_id,
+                    Participant.group_label.in_(labels),
+                    Session.status.in_(REPLAYABLE),
+                    Session.uid != uid,
+                    Session.task_id == row.task_id,
+                )
+                .order_by(Session.id)
+            ).all()
+            if not rows:
+                raise CatalogError(
+                    f"no complete sessions of group {versus_group!r} on task {task!r} in this session's study"
+                )
+            expert_dirs += [r.directory for r in rows]
+    tissue = tissue_for(task, home / "cache")
+    return open_session(directory), tissue, [open_session(d) for d in expert_dirs]
