@@ -4,6 +4,7 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from sessions.cli import main
@@ -94,3 +95,33 @@ def test_import_jigsaws_then_report(home, tmp_path):
 
 def test_console_script_exists():
     assert Path(sys.executable).with_name("vascsim").is_file()
+
+
+@pytest.mark.slow
+def test_replay_against_the_expert_group(home, tmp_path):
+    invoke("studies", "add", "course")
+    for code, level, skill in (("E1", "expert", "1.0"), ("E2", "expert", "0.95"), ("T1", "trainee", "0.2")):
+        invoke("participants", "add", code, "--study", "course", "--level", level)
+        assert invoke("run", "--study", "course", "--participant", code, "--skill", skill).exit_code == 0
+    listed = json.loads(invoke("sessions", "list", "--json").stdout)
+    trainee = next(r["session"] for r in listed if r["participant"] == "T1")
+    out = tmp_path / "t1.mp4"
+    result = invoke(
+        "replay", trainee, "--vs-group", "experts", "--mode", "side-by-side", "--size", "320x180",
+        "-o", str(out), "--stills", str(tmp_path / "stills"), "--json",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["experts"] == 2 and summary["frames"] > 60 and out.stat().st_size > 10_000
+    assert {Path(p).name for p in summary["stills"]} >= {"insertion.png", "stress_insertion.exr"}
+    for args, message in (
+        (("replay", "S-NOPE"), "no session 'S-NOPE'"),
+        (("replay", trainee, "--vs-group", "surgeons"), "no complete sessions of group 'surgeons'"),
+        (("replay", trainee, "--vs", trainee, "--vs-group", "experts"), "either --vs SESSION or --vs-group"),
+        (("replay", trainee, "-o", str(tmp_path / "x.avi")), "use .mp4 (H.264) or .webm (VP9)"),
+    ):
+        failed = CliRunner().invoke(main, list(args))
+        assert failed.exit_code == 1 and message in failed.output, (args, failed.output)
+        assert "Traceback" not in failed.output and failed.output.count("\n") == 1
+    bad_size = CliRunner().invoke(main, ["replay", trainee, "--size", "big"])
+    assert bad_size.exit_code == 2 and "is not WIDTHxHEIGHT" in bad_size.output
