@@ -765,6 +765,7 @@ def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json)
     the needle-tip path) and the expert is ghosted into the scene or shown beside it.
     """
     from metrics.replay.export import ReplaySettings, export_replay
+    from metrics.replay.video import check_video_path
     from sessions.replaying import replay_inputs
 
     catalog, home = _catalog()
@@ -772,6 +773,7 @@ def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json)
     target = (
         Path(out) if out else home / "replays" / f"{session}{'-vs' if versus or versus_group else ''}.mp4"
     )
+    check_video_path(target)
     recorded, tissue, experts = replay_inputs(catalog, home, session, versus, versus_group)
     with _progress() as progress:
         task = progress.add_task("rendering", total=None, last="")

@@ -142,13 +142,11 @@ def export_replay(
     stills: a folder for ``insertion.png`` (the frame at the pierce), ``stress_insertion.exr``
     (surface von Mises in Pa seen along the wall normal) and ``signals.png``/``.svg``.
     """
-    from metrics.replay.video import CODECS, VideoWriter
+    from metrics.replay.video import VideoWriter, check_video_path
     from sim.render import TissueRenderer
 
     settings = settings or ReplaySettings()
-    suffix = Path(out).suffix.lower()
-    if suffix not in CODECS:
-        raise MetricsError(f"video {out}: use .mp4 (H.264) or .webm (VP9); got {suffix or 'no suffix'!r}")
+    check_video_path(out)
     started = time.perf_counter()
     timings: dict[str, float] = {}
     streams = with_tissue_fields(from_recorded(session), tissue)

@@ -24,18 +24,23 @@ CODECS = {
 """Suffix -> (encoder, pixel format, encoder options, container options)."""
 
 
+def check_video_path(path: str | Path) -> Path:
+    """The path, if its suffix names a codec this writer has; else a MetricsError saying which do."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in CODECS:
+        raise MetricsError(f"video {path}: use .mp4 (H.264) or .webm (VP9); got {suffix or 'no suffix'!r}")
+    return path
+
+
 class VideoWriter:
     """Write RGB frames (H, W, 3) uint8 to ``path`` (.mp4 -> H.264, .webm -> VP9) at ``fps``."""
 
     def __init__(self, path: str | Path, size: tuple[int, int], fps: int = 30, queue_frames: int = 8) -> None:
         import av
 
-        self.path = Path(path)
+        self.path = check_video_path(path)
         suffix = self.path.suffix.lower()
-        if suffix not in CODECS:
-            raise MetricsError(
-                f"video {self.path}: use .mp4 (H.264) or .webm (VP9); got {suffix or 'no suffix'!r}"
-            )
         width, height = size
         if width % 2 or height % 2 or width < 16 or height < 16:
             raise MetricsError(f"video size must be even and at least 16x16 pixels; got {width}x{height}")
