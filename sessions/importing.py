@@ -98,3 +98,84 @@ def import_jigsaws(
                     )
                 )
     return len(trials)
+
+
+BENCH_DEVICE = "bench-video"
+
+
+def import_bench_video(
+    catalog: Catalog,
+    home: Path,
+    video: str | Path,
+    camera_file: str | Path,
+    study_name: str,
+    participant_code: str,
+    marker=None,
+    progress=None,
+) -> tuple[str, dict[str, float]]:
+    """Track the needle holder in a bench-session video and add it as a scored session of a study.
+
+    The tracked path (``track.parquet``) and the camera calibration are the session's files;
+    its motion metrics are computed like any other session's (force and tissue metrics are
+    NaN: a video has neither). Returns the session id and its metrics."""
+    from metrics.bench.camera import Camera
+    from metrics.bench.tracking import TRACK_FILE, read_video, save_track, track_frames
+    from sessions.catalog import new_uid
+
+    with catalog.session() as orm:  # names first: a typo must not cost a whole tracking run
+        study = catalog.study(orm, study_name)
+        person = catalog.participant(orm, study, participant_code)
+        label = person.group_label
+    camera = Camera.load(camera_file)
+    frames, fps, _ = read_video(video)
+    path = track_frames(frames, fps, camera, marker, progress)
+    uid = new_uid()
+    values = metrics_of(path.to_streams(uid, participant_code, label))
+    folder = home / "sessions" / uid
+    folder.mkdir(parents=True)
+    try:
+        save_track(path, folder / TRACK_FILE)
+        camera.save(folder / "camera.json")
+        with catalog.session() as orm:
+            study = catalog.study(orm, study_name)
+            person = catalog.participant(orm, study, participant_code)
+            task = catalog.task(orm, "bench-suture", "bench", {"source": "video", "marker": repr(marker)})
+            trials = [s.trial for s in person.sessions]
+            session = Session(
+                uid=uid,
+                participant_id=person.id,
+                task_id=task.id,
+                device=BENCH_DEVICE,
+                clock="recorded",
+                trial=max(trials, default=0) + 1,
+                phase="practice",
+                status="complete",
+                started_at=now(),
+                ended_at=now(),
+                directory=str(folder),
+                error="",
+            )
+            orm.add(session)
+            orm.flush()
+            for file in sorted(folder.iterdir()):
+                orm.add(
+                    StreamFile(
+                        session_id=session.id,
+                        name=file.name,
+                        sha256=sha256_of(file),
+                        bytes=file.stat().st_size,
+                    )
+                )
+            for name, value in values.items():
+                stored = None if math.isnan(value) else float(value)
+                orm.add(
+                    MetricResult(
+                        session_id=session.id, metric=name, value=stored, registry_version=REGISTRY_VERSION
+                    )
+                )
+    except BaseException:
+        import shutil
+
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    return uid, values

@@ -15,8 +15,10 @@ REPLAYABLE = ("complete", "recovered")
 
 
 def _replayable(row: Session) -> None:
-    if row.device == "jigsaws" or row.task.scenario == "jigsaws":
-        raise CatalogError(f"session {row.uid} was imported (kinematics only); it has no 3-D scene to replay")
+    if row.device in ("jigsaws", "bench-video") or row.task.scenario in ("jigsaws", "bench"):
+        raise CatalogError(
+            f"session {row.uid} was imported (a tool path only); it has no 3-D scene to replay"
+        )
     if row.status not in REPLAYABLE:
         raise CatalogError(f"session {row.uid} is {row.status}; only complete or recovered sessions replay")
     if row.task.name not in TASKS:

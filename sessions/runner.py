@@ -196,10 +196,16 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
             raise CatalogError(
                 f"session {uid} is {row.status}; only complete or recovered sessions are scored"
             )
-        directory = row.directory
-    streams = from_recorded(open_session(directory))
-    model = session_tissue(streams, (home or data_home()) / "cache")
-    values = metrics_of(with_tissue_fields(streams, model) if model is not None else streams)
+        directory, device = row.directory, row.device
+        code, label = row.participant.code, row.participant.group_label
+    if device == "bench-video":  # a tracked video: the path is the session's data
+        from metrics.bench.tracking import TRACK_FILE, load_track
+
+        values = metrics_of(load_track(Path(directory) / TRACK_FILE).to_streams(uid, code, label))
+    else:
+        streams = from_recorded(open_session(directory))
+        model = session_tissue(streams, (home or data_home()) / "cache")
+        values = metrics_of(with_tissue_fields(streams, model) if model is not None else streams)
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         orm.execute(

@@ -1,0 +1,190 @@
+"""Synthetic bench video with a known camera and a known marker trajectory, to test the tracker.
+
+Planar textures (the tool marker, a ChArUco board) are drawn into frames through the
+exact homography of the pinhole camera, supersampled 4x inside the region they cover
+and averaged down, over a textured background with sensor noise. The ground-truth tip
+path is returned with the video, so tracking error is measured, not assumed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from metrics.bench.camera import BoardSpec, aruco_dictionary
+from metrics.bench.tracking import ToolMarker
+
+SUPERSAMPLE = 4
+
+
+def default_camera_matrix(
+    size: tuple[int, int] = (1920, 1080), focal_px: float = 1400.0
+) -> NDArray[np.float64]:
+    width, height = size
+    return np.array([[focal_px, 0.0, (width - 1) / 2], [0.0, focal_px, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def background(size: tuple[int, int], rng: np.random.Generator) -> NDArray[np.uint8]:
+    """A mottled grey bench surface (smooth noise), (H, W) uint8."""
+    import cv2
+
+    width, height = size
+    coarse = rng.normal(150, 25, size=(height // 40 + 2, width // 40 + 2)).astype(np.float32)
+    return np.clip(cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC), 40, 230).astype(
+        np.uint8
+    )
+
+
+def draw_plane(
+    frame: NDArray[np.uint8],
+    texture: NDArray[np.uint8],
+    plane_corners: NDArray[np.float64],
+    rotation: NDArray[np.float64],
+    translation: NDArray[np.float64],
+    camera_matrix: NDArray[np.float64],
+) -> None:
+    """Draw ``texture`` (grey) onto ``frame`` in place: its corners (top-left, top-right, bottom-right,
+    bottom-left) are ``plane_corners`` (4, 3) in the plane's frame, posed by (rotation, translation)."""
+    import cv2
+
+    points = plane_corners @ rotation.T + translation
+    projected = points @ camera_matrix.T
+    image = projected[:, :2] / projected[:, 2:3]
+    height, width = frame.shape
+    low = np.maximum(np.floor(image.min(axis=0)) - 2, 0).astype(int)
+    high = np.minimum(np.ceil(image.max(axis=0)) + 2, [width, height]).astype(int)
+    if np.any(high <= low):
+        return
+    th, tw = texture.shape
+    # pixel centres are at integer coordinates: a texture's outer edges are half a pixel outside them
+    source = np.array([[0, 0], [tw, 0], [tw, th], [0, th]], dtype=np.float32) - 0.5
+    # into a supersampled window over the covered region, then averaged down (no aliasing); output pixel
+    # x covers supersampled pixels [S x, S x + S), whose centre is S x + (S - 1) / 2
+    target = ((image - low) * SUPERSAMPLE + (SUPERSAMPLE - 1) / 2).astype(np.float32)
+    homography = cv2.getPerspectiveTransform(source, target)
+    window = (int(high[0] - low[0]) * SUPERSAMPLE, int(high[1] - low[1]) * SUPERSAMPLE)
+    drawn = cv2.warpPerspective(texture, homography, window, flags=cv2.INTER_LINEAR, borderValue=0)
+    mask = cv2.warpPerspective(np.full_like(texture, 255), homography, window, flags=cv2.INTER_LINEAR)
+    size = (int(high[0] - low[0]), int(high[1] - low[1]))
+    drawn = cv2.resize(drawn, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+    alpha = cv2.resize(mask, size, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+    region = frame[low[1] : high[1], low[0] : high[0]].astype(np.float32)
+    frame[low[1] : high[1], low[0] : high[0]] = np.clip(alpha * drawn + (1 - alpha) * region, 0, 255).astype(
+        np.uint8
+    )
+
+
+def marker_texture(marker: ToolMarker, pixels: int = 480) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+    """The marker with a white quiet zone of one quarter side, and that texture's corners in the marker
+    frame (m)."""
+    import cv2
+
+    inner = cv2.aruco.generateImageMarker(aruco_dictionary(marker.dictionary), marker.marker_id, pixels)
+    border = pixels // 4
+    texture = cv2.copyMakeBorder(inner, border, border, border, border, cv2.BORDER_CONSTANT, value=255)
+    h = marker.side_m * (0.5 + border / pixels)
+    return texture, np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+
+def rotation_xyz(angles: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation matrix from angles (rad) about x, then y, then z."""
+    ax, ay, az = angles
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+FACING_CAMERA = np.diag([1.0, -1.0, -1.0])
+"""A plane whose z axis points back at the camera (camera looks along +z, image y down)."""
+
+
+def suturing_motion(time: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A needle-holder motion for ``time`` (s): per frame the marker's rotation (n, 3, 3) and position
+    (n, 3) in the camera frame (m): reach, a wrist turn through the bite, a pull, a stop, a return."""
+    linear = time / max(time[-1], 1e-9)
+    # the hand stops for a moment half-way (speed falls smoothly to zero and picks up again)
+    tau = linear + np.sin(2 * np.pi * linear) / (2 * np.pi)
+    position = np.column_stack(
+        [
+            0.03 * np.sin(2 * np.pi * tau) + 0.01 * np.sin(6 * np.pi * tau),
+            0.015 * np.cos(2 * np.pi * tau) - 0.005 * np.sin(4 * np.pi * tau),
+            0.30 + 0.02 * np.sin(2 * np.pi * tau + 0.5),
+        ]
+    )
+    angles = np.column_stack(
+        [0.35 * np.sin(2 * np.pi * tau), 0.3 * np.sin(4 * np.pi * tau + 0.3), 0.8 * np.sin(2 * np.pi * tau)]
+    )
+    rotations = np.array([FACING_CAMERA @ rotation_xyz(a) for a in angles])
+    return rotations, position
+
+
+def write_bench_video(
+    path: str | Path,
+    duration_s: float = 6.0,
+    fps: int = 30,
+    size: tuple[int, int] = (1920, 1080),
+    camera_matrix: NDArray[np.float64] | None = None,
+    marker: ToolMarker | None = None,
+    seed: int = 0,
+    noise: float = 2.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Render the suturing motion to a video file (lossless-quality H.264); returns (time, true tip path)."""
+    import av
+
+    marker = marker or ToolMarker()
+    camera_matrix = default_camera_matrix(size) if camera_matrix is None else camera_matrix
+    rng = np.random.default_rng(seed)
+    time = np.arange(int(round(duration_s * fps))) / fps
+    rotations, positions = suturing_motion(time)
+    texture, corners = marker_texture(marker)
+    bench = background(size, rng)
+    offset = np.asarray(marker.tip_offset_m)
+    with av.open(str(path), mode="w") as container:
+        stream = container.add_stream("libx264", rate=fps, options={"crf": "12", "preset": "veryfast"})
+        stream.width, stream.height = size
+        stream.pix_fmt = "yuv420p"
+        for rotation, translation in zip(rotations, positions, strict=True):
+            frame = bench.copy()
+            draw_plane(frame, texture, corners, rotation, translation, camera_matrix)
+            frame = np.clip(frame + rng.normal(0, noise, frame.shape), 0, 255).astype(np.uint8)
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="gray")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    tips = np.einsum("nij,j->ni", rotations, offset) + positions
+    return time, tips
+
+
+def charuco_views(
+    board: BoardSpec | None = None,
+    count: int = 12,
+    size: tuple[int, int] = (1920, 1080),
+    camera_matrix: NDArray[np.float64] | None = None,
+    seed: int = 1,
+) -> list[NDArray[np.uint8]]:
+    """Grey images of a ChArUco board at varied tilts and distances, as a calibration session takes them."""
+    board = board or BoardSpec()
+    camera_matrix = default_camera_matrix(size) if camera_matrix is None else camera_matrix
+    rng = np.random.default_rng(seed)
+    columns, rows = board.squares
+    width_m, height_m = columns * board.square_m, rows * board.square_m
+    texture = board.board().generateImage((columns * 120, rows * 120), marginSize=0, borderBits=1)
+    # board coordinates: origin at the top-left corner, x right, y down (OpenCV's CharucoBoard)
+    corners = np.array([[0, 0, 0], [width_m, 0, 0], [width_m, height_m, 0], [0, height_m, 0]], dtype=float)
+    centre = np.array([width_m / 2, height_m / 2, 0.0])
+    views = []
+    for _ in range(count):
+        tilt = rotation_xyz(
+            np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3)])
+        )
+        rotation = tilt  # board z into the scene: its front faces the camera
+        translation = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.03, 0.03), rng.uniform(0.35, 0.55)])
+        translation = translation - rotation @ centre
+        frame = background(size, rng)
+        draw_plane(frame, texture, corners, rotation, translation, camera_matrix)
+        views.append(np.clip(frame + rng.normal(0, 2.0, frame.shape), 0, 255).astype(np.uint8))
+    return views

@@ -1,0 +1,76 @@
+"""Bench-model video: ChArUco calibration and ArUco tracking on synthetic video with a known camera and a
+known marker trajectory; the tracked path through the same motion metrics; the catalog import."""
+
+import numpy as np
+import pytest
+
+from metrics import SessionStreams, metrics_of
+from metrics.bench.camera import Camera, calibrate_charuco
+from metrics.bench.synthetic import charuco_views, default_camera_matrix, write_bench_video
+from metrics.bench.tracking import read_video, smooth_path, track_frames
+from metrics.streams import MetricsError
+
+MOTION = ("task_time", "path_length", "economy_of_motion", "log_dimensionless_jerk", "spectral_arc_length")
+
+
+@pytest.fixture(scope="module")
+def calibration(tmp_path_factory):
+    camera = calibrate_charuco(charuco_views(count=12))
+    path = camera.save(tmp_path_factory.mktemp("camera") / "camera.json")
+    return camera, path
+
+
+@pytest.fixture(scope="module")
+def bench_video(tmp_path_factory):
+    path = tmp_path_factory.mktemp("video") / "bench.mp4"
+    time, truth = write_bench_video(path, duration_s=6.0, fps=30)
+    return path, time, truth
+
+
+def test_charuco_calibration_recovers_the_camera(calibration, tmp_path):
+    camera, saved = calibration
+    truth = default_camera_matrix()
+    assert camera.rms < 0.2  # pixels
+    np.testing.assert_allclose(camera.matrix, truth, rtol=2e-3, atol=1.5)  # focal and centre within ~1 px
+    again = Camera.load(saved)
+    np.testing.assert_array_equal(again.matrix, camera.matrix)
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(MetricsError, match="is not readable"):
+        Camera.load(bad)
+
+
+def test_too_few_board_views_is_a_clear_error():
+    blank = [np.full((480, 640), 128, np.uint8)] * 4
+    with pytest.raises(MetricsError, match="found in 0 of 4 images"):
+        calibrate_charuco(blank)
+
+
+@pytest.mark.slow
+def test_tracked_path_within_half_a_millimetre_and_metrics_within_two_percent(calibration, bench_video):
+    camera, _ = calibration
+    path, time, truth = bench_video
+    frames, fps, _ = read_video(path)
+    tracked = track_frames(frames, fps, camera)
+    assert tracked.found.all()
+    np.testing.assert_allclose(tracked.time, time)
+    error = np.linalg.norm(tracked.tip - truth, axis=1)
+    assert np.sqrt(np.mean(error**2)) <= 0.5e-3, np.sqrt(np.mean(error**2))
+    measured = metrics_of(tracked.to_streams("bench"))
+    expected = metrics_of(SessionStreams("truth", time, truth))
+    for name in MOTION:
+        assert measured[name] == pytest.approx(expected[name], rel=0.02), name
+    assert measured["movement_count"] == expected["movement_count"]
+    assert np.isnan(measured["peak_force"])  # a video has no force
+
+
+def test_a_lost_marker_is_bridged_briefly_and_refused_when_long():
+    time = np.arange(90) / 30.0
+    path = np.column_stack([np.sin(time), np.cos(time), time]) * 0.01
+    short = path.copy()
+    short[40:46] = np.nan  # 0.2 s
+    np.testing.assert_allclose(smooth_path(time, short), smooth_path(time, path), atol=2e-4)
+    long = path.copy()
+    long[30:60] = np.nan  # 1 s
+    with pytest.raises(MetricsError, match=r"lost for 1\.00 s"):
+        smooth_path(time, long)
