@@ -820,18 +820,27 @@ def export_bundle(study: str, out: str | None, as_json: bool) -> None:
 
     catalog, _ = _catalog()
     target = out or f"{study}.vascsim.zip"
+    summary = _per_file("exporting", lambda advance: export_study(catalog, study, target, advance))
+    _summary(
+        summary,
+        as_json,
+        f"exported study {study}: {summary['sessions']} session(s), {summary['files']} file(s) "
+        f"-> {summary['bundle']}",
+    )
+
+
+def _per_file(description: str, work):
+    """Run ``work(advance)`` under a transient progress bar advanced once per file."""
     with _progress(transient=True) as progress:
-        task = progress.add_task("exporting", total=None, last="")
-        summary = export_study(
-            catalog, study, target, lambda name: progress.update(task, advance=1, last=name)
-        )
+        task = progress.add_task(description, total=None, last="")
+        return work(lambda name: progress.update(task, advance=1, last=name))
+
+
+def _summary(summary: dict, as_json: bool, text: str) -> None:
     if as_json:
         _json(summary)
     else:
-        click.echo(
-            f"exported study {study}: {summary['sessions']} session(s), {summary['files']} file(s) "
-            f"-> {summary['bundle']}"
-        )
+        click.echo(text)
 
 
 @main.command("import-bundle")
@@ -847,18 +856,13 @@ def import_bundle_command(bundle: str, as_json: bool) -> None:
     from sessions.bundle import import_bundle
 
     catalog, home = _catalog()
-    with _progress(transient=True) as progress:
-        task = progress.add_task("verifying", total=None, last="")
-        summary = import_bundle(
-            catalog, home, bundle, lambda name: progress.update(task, advance=1, last=name)
-        )
-    if as_json:
-        _json(summary)
-    else:
-        click.echo(
-            f"imported study {summary['study']}: {summary['participants']} participant(s), "
-            f"{summary['sessions']} session(s)"
-        )
+    summary = _per_file("verifying", lambda advance: import_bundle(catalog, home, bundle, advance))
+    _summary(
+        summary,
+        as_json,
+        f"imported study {summary['study']}: {summary['participants']} participant(s), "
+        f"{summary['sessions']} session(s)",
+    )
 
 
 def _pair(text: str, what: str, kind=int, count: int = 2) -> tuple:

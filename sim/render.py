@@ -89,7 +89,7 @@ class TissueRenderer:
         if not anti_aliasing:  # 4x MSAA costs ~3x the frame time under software rendering
             self.plotter.disable_anti_aliasing()
         self.plotter.set_background("white")
-        self.plotter.add_mesh(
+        self._surface_actor = self.plotter.add_mesh(
             self.surface,
             scalars="von Mises (Pa)",
             cmap="inferno",
@@ -108,6 +108,9 @@ class TissueRenderer:
                 "height": 0.8,
             },
         )
+        # the tissue surface is closed and outward-oriented: its back faces are never seen, and not
+        # shading them cut a 10k-node artery's frame time by a third under software rendering
+        self._surface_actor.GetProperty().BackfaceCullingOn()
         self.needle = pv.PolyData(np.zeros((2, 3)), lines=np.array([2, 0, 1]))
         self.plotter.add_mesh(self.needle, color="silver", line_width=5, render_lines_as_tubes=True)
         self.marker = pv.PolyData(np.zeros((1, 3)))

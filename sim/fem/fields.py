@@ -124,14 +124,27 @@ class TissueFieldReplay:
         self.tissue = tissue
         self.mesh = tissue.mesh
         self._surface = self.mesh.surface_elements
-        self._cache: dict[tuple[int, ...], list[tuple[object, NDArray[np.float64]]]] = {}
+        self._cache: dict[tuple[int, ...], list[tuple[object, NDArray, NDArray]]] = {}
         self._cache_size = cache_size
 
-    def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray[np.float64]]]:
+    def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray, NDArray]]:
+        """Per phase: the contact handle, K0^-1 columns at the contact dofs (3N, 3k), and the surface
+        elements' stress per unit reaction (3k, F, 3, 3), so a frame is two small products."""
         key = tuple(int(n) for n in nodes)
         parts = self._cache.get(key)
         if parts is None:
-            parts = [(model.contact(nodes), model._nodes_columns(nodes)) for model in _phases(self.tissue)]
+            parts = []
+            surface, tets = self._surface, self.mesh.tets[self._surface]
+            for model in _phases(self.tissue):
+                columns = model._nodes_columns(nodes)
+                lam, mu = model._lame
+                unit_stress = np.empty((columns.shape[1], len(surface), 3, 3))
+                for c in range(columns.shape[1]):
+                    grad = displacement_gradients(
+                        model._gradients[surface], tets, columns[:, c].reshape(-1, 3)
+                    )
+                    unit_stress[c] = stress_tensor(small_strain(grad), lam[surface], mu[surface])
+                parts.append((model.contact(nodes), columns, unit_stress))
             if len(self._cache) >= self._cache_size:
                 self._cache.pop(next(iter(self._cache)))
             self._cache[key] = parts
@@ -158,17 +171,12 @@ class TissueFieldReplay:
         share = self.soft_share(ids, drive, needle_speed)
         displacement = np.zeros((self.mesh.n_nodes, 3))
         stress = np.zeros((len(self._surface), 3, 3))
-        for (handle, columns), model, fraction in zip(
-            self._phase_parts(ids), _phases(self.tissue), (share, 1.0 - share), strict=False
+        for (handle, columns, unit_stress), fraction in zip(
+            self._phase_parts(ids), (share, 1.0 - share), strict=False
         ):
             if fraction == 0.0:
                 continue
-            reactions = handle.reaction_forces(fraction * drive)
-            part = (columns @ reactions.reshape(-1)).reshape(-1, 3)
-            displacement += part
-            lam, mu = model._lame
-            grad = displacement_gradients(
-                model._gradients[self._surface], self.mesh.tets[self._surface], part
-            )
-            stress += stress_tensor(small_strain(grad), lam[self._surface], mu[self._surface])
+            reactions = handle.reaction_forces(fraction * drive).reshape(-1)
+            displacement += (columns @ reactions).reshape(-1, 3)
+            stress += np.tensordot(reactions, unit_stress, axes=1)
         return displacement, von_mises_of_stress(stress)
