@@ -147,9 +147,12 @@ def tracking_figures(repeats: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only", choices=("tracking", "replay"), default=None, help="Run one part only.")
     args = parser.parse_args()
-    tracking_figures(args.repeats)
-    replay_figures(args.repeats)
+    if args.only != "replay":
+        tracking_figures(args.repeats)
+    if args.only != "tracking":
+        replay_figures(args.repeats)
 
 
 if __name__ == "__main__":
