@@ -218,3 +218,20 @@ def _next_bound(bounds: NDArray[np.float64], k: int) -> float:
 def _last_reached(bounds: NDArray[np.float64], k: int) -> float:
     earlier = bounds[: k + 1]
     return float(earlier[np.isfinite(earlier)][-1])
+
+
+def decimated(streams: SessionStreams, rate_hz: float = 100.0) -> SessionStreams:
+    """The time base, tool and tip paths and needle state at about ``rate_hz`` (every k-th sample and
+    the last), enough to align sessions for display (10 ms at 100 Hz) at a fraction of the cost."""
+    step = max(1, int(streams.sample_rate // rate_hz))
+    keep = np.unique(np.r_[np.arange(0, streams.time.size, step), streams.time.size - 1])
+    pick = lambda values: None if values is None else values[keep]  # noqa: E731
+    return SessionStreams(
+        streams.session_id,
+        streams.time[keep],
+        streams.tool_position[keep],
+        participant_id=streams.participant_id,
+        label=streams.label,
+        tip_position=pick(streams.tip_position),
+        needle_state=pick(streams.needle_state),
+    )

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.alignment import PHASES, Alignment, align_sessions, phase_starts
+from metrics.alignment import PHASES, Alignment, align_sessions, decimated, phase_starts
 from metrics.streams import MetricsError, SessionStreams
 
 SIGNALS = {
@@ -57,7 +57,7 @@ class ExpertReference:
 
     experts: list[SessionStreams]
     medoid: SessionStreams
-    alignments: list[Alignment]  # reviewed session -> each expert, in the order of ``experts``
+    alignments: list[Alignment]  # reviewed session -> each expert (at 100 Hz), in the order of ``experts``
     medoid_alignment: Alignment
 
     def band(self, session: SessionStreams, name: str) -> Band:
@@ -68,7 +68,7 @@ class ExpertReference:
             if values is None:
                 continue
             finite = np.isfinite(values)
-            mapped = alignment.reference_times
+            mapped = alignment.reference_time_at(session.time)
             column = np.interp(mapped, expert.time, np.where(finite, values, 0.0))
             # NaN where the expert had no value near the matched time (outside indentation for stress)
             known = np.interp(mapped, expert.time, finite.astype(float)) > 0.5
@@ -113,14 +113,17 @@ def expert_reference(session: SessionStreams, experts: list[SessionStreams]) -> 
     """Align ``session`` to every expert and pick the medoid expert for the visual comparison."""
     if not experts:
         raise MetricsError("no expert sessions to compare with")
+    # aligned at 100 Hz: 10 ms is finer than a video frame, and 1 kHz sessions align 10x faster
+    coarse = [decimated(expert) for expert in experts]
     if len(experts) == 1:
         medoid = experts[0]
     else:
         costs = np.zeros(len(experts))
-        for i, a in enumerate(experts):
-            for j, b in enumerate(experts):
+        for i, a in enumerate(coarse):
+            for j, b in enumerate(coarse):
                 if i != j:
                     costs[i] += align_sessions(b, a).cost
         medoid = experts[int(np.argmin(costs))]
-    alignments = [align_sessions(session, expert) for expert in experts]
+    mine = decimated(session)
+    alignments = [align_sessions(mine, expert) for expert in coarse]
     return ExpertReference(list(experts), medoid, alignments, alignments[experts.index(medoid)])

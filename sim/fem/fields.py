@@ -126,6 +126,7 @@ class TissueFieldReplay:
         self._surface = self.mesh.surface_elements
         self._cache: dict[tuple[int, ...], list[tuple[object, NDArray, NDArray]]] = {}
         self._cache_size = cache_size
+        self._stress_operators = [surface_stress_operator(model, self._surface) for model in _phases(tissue)]
 
     def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray, NDArray]]:
         """Per phase: the contact handle, K0^-1 columns at the contact dofs (3N, 3k), and the surface
@@ -134,16 +135,9 @@ class TissueFieldReplay:
         parts = self._cache.get(key)
         if parts is None:
             parts = []
-            surface, tets = self._surface, self.mesh.tets[self._surface]
-            for model in _phases(self.tissue):
+            for model, operator in zip(_phases(self.tissue), self._stress_operators, strict=True):
                 columns = model._nodes_columns(nodes)
-                lam, mu = model._lame
-                unit_stress = np.empty((columns.shape[1], len(surface), 3, 3))
-                for c in range(columns.shape[1]):
-                    grad = displacement_gradients(
-                        model._gradients[surface], tets, columns[:, c].reshape(-1, 3)
-                    )
-                    unit_stress[c] = stress_tensor(small_strain(grad), lam[surface], mu[surface])
+                unit_stress = (operator @ columns).T.reshape(columns.shape[1], len(self._surface), 3, 3)
                 parts.append((model.contact(nodes), columns, unit_stress))
             if len(self._cache) >= self._cache_size:
                 self._cache.pop(next(iter(self._cache)))
@@ -180,3 +174,30 @@ class TissueFieldReplay:
             displacement += (columns @ reactions).reshape(-1, 3)
             stress += np.tensordot(reactions, unit_stress, axes=1)
         return displacement, von_mises_of_stress(stress)
+
+
+def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):
+    """Sparse (9E, 3N) map from nodal displacements (m) to the linear-elastic stress tensors (Pa,
+    row-major 3x3 per element) of ``elements``: sigma = lambda tr(eps) I + 2 mu eps, eps = sym(grad u),
+    grad u = sum over the element's nodes of u_a (x) grad N_a."""
+    import scipy.sparse as sp
+
+    gradients = model._gradients[elements]  # (E, 4, 3): grad N_a per element node
+    tets = model.mesh.tets[elements]
+    lam, mu = (values[elements] for values in model._lame)
+    base = np.arange(len(elements)) * 9
+    eye = np.eye(3)
+    rows, cols, vals = [], [], []
+    for a in range(4):
+        g = gradients[:, a, :]  # (E, 3)
+        for k in range(3):  # displacement component k of node a
+            # d(grad u)_ij / d u_ak = delta_ik g_j; eps_ij = (grad_ij + grad_ji) / 2; d tr(eps) = g_k
+            for i in range(3):
+                for j in range(3):
+                    strain = 0.5 * (eye[i, k] * g[:, j] + eye[j, k] * g[:, i])
+                    value = 2 * mu * strain + (lam * g[:, k] if i == j else 0.0)
+                    rows.append(base + 3 * i + j)
+                    cols.append(3 * tets[:, a] + k)
+                    vals.append(value)
+    shape = (9 * len(elements), 3 * model.mesh.n_nodes)
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
