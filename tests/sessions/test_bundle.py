@@ -42,15 +42,14 @@ def _sessions_on_disk(home: Path) -> list[str]:
 
 @pytest.mark.slow
 def test_export_then_import_elsewhere_reproduces_identical_metrics(small_study, tmp_path, open_catalog):
-    from sessions.catalog import Catalog
     from sessions.config import database_url
 
-    source = Catalog(database_url(small_study))
+    source = open_catalog(database_url(small_study))  # closed at teardown even if an assert fails
     bundle = tmp_path / "course.vascsim.zip"
     summary = export_study(source, "course", bundle)
-    assert summary["sessions"] == 3 and summary["files"] == 9
+    # header, samples, events, scene per session
+    assert summary["sessions"] == 3 and summary["files"] == 12
     before = study_table(source, "course")
-    source.close()
     # a second machine: another data directory, always an embedded SQLite catalog
     other_home = tmp_path / "other"
     target = open_catalog(f"sqlite:///{tmp_path / 'other.sqlite'}")
