@@ -109,3 +109,8 @@ class SessionContext:
     def window(self, start: float, end: float) -> NDArray[np.bool_]:
         time = self.streams.time
         return (time >= start) & (time <= end)
+
+    def span(self, start: float, end: float) -> slice:
+        """The samples with start <= time <= end, as a slice (time is sorted: two binary searches)."""
+        time = self.streams.time
+        return slice(int(np.searchsorted(time, start, "left")), int(np.searchsorted(time, end, "right")))

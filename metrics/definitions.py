@@ -141,11 +141,11 @@ def _tip_speed_near(context: SessionContext, after: bool) -> float:
     previous_end = context.streams.time[0]
     for insertion in context.insertions:
         if after:
-            window = context.window(insertion.pierce_time, insertion.end_time)
+            window = context.span(insertion.pierce_time, insertion.end_time)
         else:
-            window = context.window(previous_end, insertion.pierce_time)
+            window = context.span(previous_end, insertion.pierce_time)
         previous_end = insertion.end_time
-        selected = speed[window & near]
+        selected = speed[window][near[window]]
         if selected.size:
             values.append(float(selected.mean()))
     return float(np.mean(values)) if values else NAN
@@ -454,7 +454,7 @@ def _insertion_mask(context: SessionContext):
         return None
     mask = np.zeros(context.streams.time.size, dtype=bool)
     for insertion in context.insertions:
-        mask |= context.window(insertion.pierce_time, insertion.end_time)
+        mask[context.span(insertion.pierce_time, insertion.end_time)] = True
     return mask
 
 
@@ -476,9 +476,8 @@ def subordinate_displacement(context: SessionContext) -> float:
         return NAN
     largest = 0.0
     for insertion in context.insertions:
-        window = context.window(insertion.pierce_time, insertion.end_time)
-        if window.any():
-            segment = moved[window]
+        segment = moved[context.span(insertion.pierce_time, insertion.end_time)]
+        if len(segment):
             largest = max(largest, float(np.linalg.norm(segment - segment[0], axis=1).max()))
     return largest
 
