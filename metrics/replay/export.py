@@ -149,11 +149,16 @@ def export_replay(
     check_video_path(out)
     started = time.perf_counter()
     timings: dict[str, float] = {}
-    streams = with_tissue_fields(from_recorded(session), tissue)
+    # the derived tissue streams (local stress) are only drawn in the signal plots
+    def load(recorded):
+        streams = from_recorded(recorded)
+        return with_tissue_fields(streams, tissue) if stills is not None else streams
+
+    streams = load(session)
     scene = SceneReplay(session, tissue, streams, settings.fps)
     reference = expert_scene = None
     if experts:
-        expert_streams = [with_tissue_fields(from_recorded(e), tissue) for e in experts]
+        expert_streams = [load(e) for e in experts]
         reference = expert_reference(streams, expert_streams)
         medoid = experts[expert_streams.index(reference.medoid)]
         expert_scene = SceneReplay(medoid, tissue, reference.medoid, settings.fps)
