@@ -122,9 +122,9 @@ def replay_figures(repeats: int) -> None:
                 total, loop = float(np.median(totals)), float(np.median(loops))
                 print(
                     f"[{case_name}] replay export ({state} model) 1280x720 30 fps H.264, {frames} frames "
-                    f"({frames / 30:.1f} s): median {total:.2f} s over {repeats} = {frames / total:.1f} frames/s "
-                    f"whole export ({frames / total / 30:.2f}x real time); render loop {frames / loop:.1f} "
-                    "frames/s (target >= 30)"
+                    f"({frames / 30:.1f} s): median {total:.2f} s over {repeats} = "
+                    f"{frames / total:.1f} frames/s whole export ({frames / total / 30:.2f}x real time); "
+                    f"render loop {frames / loop:.1f} frames/s (target >= 30)"
                 )
 
 
