@@ -318,6 +318,12 @@ def demo(small: bool, as_json: bool) -> None:
             f"({low:.2f}-{high:.2f})"
         )
     click.echo(f"{result.sessions} sessions in {result.seconds:.0f} s; full report: {result.report}")
+    first_trainee = analysis.sessions.loc[analysis.sessions["label"] == "trainee", "session_id"]
+    if len(first_trainee):
+        click.echo(
+            f"replay a trainee against the experts: vascsim replay {first_trainee.iloc[0]} "
+            "--vs-group experts --mode side-by-side"
+        )
 
 
 @main.group()
