@@ -125,3 +125,18 @@ def test_replay_against_the_expert_group(home, tmp_path):
         assert "Traceback" not in failed.output and failed.output.count("\n") == 1
     bad_size = CliRunner().invoke(main, ["replay", trainee, "--size", "big"])
     assert bad_size.exit_code == 2 and "is not WIDTHxHEIGHT" in bad_size.output
+
+
+@pytest.mark.slow
+def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
+    monkeypatch.setenv("VASCSIM_HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("VASCSIM_DATABASE_URL", raising=False)
+    result = CliRunner().invoke(main, ["demo", "--small"])
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.strip().splitlines()
+    report = Path(lines[-2].rsplit("full report: ", 1)[1])
+    assert report.is_file() and report.name == "report.html"
+    assert lines[-1].startswith("replay a trainee against the experts: vascsim replay S-")
+    uid = lines[-1].split("vascsim replay ", 1)[1].split()[0]
+    shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
+    assert shown["status"] == "complete"
