@@ -225,13 +225,13 @@ def decimated(streams: SessionStreams, rate_hz: float = 100.0) -> SessionStreams
     the last), enough to align sessions for display (10 ms at 100 Hz) at a fraction of the cost."""
     step = max(1, int(streams.sample_rate // rate_hz))
     keep = np.unique(np.r_[np.arange(0, streams.time.size, step), streams.time.size - 1])
-    pick = lambda values: None if values is None else values[keep]  # noqa: E731
+    tip, state = streams.tip_position, streams.needle_state
     return SessionStreams(
         streams.session_id,
         streams.time[keep],
         streams.tool_position[keep],
         participant_id=streams.participant_id,
         label=streams.label,
-        tip_position=pick(streams.tip_position),
-        needle_state=pick(streams.needle_state),
+        tip_position=None if tip is None else tip[keep],
+        needle_state=None if state is None else state[keep],
     )

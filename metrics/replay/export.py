@@ -149,6 +149,7 @@ def export_replay(
     check_video_path(out)
     started = time.perf_counter()
     timings: dict[str, float] = {}
+
     # the derived tissue streams (local stress) are only drawn in the signal plots
     def load(recorded):
         streams = from_recorded(recorded)
