@@ -33,27 +33,11 @@ from metrics.replay.export import ReplaySettings, export_replay  # noqa: E402
 from recorder import SessionWriter, open_session  # noqa: E402
 from recorder.runtime import RuntimeRecorder  # noqa: E402
 from sim.devices import ScriptedDevice  # noqa: E402
-from sim.devices.scripted import SuturingPass, sequence_of_passes  # noqa: E402
+from sim.devices.scripted import sequence_of_passes  # noqa: E402
 from sim.fem import BiphaseTissue  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
-from sim.scenarios import scenario  # noqa: E402
-
-
-def passes_on(case, needle: Needle, count: int) -> list[SuturingPass]:
-    mesh = case.mesh
-    if case.name == "paper_cube":
-        spots = [(0.003 + 0.002 * (k % 3), 0.003 + 0.002 * ((k // 3) % 3)) for k in range(count)]
-        return [SuturingPass(needle, [x, y, 0.01], [0, 0, 1], [1, 0, 0]) for x, y in spots]
-    outer = np.hypot(mesh.points[:, 0], mesh.points[:, 1]).max()
-    result = []
-    for k in range(count):
-        angle = np.radians(200 + 25 * (k % 6))
-        normal = np.array([np.cos(angle), np.sin(angle), 0.0])
-        result.append(
-            SuturingPass(needle, outer * normal + [0, 0, 0.008 + 0.003 * (k % 5)], normal, [0, 0, 1])
-        )
-    return result
+from sim.scenarios import practice_passes, scenario  # noqa: E402
 
 
 def record(case_name: str, folder: Path, precompute: bool):
@@ -62,7 +46,7 @@ def record(case_name: str, folder: Path, precompute: bool):
     if precompute:
         tissue.precompute(use_cache=False)
     needle = Needle.curved()
-    trajectory, duration = sequence_of_passes(passes_on(case, needle, 4))
+    trajectory, duration = sequence_of_passes(practice_passes(case, needle, 4))
     writer = SessionWriter(folder, {"session_id": case_name, "task": case_name}, flush_interval=0.1)
     started = time.perf_counter()
     RuntimeRecorder(writer).attach(Simulation(tissue, needle, ScriptedDevice(trajectory))).run_simulated(

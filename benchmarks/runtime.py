@@ -16,33 +16,16 @@ For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
 from sim.devices import ScriptedDevice
-from sim.devices.scripted import SuturingPass, sequence_of_passes
+from sim.devices.scripted import sequence_of_passes
 from sim.experiments import paper_cube
 from sim.fem import BiphaseTissue
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings, Simulation
-from sim.scenarios import scenario
-
-
-def cube_passes(needle: Needle, count: int) -> list[SuturingPass]:
-    spots = [(0.003 + 0.002 * (k % 3), 0.003 + 0.002 * ((k // 3) % 3)) for k in range(count)]
-    return [SuturingPass(needle, [x, y, 0.01], [0, 0, 1], [1, 0, 0]) for x, y in spots]
-
-
-def artery_passes(needle: Needle, mesh, count: int) -> list[SuturingPass]:
-    outer_radius = np.hypot(mesh.points[:, 0], mesh.points[:, 1]).max()
-    passes = []
-    for k in range(count):
-        angle = math.radians(200 + 25 * (k % 6))
-        z = 0.008 + 0.003 * (k % 5)
-        normal = np.array([math.cos(angle), math.sin(angle), 0.0])
-        passes.append(SuturingPass(needle, outer_radius * normal + [0, 0, z], normal, [0, 0, 1]))
-    return passes
+from sim.scenarios import practice_passes, scenario
 
 
 def report(name: str, simulation: Simulation, result) -> None:
@@ -114,7 +97,7 @@ def main() -> None:
 
 
 def simulated_throughput(cube, needle) -> None:
-    one = cube_passes(needle, 1)[0]
+    one = practice_passes(scenario("paper_cube"), needle, 1)[0]
     ratios = []
     for _ in range(3):
         simulation = Simulation(cube, needle, ScriptedDevice(one.pose_and_grip))
@@ -128,7 +111,7 @@ def simulated_throughput(cube, needle) -> None:
 
 
 def realtime_cube(cube, needle, seconds, size, render) -> None:
-    trajectory, total = sequence_of_passes(cube_passes(needle, 20))
+    trajectory, total = sequence_of_passes(practice_passes(scenario("paper_cube"), needle, 20))
     duration = min(seconds, total)
     settings = RuntimeSettings(fem_rate=500.0)
     simulation = Simulation(
@@ -142,7 +125,7 @@ def realtime_artery(needle, seconds, size, render, precomputed) -> None:
     artery = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
     if precomputed:
         artery.precompute(use_cache=False)
-    trajectory, total = sequence_of_passes(artery_passes(needle, case.mesh, 20))
+    trajectory, total = sequence_of_passes(practice_passes(case, needle, 20))
     duration = min(seconds, total)
     settings = RuntimeSettings(fem_rate=500.0)
     simulation = Simulation(

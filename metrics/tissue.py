@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from metrics.streams import SessionStreams
 from sim.fem import BiphaseTissue, TissueModel
-from sim.fem.fields import IndentationStress, contact_depth
+from sim.fem.fields import IndentationStress, TissueFieldReplay, contact_depth
 
 NEAR_CONTACT_M = 0.002
 """Elements whose centroid lies within 2 mm of the contact point count as "near the contact"."""
@@ -54,16 +54,6 @@ def indentation_runs(streams: SessionStreams) -> list[tuple[int, int]]:
     starts = np.flatnonzero(indenting & (change | ~before))
     stops = np.flatnonzero(indenting & (np.r_[change[1:], True] | ~after)) + 1
     return list(zip(starts.tolist(), stops.tolist(), strict=True))
-
-
-def _surface_geometry(tissue: Tissue) -> tuple[NDArray, NDArray]:
-    mesh = tissue.mesh
-    corners = mesh.points[mesh.surface_triangles]
-    centres = corners.mean(axis=1)
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
-    return centres, areas
 
 
 def with_tissue_fields(streams: SessionStreams, tissue: Tissue) -> SessionStreams:
@@ -123,11 +113,13 @@ def insertion_stress_field(
 ) -> pd.DataFrame:
     """Von Mises stress (Pa) of each exterior triangle's element for one indentation state,
     with the triangle's centre (m) and area (m^2): the table the stress-localisation metrics read."""
-    everything = np.arange(tissue.mesh.n_elements)
-    operator = IndentationStress(tissue, nodes, weights, everything)
-    von_mises = operator.von_mises(tool_displacement[None, :], np.array([needle_speed]))[0]
-    centres, areas = _surface_geometry(tissue)
-    surface = von_mises[tissue.mesh.surface_elements]
+    drive = np.outer(weights, tool_displacement)  # what the runtime drove the triangle's nodes to
+    _, surface = TissueFieldReplay(tissue).state(nodes, drive, needle_speed)
+    corners = tissue.mesh.points[tissue.mesh.surface_triangles]
+    centres = corners.mean(axis=1)
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
     return pd.DataFrame(
         {"x": centres[:, 0], "y": centres[:, 1], "z": centres[:, 2], "area": areas, "von_mises": surface}
     )

@@ -7,6 +7,7 @@ schema is created and upgraded by the Alembic migrations in ``sessions/migration
 
 from __future__ import annotations
 
+import math
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,7 +22,8 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
-from sessions.models import Participant, Session, Study, Task
+from recorder.writer import sha256_of
+from sessions.models import MetricResult, Participant, Session, StreamFile, Study, Task
 from sim.errors import VascsimError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
@@ -180,3 +182,25 @@ class Catalog:
             orm.add(found)
             orm.flush()
         return found
+
+
+def stream_file(session_id: int, path: Path) -> StreamFile:
+    """The catalog row of one stream file: name, SHA-256 and size."""
+    return StreamFile(
+        session_id=session_id, name=path.name, sha256=sha256_of(path), bytes=path.stat().st_size
+    )
+
+
+def metric_results(session_id: int, values: dict[str, float]) -> list[MetricResult]:
+    """Metric rows of one session under the current registry version (NaN stored as NULL)."""
+    from metrics.registry import REGISTRY_VERSION
+
+    return [
+        MetricResult(
+            session_id=session_id,
+            metric=name,
+            value=None if math.isnan(value) else float(value),
+            registry_version=REGISTRY_VERSION,
+        )
+        for name, value in values.items()
+    ]

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from sqlalchemy import select
 
-from metrics import REGISTRY_VERSION, metrics_of
+from metrics import metrics_of
 from metrics.datasets import jigsaws
-from recorder.writer import sha256_of
-from sessions.catalog import Catalog, CatalogError, now
-from sessions.models import MetricResult, Participant, Rating, Session, StreamFile
+from sessions.catalog import Catalog, CatalogError, metric_results, now, stream_file
+from sessions.models import Participant, Rating, Session
 
 
 def import_jigsaws(
@@ -64,11 +62,7 @@ def import_jigsaws(
             )
             orm.add(session)
             orm.flush()
-            orm.add(
-                StreamFile(
-                    session_id=session.id, name=path.name, sha256=sha256_of(path), bytes=path.stat().st_size
-                )
-            )
+            orm.add(stream_file(session.id, path))
             orm.add(
                 Rating(
                     session_id=session.id,
@@ -90,13 +84,7 @@ def import_jigsaws(
                         created_at=now(),
                     )
                 )
-            for name, value in values.items():
-                stored = None if math.isnan(value) else float(value)
-                orm.add(
-                    MetricResult(
-                        session_id=session.id, metric=name, value=stored, registry_version=REGISTRY_VERSION
-                    )
-                )
+            orm.add_all(metric_results(session.id, values))
     return len(trials)
 
 
@@ -157,22 +145,8 @@ def import_bench_video(
             )
             orm.add(session)
             orm.flush()
-            for file in sorted(folder.iterdir()):
-                orm.add(
-                    StreamFile(
-                        session_id=session.id,
-                        name=file.name,
-                        sha256=sha256_of(file),
-                        bytes=file.stat().st_size,
-                    )
-                )
-            for name, value in values.items():
-                stored = None if math.isnan(value) else float(value)
-                orm.add(
-                    MetricResult(
-                        session_id=session.id, metric=name, value=stored, registry_version=REGISTRY_VERSION
-                    )
-                )
+            orm.add_all(stream_file(session.id, file) for file in sorted(folder.iterdir()))
+            orm.add_all(metric_results(session.id, values))
     except BaseException:
         import shutil
 

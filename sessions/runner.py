@@ -9,7 +9,6 @@ row ``failed`` with the reason; a hard crash leaves ``running`` plus a journal t
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,8 +19,7 @@ from metrics import REGISTRY_VERSION, from_recorded, metrics_of
 from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from recorder.writer import sha256_of
-from sessions.catalog import Catalog, CatalogError, new_uid, now
+from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
 from sessions.config import data_home
 from sessions.models import MetricResult, Participant, Session, StreamFile, Study
 from sessions.tasks import session_tissue, task_spec, tissue_for
@@ -146,12 +144,7 @@ def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         orm.execute(delete(StreamFile).where(StreamFile.session_id == row.id))
-        for path in sorted(p for p in directory.iterdir() if p.is_file()):
-            orm.add(
-                StreamFile(
-                    session_id=row.id, name=path.name, sha256=sha256_of(path), bytes=path.stat().st_size
-                )
-            )
+        orm.add_all(stream_file(row.id, path) for path in sorted(directory.iterdir()) if path.is_file())
         row.status = status
         row.error = error
         row.ended_at = now()
@@ -213,11 +206,7 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
                 MetricResult.session_id == row.id, MetricResult.registry_version == REGISTRY_VERSION
             )
         )
-        for name, value in values.items():
-            stored = None if math.isnan(value) else float(value)
-            orm.add(
-                MetricResult(session_id=row.id, metric=name, value=stored, registry_version=REGISTRY_VERSION)
-            )
+        orm.add_all(metric_results(row.id, values))
     return values
 
 

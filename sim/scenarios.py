@@ -84,3 +84,27 @@ def scenario(name: str) -> Scenario:
     if name not in SCENARIOS:
         raise ModelError(f"unknown scenario {name!r}; choose one of {', '.join(SCENARIOS)}")
     return SCENARIOS[name]()
+
+
+def practice_passes(case: Scenario, needle, count: int) -> list:
+    """``count`` scripted suturing passes laid out over a scenario's working surface, for benchmarks:
+    on the cube's top face a 3 x 3 grid of entry points 2 mm apart; on an artery entry points around
+    its outer surface (angles 200-325 deg, 8-20 mm along it), bites along its axis."""
+    import math
+
+    from sim.devices.scripted import SuturingPass
+
+    if case.name == "paper_cube":
+        spots = [(0.003 + 0.002 * (k % 3), 0.003 + 0.002 * ((k // 3) % 3)) for k in range(count)]
+        return [SuturingPass(needle, [x, y, 0.01], [0, 0, 1], [1, 0, 0]) for x, y in spots]
+    if not case.name.startswith("vessel"):
+        raise ModelError(f"no practice passes are laid out for scenario {case.name!r}")
+    outer_radius = np.hypot(case.mesh.points[:, 0], case.mesh.points[:, 1]).max()
+    passes = []
+    for k in range(count):
+        angle = math.radians(200 + 25 * (k % 6))
+        normal = np.array([math.cos(angle), math.sin(angle), 0.0])
+        passes.append(
+            SuturingPass(needle, outer_radius * normal + [0, 0, 0.008 + 0.003 * (k % 5)], normal, [0, 0, 1])
+        )
+    return passes

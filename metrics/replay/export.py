@@ -196,7 +196,8 @@ def export_replay(
                 ghost_needle = (
                     expert_scene.track.needle[expert_k] if expert_k is not None and not split else None
                 )
-                pixels = renderers[0].render(scene.frame(k, ghost_path, ghost_needle))
+                frame = scene.frame(k, ghost_path, ghost_needle)
+                pixels = renderers[0].render(frame)
                 if k == 0 and split:
                     renderers[1].set_camera(*renderers[0].plotter.camera_position)
                 if split:
@@ -211,7 +212,7 @@ def export_replay(
                 title, lines = _hud_lines(scene, k, bands)
                 draw_hud(pixels, title, lines, scale)
                 if k == insertion:
-                    written += _write_insertion_stills(Path(stills), scene, k, pixels)
+                    written += _write_insertion_stills(Path(stills), scene, k, frame, pixels)
                 render_time += time.perf_counter() - began
                 writer.write(pixels)
                 if progress is not None:
@@ -230,12 +231,12 @@ def export_replay(
 
 
 def _write_insertion_stills(
-    folder: Path, scene: SceneReplay, k: int, pixels: NDArray[np.uint8]
+    folder: Path, scene: SceneReplay, k: int, frame, pixels: NDArray[np.uint8]
 ) -> list[Path]:
+    """The insertion frame as rendered (PNG) and its surface stress seen along the wall normal (EXR)."""
     from sim.render import write_image
 
     folder.mkdir(parents=True, exist_ok=True)
-    frame = scene.frame(k)
     mesh = scene.fields.mesh
     sample = min(int(np.searchsorted(scene.streams.time, scene.track.times[k])), scene.streams.time.size - 1)
     triangle = int(scene.streams.contact_triangle[sample])
