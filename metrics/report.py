@@ -36,7 +36,7 @@ def _save(figure, folder: Path, name: str) -> str:
     return f"figures/{name}.png"
 
 
-def _participant_medians(analysis: StudyAnalysis, metrics: list[str]) -> pd.DataFrame:
+def participant_medians(analysis: StudyAnalysis, metrics: list[str]) -> pd.DataFrame:
     """One row per participant of the compared groups: the median of their practice sessions."""
     settings = analysis.settings
     data = analysis.sessions
@@ -50,7 +50,7 @@ def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
     columns = 4
     rows = max(1, math.ceil(len(metrics) / columns))
     figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.6 * rows), squeeze=False)
-    per_participant = _participant_medians(analysis, metrics)
+    per_participant = participant_medians(analysis, metrics)
     significant = set(analysis.validity.discriminating())
     for axis, metric in zip(axes.ravel(), metrics, strict=False):
         groups = [
@@ -78,7 +78,7 @@ def _roc(analysis: StudyAnalysis, folder: Path) -> str:
     settings = analysis.settings
     table = analysis.validity.table.dropna(subset=["auc"])
     ranked = table.assign(effect=(table["auc"] - 0.5).abs()).sort_values("effect", ascending=False).head(6)
-    per_participant = _participant_medians(analysis, ranked["metric"].tolist())
+    per_participant = participant_medians(analysis, ranked["metric"].tolist())
     skilled = (per_participant[settings.group_col] == settings.skilled_group).to_numpy()
     figure, axis = plt.subplots(figsize=(5, 5))
     for metric in ranked["metric"]:

@@ -23,6 +23,7 @@ import json
 import math
 import os
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -124,10 +125,11 @@ def _schema_message_length(schema: pa.Schema) -> int:
 class IngestStore:
     """The central recorder's storage: one directory per session under ``root``."""
 
-    def __init__(self, root: str | Path, tokens: dict[str, str]) -> None:
+    def __init__(self, root: str | Path, tokens: dict[str, str] | Callable[[str], str | None]) -> None:
+        """tokens: token -> station id, as a mapping or a lookup function (e.g. the catalog's)."""
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
-        self.tokens = dict(tokens)  # token -> station id
+        self._station_of = dict(tokens).get if isinstance(tokens, dict) else tokens
         self._sessions: dict[str, _Session] = {}
         self._lock = threading.Lock()
 
@@ -141,7 +143,7 @@ class IngestStore:
     def station_for(self, authorization: str | None) -> str | None:
         if not authorization or not authorization.startswith("Bearer "):
             return None
-        return self.tokens.get(authorization[len("Bearer ") :])
+        return self._station_of(authorization[len("Bearer ") :])
 
     def session(self, station: str, session_id: str) -> _Session:
         if not session_id.replace("-", "").replace("_", "").isalnum():

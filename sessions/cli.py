@@ -976,3 +976,6 @@ def import_jigsaws(kinematics_dir: str, meta_file: str, study: str) -> None:
     catalog, _ = _catalog()
     count = run_import(catalog, kinematics_dir, meta_file, study)
     click.echo(f"imported {count} JIGSAWS trial(s) into study {study}")
+
+
+from sessions import cli_accounts as _cli_accounts  # noqa: E402,F401  (registers `vascsim users`)

@@ -18,6 +18,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 SESSION_STATUSES = ("running", "complete", "recovered", "failed")
+ROLES = ("admin", "supervisor", "researcher", "trainee")
 
 
 class Base(DeclarativeBase):
@@ -51,6 +52,10 @@ class Participant(Base):
     group_label: Mapped[str] = mapped_column(String(64), default="")
     synthetic: Mapped[bool] = mapped_column(Boolean, default=False)
     created_at: Mapped[datetime] = mapped_column(DateTime)
+    # the trainee account that may see this participant's sessions (never shown to researchers)
+    user_id: Mapped[int | None] = mapped_column(
+        ForeignKey("users.id", ondelete="SET NULL", name="fk_participants_user_id"), nullable=True, index=True
+    )
     study: Mapped[Study] = relationship(back_populates="participants")
     sessions: Mapped[list[Session]] = relationship(back_populates="participant", cascade="all, delete-orphan")
 
@@ -131,3 +136,37 @@ class Annotation(Base):
     time_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     text: Mapped[str] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class User(Base):
+    """A dashboard account. ``password_hash`` is an Argon2id hash; the password itself is never stored."""
+
+    __tablename__ = "users"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    username: Mapped[str] = mapped_column(String(64), unique=True)
+    password_hash: Mapped[str] = mapped_column(String(200))
+    role: Mapped[str] = mapped_column(String(16))
+    active: Mapped[bool] = mapped_column(Boolean, default=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class LoginSession(Base):
+    """A signed-in browser: the cookie holds a random token, the catalog only its SHA-256."""
+
+    __tablename__ = "login_sessions"
+    token_sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    csrf_token: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    expires_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class StationToken(Base):
+    """A remote station's ingest credential (stored as SHA-256; shown once when created)."""
+
+    __tablename__ = "station_tokens"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    station: Mapped[str] = mapped_column(String(64), unique=True)
+    token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    revoked_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)

@@ -1,0 +1,140 @@
+"""Study analyses for the dashboard, computed once per catalog state and kept in memory.
+
+A study's analysis (construct validity, benchmarks, proficiency, learning curves) is
+the same computation as `vascsim report`. It depends only on the study's scored
+sessions, so it is cached under a fingerprint of the catalog's sessions, metric
+results and participants: any new score, session or relabelling recomputes it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import func, select
+
+from metrics.registry import REGISTRY_VERSION
+from metrics.study import StudyAnalysis, StudySettings, analyse_study, oriented
+from sessions.catalog import Catalog, CatalogError
+from sessions.demo import BENCHMARK_RULE, PRIMARY_METRICS
+from sessions.models import MetricResult, Participant, Session, Study
+from sessions.runner import study_table
+
+CACHED_STUDIES = 16
+
+
+@dataclass(frozen=True)
+class CachedAnalysis:
+    analysis: StudyAnalysis
+    uid_of: dict[str, int]  # session uid -> row of analysis.sessions
+
+
+def study_settings(table: pd.DataFrame) -> StudySettings:
+    """The dashboard's analysis: experts against the other group, the demo's declared primary metrics
+    when the study has them, benchmarks at the level three in four experts reach."""
+    labels = [label for label in pd.unique(table["label"]) if label != "expert"]
+    other = "trainee" if "trainee" in labels or not labels else sorted(labels)[0]
+    primary = tuple(m for m in PRIMARY_METRICS if m in table.columns and table[m].notna().any())
+    return StudySettings(
+        groups=("expert", other),
+        skilled_group="expert",
+        metrics=primary if len(primary) == len(PRIMARY_METRICS) else None,
+        benchmark_rule=BENCHMARK_RULE,
+    )
+
+
+class AnalysisCache:
+    """Per-study analyses keyed by the catalog's state (thread-safe; one computation per study at a time)."""
+
+    def __init__(self, catalog: Catalog) -> None:
+        self.catalog = catalog
+        self._cache: OrderedDict[int, tuple[tuple, CachedAnalysis]] = OrderedDict()
+        self._lock = threading.Lock()
+        self._study_locks: dict[int, threading.Lock] = {}
+
+    def fingerprint(self, study_id: int) -> tuple:
+        with self.catalog.session() as orm:
+            sessions = orm.execute(
+                select(func.count(Session.id), func.max(Session.id), func.max(Session.ended_at))
+                .join(Participant, Session.participant_id == Participant.id)
+                .where(Participant.study_id == study_id)
+            ).one()
+            results = orm.execute(select(func.count(MetricResult.id), func.max(MetricResult.id))).one()
+            participants = orm.execute(
+                select(func.count(Participant.id), func.max(Participant.id)).where(
+                    Participant.study_id == study_id
+                )
+            ).one()
+        return (*sessions, *results, *participants, REGISTRY_VERSION)
+
+    def get(self, study_id: int) -> CachedAnalysis:
+        with self._lock:
+            study_lock = self._study_locks.setdefault(study_id, threading.Lock())
+        with study_lock:
+            key = self.fingerprint(study_id)
+            with self._lock:
+                held = self._cache.get(study_id)
+                if held is not None and held[0] == key:
+                    self._cache.move_to_end(study_id)
+                    return held[1]
+            computed = self._compute(study_id)
+            with self._lock:
+                self._cache[study_id] = (key, computed)
+                while len(self._cache) > CACHED_STUDIES:
+                    self._cache.popitem(last=False)
+            return computed
+
+    def _compute(self, study_id: int) -> CachedAnalysis:
+        with self.catalog.session() as orm:
+            study = orm.get(Study, study_id)
+            if study is None:
+                raise CatalogError(f"no study {study_id}")
+            name = study.name
+        table = study_table(self.catalog, name)
+        analysis = analyse_study(table, study_settings(table))
+        uid_of = {uid: k for k, uid in enumerate(analysis.sessions["session_id"])}
+        return CachedAnalysis(analysis, uid_of)
+
+
+def _finite(value) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def records(frame: pd.DataFrame) -> list[dict]:
+    """JSON-ready rows: NaN/NA as None, NumPy scalars as Python numbers."""
+    out = []
+    for row in frame.to_dict(orient="records"):
+        clean = {}
+        for key, value in row.items():
+            if isinstance(value, np.generic):
+                value = value.item()
+            if isinstance(value, float):
+                value = _finite(value)
+            elif value is pd.NA:
+                value = None
+            clean[str(key)] = value
+        out.append(clean)
+    return out
+
+
+def benchmark_rows(analysis: StudyAnalysis) -> list[dict]:
+    return records(analysis.benchmarks)
+
+
+def roc_points(per_participant: pd.DataFrame, metric: str, skilled: np.ndarray) -> dict | None:
+    """ROC curve of one metric over participant medians (oriented so higher = better)."""
+    from sklearn.metrics import roc_curve
+
+    values = oriented(per_participant[metric], metric)
+    keep = ~np.isnan(values)
+    if keep.sum() < 2 or len(set(skilled[keep])) < 2:
+        return None
+    fpr, tpr, _ = roc_curve(skilled[keep], values[keep])
+    return {"metric": metric, "fpr": fpr.round(4).tolist(), "tpr": tpr.round(4).tolist()}

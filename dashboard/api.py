@@ -1,0 +1,398 @@
+"""The JSON API under ``/api`` (its OpenAPI document at ``/api/openapi.json``)."""
+
+from __future__ import annotations
+
+import io
+from datetime import timedelta
+from pathlib import Path
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi.responses import FileResponse, StreamingResponse
+from pydantic import BaseModel, Field
+from sqlalchemy import select
+
+from dashboard import access, queries
+from dashboard.auth import COOKIE, STAFF, LoginRateLimiter, Viewer, current_viewer, limiter_key, require
+from dashboard.errors import ERROR_RESPONSES, DashboardError, not_found
+from dashboard.live import live_stream
+from dashboard.signals import inside, replay_video, session_file
+from sessions import accounts
+from sessions.models import ROLES, Participant, Session, StationToken, Study, User
+
+router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
+Staff = Annotated[Viewer, Depends(require(*STAFF))]
+Admin = Annotated[Viewer, Depends(require("admin"))]
+Watcher = Annotated[Viewer, Depends(require("admin", "supervisor"))]
+Anyone = Annotated[Viewer, Depends(current_viewer)]
+FIGURES = ("box_plots.png", "box_plots.svg", "roc.png", "roc.svg")
+
+
+class Credentials(BaseModel):
+    username: str = Field(min_length=1, max_length=64)
+    password: str = Field(min_length=1, max_length=1024)
+
+
+class NewUser(BaseModel):
+    username: str = Field(min_length=2, max_length=64)
+    password: str = Field(min_length=1, max_length=1024)
+    role: Literal["admin", "supervisor", "researcher", "trainee"]
+    participant_ids: list[int] = Field(default_factory=list, max_length=100)
+
+
+class UserChange(BaseModel):
+    role: Literal["admin", "supervisor", "researcher", "trainee"] | None = None
+    active: bool | None = None
+    password: str | None = Field(default=None, min_length=1, max_length=1024)
+
+
+class NewStation(BaseModel):
+    station: str = Field(min_length=1, max_length=64)
+
+
+class NewStudy(BaseModel):
+    name: str = Field(min_length=1, max_length=200)
+    description: str = Field(default="", max_length=5000)
+
+
+def _state(request: Request):
+    return request.app.state
+
+
+def sign_in(request: Request, response: Response, username: str, password: str) -> tuple[User, str]:
+    """Check the credentials under the rate limit, set the sign-in cookie; (user, CSRF token)."""
+    state = _state(request)
+    limiter: LoginRateLimiter = state.login_limiter
+    key = limiter_key(request, username)
+    wait = limiter.retry_after(key)
+    if wait > 0:
+        error = DashboardError(429, f"too many failed sign-ins for {username!r}; try again in {wait:.0f} s")
+        error.retry_after = int(wait) + 1
+        raise error
+    with state.catalog.session() as orm:
+        user = accounts.authenticate(orm, username, password)
+        if user is None:
+            limiter.failed(key)
+            raise DashboardError(401, "wrong user name or password")
+        token, csrf = accounts.start_login(orm, user, timedelta(seconds=state.settings.login_lifetime_s))
+    limiter.succeeded(key)
+    response.set_cookie(
+        COOKIE,
+        token,
+        max_age=int(state.settings.login_lifetime_s),
+        httponly=True,
+        samesite="strict",
+        secure=state.settings.secure_cookies,
+        path="/",
+    )
+    return user, csrf
+
+
+def sign_out(request: Request, response: Response) -> None:
+    token = request.cookies.get(COOKIE)
+    if token:
+        with _state(request).catalog.session() as orm:
+            accounts.end_login(orm, token)
+    response.delete_cookie(COOKIE, path="/")
+
+
+@router.post("/login", summary="Sign in; sets an HttpOnly cookie and returns the CSRF token")
+def login(request: Request, response: Response, credentials: Credentials) -> dict:
+    user, csrf = sign_in(request, response, credentials.username, credentials.password)
+    return {"username": user.username, "role": user.role, "csrf_token": csrf}
+
+
+@router.post("/logout", summary="Sign out (ends the sign-in on the server)")
+def logout(request: Request, response: Response, viewer: Anyone) -> dict:
+    sign_out(request, response)
+    return {"signed_out": viewer.username}
+
+
+@router.get("/me")
+def me(viewer: Anyone) -> dict:
+    return {
+        "username": viewer.username,
+        "role": viewer.role,
+        "participant_ids": sorted(viewer.participant_ids),
+        "csrf_token": viewer.csrf_token,
+    }
+
+
+@router.get("/studies")
+def studies(request: Request, viewer: Anyone) -> list[dict]:
+    return queries.studies(_state(request).catalog, viewer)
+
+
+@router.get("/studies/{study_id}", summary="Study overview: participants, latest scores, who needs attention")
+def study(request: Request, study_id: int, viewer: Staff) -> dict:
+    state = _state(request)
+    return queries.study_overview(state.catalog, state.analyses, viewer, study_id)
+
+
+@router.get("/studies/{study_id}/validity", summary="Construct-validity report")
+def validity(request: Request, study_id: int, viewer: Staff) -> dict:
+    state = _state(request)
+    return queries.validity_report(state.catalog, state.analyses, viewer, study_id)
+
+
+@router.get("/studies/{study_id}/validity.csv", response_class=Response, summary="Validity table as CSV")
+def validity_csv(request: Request, study_id: int, viewer: Staff) -> Response:
+    from metrics.report import summary_table
+
+    state = _state(request)
+    with state.catalog.session() as orm:
+        name = access.owned_study(orm, viewer, study_id, whole=True).name
+    buffer = io.StringIO()
+    summary_table(state.analyses.get(study_id).analysis).to_csv(buffer, index=False)
+    return Response(
+        buffer.getvalue(),
+        media_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="validity-{_plain(name)}.csv"'},
+    )
+
+
+def _plain(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)[:80]
+
+
+@router.get(
+    "/studies/{study_id}/figures/{name}",
+    response_class=FileResponse,
+    summary="A report figure (box plots or ROC, PNG or SVG)",
+)
+def figure(request: Request, study_id: int, name: str, viewer: Staff) -> FileResponse:
+    from metrics.report import write_report
+
+    if name not in FIGURES:
+        raise not_found(f"figure {name!r}")
+    state = _state(request)
+    with state.catalog.session() as orm:
+        study_name = access.owned_study(orm, viewer, study_id, whole=True).name
+    folder = state.settings.home / "reports" / "dashboard" / str(study_id)
+    analysis = state.analyses.get(study_id).analysis
+    stamp = folder / ".fingerprint"
+    key = repr(state.analyses.fingerprint(study_id))
+    if not stamp.exists() or stamp.read_text() != key:
+        write_report(analysis, folder, title=f"Study {study_name}")
+        stamp.write_text(key)
+    path = inside(state.settings.home, folder / "figures" / name)
+    if not path.is_file():
+        raise not_found(f"figure {name!r}")
+    return FileResponse(path, filename=f"{_plain(study_name)}-{name}")
+
+
+@router.get(
+    "/participants/{participant_id}/progress", summary="Learning curves, pass/fail history, retention"
+)
+def progress(request: Request, participant_id: int, viewer: Anyone) -> dict:
+    state = _state(request)
+    return queries.participant_progress(state.catalog, state.analyses, viewer, participant_id)
+
+
+@router.get("/sessions", summary="Sessions the caller may see, newest first")
+def sessions(
+    request: Request,
+    viewer: Anyone,
+    study_id: int | None = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+) -> dict:
+    return queries.session_list(_state(request).catalog, viewer, study_id, limit, offset)
+
+
+@router.get("/sessions/{uid}", summary="A session: metrics against the expert band, events, files")
+def session(request: Request, uid: str, viewer: Anyone) -> dict:
+    state = _state(request)
+    return queries.session_detail(state.catalog, state.analyses, viewer, uid)
+
+
+def _directory(request: Request, viewer: Viewer, uid: str) -> tuple[str, set[str]]:
+    with _state(request).catalog.session() as orm:
+        row = access.owned_session(orm, viewer, uid)
+        return row.directory, {f.name for f in row.files}
+
+
+@router.get("/sessions/{uid}/signals", summary="Force, tip speed and local stress over time; events")
+def signals(request: Request, uid: str, viewer: Anyone) -> dict:
+    directory, _ = _directory(request, viewer, uid)
+    return _state(request).signals.signals(directory)
+
+
+@router.get("/sessions/{uid}/video", response_class=FileResponse, summary="The replay video (range requests)")
+def video(request: Request, uid: str, viewer: Anyone) -> FileResponse:
+    _directory(request, viewer, uid)
+    path = replay_video(_state(request).settings.home, uid)
+    if path is None:
+        raise DashboardError(
+            404,
+            f"session {uid!r} has no replay video yet; render it with "
+            f"`vascsim replay {uid} --vs-group experts`",
+        )
+    return FileResponse(path, media_type="video/mp4" if path.suffix == ".mp4" else "video/webm")
+
+
+@router.get("/sessions/{uid}/files/{name}", response_class=FileResponse, summary="Download a stream file")
+def download(request: Request, uid: str, name: str, viewer: Anyone) -> FileResponse:
+    directory, names = _directory(request, viewer, uid)
+    path = session_file(_state(request).settings.home, directory, name, names)
+    return FileResponse(path, filename=f"{uid}-{name}")
+
+
+# -- live view --------------------------------------------------------------------------
+@router.get("/live", summary="Stations recording now: local sessions and remote stations")
+def live(request: Request, viewer: Watcher) -> dict:
+    state = _state(request)
+    with state.catalog.session() as orm:
+        running = orm.execute(
+            select(Session.uid, Participant.code, Session.started_at)
+            .join(Participant, Session.participant_id == Participant.id)
+            .where(Session.status == "running")
+            .order_by(Session.started_at.desc())
+        ).all()
+    stations = []
+    root = state.settings.ingest_root
+    if root.is_dir():
+        for journal in sorted(root.glob("*/*/samples.arrows")):
+            stations.append({"station": journal.parent.parent.name, "session": journal.parent.name})
+    return {
+        "sessions": [{"uid": u, "participant": c, "started_at": a} for u, c, a in running],
+        "stations": stations,
+    }
+
+
+def _event_stream(request: Request, directory: Path, still_running) -> StreamingResponse:
+    settings = _state(request).settings
+    stream = live_stream(
+        directory, still_running, request.is_disconnected, settings.live_poll_s, settings.live_rate_hz
+    )
+    return StreamingResponse(
+        stream,
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"},
+    )
+
+
+@router.get(
+    "/live/sessions/{uid}", response_class=StreamingResponse, summary="Server-sent events of a session"
+)
+def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingResponse:
+    catalog = _state(request).catalog
+    with catalog.session() as orm:
+        row = access.owned_session(orm, viewer, uid)
+        if row.status != "running":
+            raise DashboardError(409, f"session {uid!r} is {row.status}, not recording")
+        directory = inside(_state(request).settings.home, Path(row.directory))
+
+    def still_running() -> bool:
+        with catalog.session() as orm:
+            return orm.scalar(select(Session.status).where(Session.uid == uid)) == "running"
+
+    return _event_stream(request, directory, still_running)
+
+
+@router.get(
+    "/live/stations/{station}/{session_id}",
+    response_class=StreamingResponse,
+    summary="Server-sent events of a remote station's session",
+)
+def live_station(request: Request, station: str, session_id: str, viewer: Watcher) -> StreamingResponse:
+    root = _state(request).settings.ingest_root
+    if not all(part.replace("-", "").replace("_", "").isalnum() for part in (station, session_id)):
+        raise not_found(f"station session {station}/{session_id}")
+    directory = inside(_state(request).settings.home, root / station / session_id)
+    if not (directory / "samples.arrows").exists():
+        raise not_found(f"station session {station}/{session_id}")
+    return _event_stream(request, directory, lambda: (directory / "samples.arrows").exists())
+
+
+# -- administration ---------------------------------------------------------------------
+def _user_record(user: User, linked: list[int]) -> dict:
+    return {
+        "id": user.id,
+        "username": user.username,
+        "role": user.role,
+        "active": user.active,
+        "created_at": user.created_at,
+        "participant_ids": linked,
+    }
+
+
+def _linked(orm, user_id: int) -> list[int]:
+    return list(
+        orm.scalars(select(Participant.id).where(Participant.user_id == user_id).order_by(Participant.id))
+    )
+
+
+@router.get("/users", summary="Accounts (admin)")
+def users(request: Request, viewer: Admin) -> list[dict]:
+    with _state(request).catalog.session() as orm:
+        return [
+            _user_record(u, _linked(orm, u.id)) for u in orm.scalars(select(User).order_by(User.username))
+        ]
+
+
+@router.post("/users", status_code=201, summary="Create an account (admin)")
+def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
+    with _state(request).catalog.session() as orm:
+        user = accounts.create_user(orm, body.username, body.password, body.role)
+        for participant_id in body.participant_ids:
+            participant = orm.get(Participant, participant_id)
+            if participant is None:
+                raise not_found(f"participant {participant_id}")
+            accounts.link_participant(orm, user, participant)
+        orm.flush()
+        return _user_record(user, _linked(orm, user.id))
+
+
+@router.patch("/users/{user_id}", summary="Change an account's role, state or password (admin)")
+def change_user(request: Request, user_id: int, body: UserChange, viewer: Admin) -> dict:
+    with _state(request).catalog.session() as orm:
+        user = orm.get(User, user_id)
+        if user is None:
+            raise not_found(f"user {user_id}")
+        if user.id == viewer.user_id and (body.active is False or (body.role and body.role != "admin")):
+            raise DashboardError(409, "an admin cannot deactivate or demote their own account")
+        if body.role is not None:
+            user.role = accounts.check_role(body.role)
+        if body.active is not None:
+            user.active = body.active
+        if body.password is not None:
+            accounts.set_password(orm, user, body.password)
+        return _user_record(user, _linked(orm, user.id))
+
+
+@router.get("/stations", summary="Station ingest tokens (admin; the tokens themselves are never shown again)")
+def stations(request: Request, viewer: Admin) -> list[dict]:
+    with _state(request).catalog.session() as orm:
+        rows = orm.scalars(select(StationToken).order_by(StationToken.station))
+        return [
+            {"id": r.id, "station": r.station, "created_at": r.created_at, "revoked_at": r.revoked_at}
+            for r in rows
+        ]
+
+
+@router.post("/stations", status_code=201, summary="Issue a station's ingest token (admin); shown once")
+def create_station(request: Request, body: NewStation, viewer: Admin) -> dict:
+    with _state(request).catalog.session() as orm:
+        row, token = accounts.create_station_token(orm, body.station)
+        return {"id": row.id, "station": row.station, "token": token}
+
+
+@router.delete("/stations/{token_id}", summary="Revoke a station's token (admin)")
+def revoke_station(request: Request, token_id: int, viewer: Admin) -> dict:
+    with _state(request).catalog.session() as orm:
+        row = accounts.revoke_station_token(orm, token_id)
+        return {"id": row.id, "station": row.station, "revoked_at": row.revoked_at}
+
+
+@router.post("/studies", status_code=201, summary="Create a study (admin)")
+def create_study(request: Request, body: NewStudy, viewer: Admin) -> dict:
+    catalog = _state(request).catalog
+    with catalog.session() as orm:
+        if orm.scalar(select(Study.id).where(Study.name == body.name)) is not None:
+            raise DashboardError(409, f"study {body.name!r} already exists")
+        study = catalog.study(orm, body.name, create=True, description=body.description)
+        return {"id": study.id, "name": study.name, "description": study.description}
+
+
+ROLE_NAMES = ROLES

@@ -1,0 +1,105 @@
+"""The dashboard application: ``create_app(settings)`` builds it, `vascsim serve` runs it."""
+
+from __future__ import annotations
+
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI, Request
+from fastapi.responses import FileResponse
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+
+from dashboard import api, pages
+from dashboard.analysis import AnalysisCache
+from dashboard.auth import LoginRateLimiter
+from dashboard.errors import install_error_handlers
+from dashboard.settings import DashboardSettings
+from dashboard.signals import SignalCache
+from recorder.remote import IngestStore
+from recorder.remote import create_app as create_ingest_app
+from sessions.catalog import Catalog
+
+HERE = Path(__file__).parent
+SECURITY_HEADERS = {
+    # every asset is served from here: nothing loads from a CDN, no inline script runs
+    "Content-Security-Policy": (
+        "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+        "img-src 'self' data: blob:; media-src 'self'; connect-src 'self'; frame-ancestors 'none'; "
+        "form-action 'self'; base-uri 'none'"
+    ),
+    "X-Content-Type-Options": "nosniff",
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "same-origin",
+}
+
+
+def plotly_bundle() -> Path:
+    """plotly.min.js from the installed plotly package (served locally: no internet on hospital networks)."""
+    import plotly
+
+    path = Path(plotly.__file__).parent / "package_data" / "plotly.min.js"
+    if not path.is_file():
+        raise FileNotFoundError(f"plotly.min.js not found at {path}; reinstall with `scripts/bootstrap`")
+    return path
+
+
+def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> FastAPI:
+    """The web application over the catalog at ``settings.database_url`` and the data in ``settings.home``."""
+    catalog = catalog or Catalog(settings.database_url)
+    ingest_store = _ingest_store(settings, catalog)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI):
+        yield
+        ingest_store.close()
+
+    app = FastAPI(
+        lifespan=lifespan,
+        title="vascsim dashboard",
+        version="1",
+        description="Courses, studies and replay review for the vascsim suturing simulator.",
+        openapi_url="/api/openapi.json",
+        docs_url=None,  # the interactive docs load their assets from a CDN
+        redoc_url=None,
+    )
+    app.state.settings = settings
+    app.state.catalog = catalog
+    app.state.ingest = ingest_store
+    app.state.analyses = AnalysisCache(app.state.catalog)
+    app.state.signals = SignalCache(settings.home)
+    app.state.login_limiter = LoginRateLimiter(settings.login_attempts, settings.login_window_s)
+    app.state.templates = Jinja2Templates(directory=str(HERE / "templates"))
+    install_error_handlers(app)
+
+    @app.middleware("http")
+    async def security_headers(request: Request, call_next):
+        response = await call_next(request)
+        for name, value in SECURITY_HEADERS.items():
+            response.headers.setdefault(name, value)
+        if request.url.path.startswith("/api") and "cache-control" not in response.headers:
+            response.headers["Cache-Control"] = "no-store"
+        return response
+
+    app.include_router(api.router)
+    app.include_router(pages.router)
+    bundle = plotly_bundle()
+
+    @app.get("/static/vendor/plotly.min.js", include_in_schema=False)
+    def plotly_js() -> FileResponse:
+        return FileResponse(bundle, media_type="text/javascript", headers={"Cache-Control": "max-age=86400"})
+
+    app.mount("/static", StaticFiles(directory=str(HERE / "static")), name="static")
+    app.mount("/ingest", create_ingest_app(ingest_store), name="ingest")
+    return app
+
+
+def _ingest_store(settings: DashboardSettings, catalog: Catalog) -> IngestStore:
+    """Remote stations' HTTP ingest store (recorder.remote), authorised by the catalog's station tokens."""
+    from sessions.accounts import station_for_token
+
+    def station_of(token: str) -> str | None:
+        with catalog.session() as orm:
+            return station_for_token(orm, token)
+
+    return IngestStore(settings.ingest_root, station_of)

@@ -1,0 +1,97 @@
+"""One error shape for every failure: ``{"error": {"status": 404, "message": "..."}}``.
+
+API paths answer it as JSON; pages render the same message in HTML (and send a
+signed-out browser to the sign-in page).
+"""
+
+from __future__ import annotations
+
+from fastapi import Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, RedirectResponse, Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from sim.errors import VascsimError
+
+
+class DashboardError(VascsimError):
+    """A request the dashboard refuses, with the HTTP status to answer."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+def not_found(what: str) -> DashboardError:
+    """The same answer for "does not exist" and "not yours": ids cannot be probed."""
+    return DashboardError(404, f"{what} not found")
+
+
+def forbidden(what: str) -> DashboardError:
+    return DashboardError(403, f"{what} needs a different role")
+
+
+def error_body(status: int, message: str) -> dict:
+    return {"error": {"status": status, "message": message}}
+
+
+ERROR_SCHEMA = {
+    "description": "The one error shape",
+    "content": {
+        "application/json": {
+            "schema": {
+                "type": "object",
+                "required": ["error"],
+                "properties": {
+                    "error": {
+                        "type": "object",
+                        "required": ["status", "message"],
+                        "properties": {"status": {"type": "integer"}, "message": {"type": "string"}},
+                    }
+                },
+            }
+        }
+    },
+}
+ERROR_RESPONSES = {status: ERROR_SCHEMA for status in (400, 401, 403, 404, 422, 429)}
+
+
+def _answer(request: Request, status: int, message: str, headers: dict | None = None) -> Response:
+    if request.url.path.startswith("/api") or request.url.path.startswith("/ingest"):
+        return JSONResponse(error_body(status, message), status_code=status, headers=headers)
+    if status == 401:
+        return RedirectResponse(f"/login?next={request.url.path}", status_code=303)
+    templates = request.app.state.templates
+    return templates.TemplateResponse(
+        request, "error.html", {"status": status, "message": message}, status_code=status, headers=headers
+    )
+
+
+def install_error_handlers(app) -> None:
+    async def dashboard_error(request: Request, error: DashboardError) -> Response:
+        headers = {"Retry-After": str(getattr(error, "retry_after", 1))} if error.status == 429 else None
+        return _answer(request, error.status, error.message, headers)
+
+    async def vascsim_error(request: Request, error: VascsimError) -> Response:
+        message = str(error)
+        return _answer(request, 404 if message.startswith("no ") else 400, message)
+
+    async def http_error(request: Request, error: StarletteHTTPException) -> Response:
+        return _answer(request, error.status_code, str(error.detail))
+
+    async def invalid(request: Request, error: RequestValidationError) -> Response:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in item.get('loc', ()))}: {item.get('msg', '')}"
+            for item in error.errors()
+        )
+        return _answer(request, 422, f"invalid request: {problems}"[:500])
+
+    async def crashed(request: Request, error: Exception) -> Response:
+        return _answer(request, 500, "internal error; the server log has the details")
+
+    app.add_exception_handler(DashboardError, dashboard_error)
+    app.add_exception_handler(VascsimError, vascsim_error)
+    app.add_exception_handler(StarletteHTTPException, http_error)
+    app.add_exception_handler(RequestValidationError, invalid)
+    app.add_exception_handler(Exception, crashed)

@@ -1,0 +1,281 @@
+"""Server-rendered pages. Each gathers its data from :mod:`dashboard.queries` (the same calls as the API),
+puts it in the page as JSON for the charts, and renders a template; forms carry the CSRF token."""
+
+from __future__ import annotations
+
+import json
+import secrets
+from typing import Annotated
+from urllib.parse import quote
+
+from fastapi import APIRouter, Depends, Form, Request
+from fastapi.responses import HTMLResponse, RedirectResponse, Response
+from pydantic import ValidationError
+from sqlalchemy import select
+
+from dashboard import queries
+from dashboard.api import NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
+from dashboard.api import change_user as api_change_user
+from dashboard.api import create_station as api_create_station
+from dashboard.api import create_study as api_create_study
+from dashboard.api import create_user as api_create_user
+from dashboard.api import live as api_live
+from dashboard.api import revoke_station as api_revoke_station
+from dashboard.api import stations as api_stations
+from dashboard.api import users as api_users
+from dashboard.auth import (
+    PRE_LOGIN_COOKIE,
+    STAFF,
+    Viewer,
+    check_csrf,
+    current_viewer,
+    optional_viewer,
+    require,
+)
+from dashboard.errors import DashboardError
+from dashboard.signals import replay_video
+from sessions.models import ROLES, Participant
+from sim.errors import VascsimError
+
+router = APIRouter(include_in_schema=False)
+Anyone = Annotated[Viewer, Depends(current_viewer)]
+Staff = Annotated[Viewer, Depends(require(*STAFF))]
+Admin = Annotated[Viewer, Depends(require("admin"))]
+Watcher = Annotated[Viewer, Depends(require("admin", "supervisor"))]
+
+
+def render(request: Request, template: str, viewer: Viewer | None, data: dict | None = None, **context):
+    """A page; ``data`` goes into the page as JSON (read by static/app.js, never executed)."""
+    page_data = json.dumps(data or {}, default=str).replace("</", "<\\/")
+    return request.app.state.templates.TemplateResponse(
+        request, template, {"viewer": viewer, "page_data": page_data, **context}
+    )
+
+
+def _safe_next(target: str | None) -> str:
+    """Only same-site paths after sign-in (no open redirect)."""
+    if not target or not target.startswith("/") or target.startswith("//") or "\\" in target:
+        return "/"
+    return target
+
+
+@router.get("/login", response_class=HTMLResponse)
+def login_page(request: Request, next: str = "/") -> Response:
+    token = secrets.token_urlsafe(32)
+    response = render(request, "login.html", None, next=_safe_next(next), csrf_token=token, error=None)
+    response.set_cookie(
+        PRE_LOGIN_COOKIE, token, httponly=True, samesite="strict", path="/login", max_age=3600
+    )
+    return response
+
+
+@router.post("/login", response_class=HTMLResponse)
+async def login_form(
+    request: Request,
+    username: Annotated[str, Form(max_length=64)],
+    password: Annotated[str, Form(max_length=1024)],
+    next: Annotated[str, Form(max_length=500)] = "/",
+) -> Response:
+    await check_csrf(request, request.cookies.get(PRE_LOGIN_COOKIE, ""))
+    response = RedirectResponse(_safe_next(next), status_code=303)
+    try:
+        from starlette.concurrency import run_in_threadpool
+
+        await run_in_threadpool(sign_in, request, response, username, password)
+    except DashboardError as error:
+        if error.status not in (401, 429):
+            raise
+        token = secrets.token_urlsafe(32)
+        page = render(
+            request, "login.html", None, next=_safe_next(next), csrf_token=token, error=error.message
+        )
+        page.status_code = error.status
+        page.set_cookie(
+            PRE_LOGIN_COOKIE, token, httponly=True, samesite="strict", path="/login", max_age=3600
+        )
+        return page
+    response.delete_cookie(PRE_LOGIN_COOKIE, path="/login")
+    return response
+
+
+@router.post("/logout")
+def logout_form(request: Request, viewer: Anyone) -> Response:
+    response = RedirectResponse("/login", status_code=303)
+    sign_out(request, response)
+    return response
+
+
+@router.get("/", response_class=HTMLResponse)
+def home(request: Request) -> Response:
+    viewer = optional_viewer(request)
+    if viewer is None:
+        return RedirectResponse("/login", status_code=303)
+    catalog = request.app.state.catalog
+    if viewer.is_trainee:
+        with catalog.session() as orm:
+            mine = orm.execute(
+                select(Participant.id, Participant.code).where(
+                    Participant.id.in_(viewer.participant_ids or {-1})
+                )
+            ).all()
+        if len(mine) == 1:
+            return RedirectResponse(f"/participants/{mine[0][0]}", status_code=303)
+        return render(request, "home.html", viewer, studies=[], participants=mine)
+    return render(request, "home.html", viewer, studies=queries.studies(catalog, viewer), participants=[])
+
+
+@router.get("/studies/{study_id}", response_class=HTMLResponse)
+def study_page(request: Request, study_id: int, viewer: Staff) -> Response:
+    state = request.app.state
+    overview = queries.study_overview(state.catalog, state.analyses, viewer, study_id)
+    return render(request, "study.html", viewer, overview, overview=overview)
+
+
+@router.get("/studies/{study_id}/validity", response_class=HTMLResponse)
+def validity_page(request: Request, study_id: int, viewer: Staff) -> Response:
+    state = request.app.state
+    report = queries.validity_report(state.catalog, state.analyses, viewer, study_id)
+    return render(request, "validity.html", viewer, report, report=report)
+
+
+@router.get("/participants/{participant_id}", response_class=HTMLResponse)
+def participant_page(request: Request, participant_id: int, viewer: Anyone) -> Response:
+    state = request.app.state
+    progress = queries.participant_progress(state.catalog, state.analyses, viewer, participant_id)
+    return render(request, "participant.html", viewer, progress, progress=progress)
+
+
+@router.get("/sessions/{uid}", response_class=HTMLResponse)
+def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
+    state = request.app.state
+    detail = queries.session_detail(state.catalog, state.analyses, viewer, uid)
+    has_video = replay_video(state.settings.home, uid) is not None
+    has_samples = any(f["name"] == "samples.parquet" for f in detail["files"])
+    data = {"uid": uid, "has_video": has_video, "has_samples": has_samples}
+    return render(
+        request, "session.html", viewer, data, detail=detail, has_video=has_video, has_samples=has_samples
+    )
+
+
+@router.get("/live", response_class=HTMLResponse)
+def live_page(request: Request, viewer: Watcher) -> Response:
+    return render(request, "live.html", viewer, running=api_live(request, viewer))
+
+
+@router.get("/live/sessions/{uid}", response_class=HTMLResponse)
+def live_session_page(request: Request, uid: str, viewer: Watcher) -> Response:
+    source = f"/api/live/sessions/{quote(uid)}"
+    return render(request, "live_view.html", viewer, {"source": source}, title=f"session {uid}")
+
+
+@router.get("/live/stations/{station}/{session_id}", response_class=HTMLResponse)
+def live_station_page(request: Request, station: str, session_id: str, viewer: Watcher) -> Response:
+    source = f"/api/live/stations/{quote(station)}/{quote(session_id)}"
+    return render(
+        request, "live_view.html", viewer, {"source": source}, title=f"station {station} / {session_id}"
+    )
+
+
+# -- administration -----------------------------------------------------------------------
+def _admin_page(request: Request, viewer: Viewer, message: str | None = None, token: dict | None = None):
+    return render(
+        request,
+        "admin.html",
+        viewer,
+        users=api_users(request, viewer),
+        stations=api_stations(request, viewer),
+        roles=ROLES,
+        message=message,
+        token=token,
+    )
+
+
+@router.get("/admin", response_class=HTMLResponse)
+def admin_page(request: Request, viewer: Admin) -> Response:
+    return _admin_page(request, viewer)
+
+
+def _admin_action(request: Request, viewer: Viewer, action, done: str) -> Response:
+    try:
+        result = action()
+    except (VascsimError, ValidationError) as error:
+        status = getattr(error, "status", 400 if isinstance(error, VascsimError) else 422)
+        if isinstance(error, ValidationError):
+            message = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in error.errors())
+        else:
+            message = str(error)
+        page = _admin_page(request, viewer, message=message)
+        page.status_code = status
+        return page
+    return _admin_page(request, viewer, message=done, token=result if "token" in (result or {}) else None)
+
+
+@router.post("/admin/users", response_class=HTMLResponse)
+def admin_create_user(
+    request: Request,
+    viewer: Admin,
+    username: Annotated[str, Form(max_length=64)],
+    password: Annotated[str, Form(max_length=1024)],
+    role: Annotated[str, Form(max_length=16)],
+    participant_ids: Annotated[str, Form(max_length=500)] = "",
+) -> Response:
+    def create():
+        ids = [int(p) for p in participant_ids.replace(",", " ").split() if p.isdigit()]
+        if role not in ROLES:
+            raise DashboardError(422, f"role {role!r} is not one of {', '.join(ROLES)}")
+        return api_create_user(
+            request, NewUser(username=username, password=password, role=role, participant_ids=ids), viewer
+        )
+
+    return _admin_action(request, viewer, create, f"created user {username!r}")
+
+
+@router.post("/admin/users/{user_id}", response_class=HTMLResponse)
+def admin_change_user(
+    request: Request,
+    user_id: int,
+    viewer: Admin,
+    active: Annotated[str, Form(max_length=5)] = "",
+    role: Annotated[str, Form(max_length=16)] = "",
+) -> Response:
+    def change():
+        if role and role not in ROLES:
+            raise DashboardError(422, f"role {role!r} is not one of {', '.join(ROLES)}")
+        body = UserChange(role=role or None, active=None if not active else active == "true")
+        return api_change_user(request, user_id, body, viewer)
+
+    return _admin_action(request, viewer, change, "account updated")
+
+
+@router.post("/admin/stations", response_class=HTMLResponse)
+def admin_create_station(
+    request: Request, viewer: Admin, station: Annotated[str, Form(max_length=64)]
+) -> Response:
+    return _admin_action(
+        request,
+        viewer,
+        lambda: api_create_station(request, NewStation(station=station), viewer),
+        "token issued",
+    )
+
+
+@router.post("/admin/stations/{token_id}/revoke", response_class=HTMLResponse)
+def admin_revoke_station(request: Request, token_id: int, viewer: Admin) -> Response:
+    return _admin_action(
+        request, viewer, lambda: api_revoke_station(request, token_id, viewer), "token revoked"
+    )
+
+
+@router.post("/admin/studies", response_class=HTMLResponse)
+def admin_create_study(
+    request: Request,
+    viewer: Admin,
+    name: Annotated[str, Form(max_length=200)],
+    description: Annotated[str, Form(max_length=5000)] = "",
+) -> Response:
+    return _admin_action(
+        request,
+        viewer,
+        lambda: api_create_study(request, NewStudy(name=name, description=description), viewer),
+        f"created study {name!r}",
+    )

@@ -1,0 +1,333 @@
+"""What each page shows, as plain dictionaries, always filtered by who is asking.
+
+Every lookup by id goes through :mod:`dashboard.access`, so an id that exists but
+belongs to somebody else answers exactly like an id that does not exist.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import func, select
+
+from dashboard.access import owned_participant, owned_session, owned_study, session_filter
+from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
+from dashboard.auth import Viewer
+from metrics.registry import REGISTRY, REGISTRY_VERSION
+from metrics.report import participant_medians, summary_table
+from metrics.study import practice_mask
+from sessions.catalog import Catalog
+from sessions.models import Annotation, MetricResult, Participant, Session, Study, User
+
+ATTENTION_AFTER_TRIALS = 5
+"""A trainee not yet proficient after this many practice sessions needs a supervisor's look."""
+
+
+def studies(catalog: Catalog, viewer: Viewer) -> list[dict]:
+    with catalog.session() as orm:
+        query = (
+            select(
+                Study.id,
+                Study.name,
+                Study.description,
+                func.count(func.distinct(Participant.id)),
+                func.count(Session.id),
+            )
+            .outerjoin(Participant, Participant.study_id == Study.id)
+            .outerjoin(Session, Session.participant_id == Participant.id)
+            .group_by(Study.id)
+            .order_by(Study.name)
+        )
+        if viewer.is_trainee:
+            query = query.where(Participant.id.in_(viewer.participant_ids or {-1}))
+        rows = orm.execute(query).all()
+    return [
+        {"id": i, "name": n, "description": d, "participants": p, "sessions": s} for i, n, d, p, s in rows
+    ]
+
+
+def _participant_rows(orm, viewer: Viewer, study_id: int) -> list[dict]:
+    query = (
+        select(
+            Participant.id,
+            Participant.code,
+            Participant.group_label,
+            Participant.synthetic,
+            func.count(Session.id),
+            func.max(Session.started_at),
+        )
+        .outerjoin(Session, Session.participant_id == Participant.id)
+        .where(Participant.study_id == study_id)
+        .group_by(Participant.id)
+        .order_by(Participant.code)
+    )
+    rows = [
+        {"id": i, "code": c, "group": g, "synthetic": bool(s), "sessions": n, "last_session_at": last}
+        for i, c, g, s, n, last in orm.execute(query).all()
+    ]
+    if viewer.sees_accounts:
+        accounts = dict(
+            orm.execute(
+                select(Participant.id, User.username)
+                .join(User, Participant.user_id == User.id)
+                .where(Participant.study_id == study_id)
+            ).all()
+        )
+        for row in rows:
+            row["account"] = accounts.get(row["id"])
+    return rows
+
+
+def study_overview(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
+    """Participants, their latest score against the benchmark, and who needs attention."""
+    with catalog.session() as orm:
+        study = owned_study(orm, viewer, study_id, whole=True)
+        participants = _participant_rows(orm, viewer, study.id)
+        statuses = dict(
+            orm.execute(
+                select(Session.status, func.count(Session.id))
+                .join(Participant, Session.participant_id == Participant.id)
+                .where(Participant.study_id == study.id)
+                .group_by(Session.status)
+            ).all()
+        )
+        info = {"id": study.id, "name": study.name, "description": study.description}
+    overview = {"study": info, "sessions_by_status": statuses, "participants": participants}
+    scored = sum(statuses.get(s, 0) for s in ("complete", "recovered"))
+    if not scored:
+        overview.update(benchmarks=[], attention=[], synthetic=False)
+        return overview
+    cached = analyses.get(study_id)
+    analysis = cached.analysis
+    latest = _latest_scores(analysis)
+    trainees = analysis.trainees.set_index("participant_id") if not analysis.trainees.empty else None
+    attention = []
+    for row in participants:
+        row.update(latest.get(row["code"], {}))
+        reasons = _attention_reasons(row, trainees)
+        row["attention"] = reasons
+        if reasons:
+            attention.append({"participant_id": row["id"], "code": row["code"], "reasons": reasons})
+    overview.update(benchmarks=benchmark_rows(analysis), attention=attention, synthetic=analysis.synthetic)
+    return overview
+
+
+def _latest_scores(analysis) -> dict[str, dict]:
+    table, passed = analysis.sessions, analysis.proficiency["passed"]
+    latest = {}
+    for code, rows in table.groupby("participant_id", sort=False):
+        last = rows.index[-1]
+        latest[code] = {
+            "latest_session": table.at[last, "session_id"],
+            "latest_trial": int(table.at[last, "trial"]),
+            "latest_passed": bool(passed.loc[last]),
+            "passes": int(passed.loc[rows.index].sum()),
+        }
+    return latest
+
+
+def _attention_reasons(row: dict, trainees: pd.DataFrame | None) -> list[str]:
+    if trainees is None or row["code"] not in trainees.index:
+        return []
+    record = trainees.loc[row["code"]]
+    reasons = []
+    if not bool(record["proficient"]) and int(record["practice_sessions"]) >= ATTENTION_AFTER_TRIALS:
+        reasons.append(f"not proficient after {int(record['practice_sessions'])} practice sessions")
+    if "retention_passed" in record.index and record["retention_passed"] is False:
+        reasons.append("retention session below the benchmark")
+    if row.get("latest_passed") is False and "latest_trial" in row:
+        reasons.append(f"latest session (trial {row['latest_trial']}) below the benchmark")
+    return reasons
+
+
+def participant_progress(
+    catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, participant_id: int
+) -> dict:
+    """Learning curve per benchmarked metric with the benchmark line, pass/fail history, retention."""
+    with catalog.session() as orm:
+        participant = owned_participant(orm, viewer, participant_id)
+        info = {
+            "id": participant.id,
+            "code": participant.code,
+            "group": participant.group_label,
+            "synthetic": participant.synthetic,
+            "study": {"id": participant.study.id, "name": participant.study.name},
+        }
+        sessions = orm.execute(
+            select(Session.uid, Session.trial, Session.phase, Session.status, Session.started_at)
+            .where(Session.participant_id == participant.id)
+            .order_by(Session.trial, Session.id)
+        ).all()
+        study_id = participant.study_id
+    progress = {
+        "participant": info,
+        "sessions": [
+            {"uid": u, "trial": t, "phase": p, "status": s, "started_at": a} for u, t, p, s, a in sessions
+        ],
+        "curves": [],
+        "benchmarks": [],
+        "trainee": None,
+    }
+    if not any(s["status"] in ("complete", "recovered") for s in progress["sessions"]):
+        return progress
+    analysis = analyses.get(study_id).analysis
+    mine = analysis.sessions["participant_id"] == info["code"]
+    rows = analysis.sessions[mine]
+    passed = analysis.proficiency.loc[rows.index, "passed"]
+    for item in progress["sessions"]:
+        hit = rows.index[rows["session_id"] == item["uid"]]
+        item["passed"] = bool(passed.loc[hit[0]]) if len(hit) else None
+    for bench in analysis.benchmarks.itertuples():
+        progress["curves"].append(
+            {
+                "metric": bench.metric,
+                "unit": REGISTRY[bench.metric].unit if bench.metric in REGISTRY else "",
+                "better": bench.better,
+                "benchmark": None if math.isnan(bench.benchmark) else bench.benchmark,
+                "trial": rows["trial"].tolist(),
+                "phase": rows["phase"].fillna("practice").tolist(),
+                "value": [None if not math.isfinite(v) else v for v in rows[bench.metric].astype(float)],
+            }
+        )
+    progress["benchmarks"] = benchmark_rows(analysis)
+    if not analysis.trainees.empty and info["code"] in set(analysis.trainees["participant_id"]):
+        found = analysis.trainees[analysis.trainees["participant_id"] == info["code"]]
+        progress["trainee"] = records(found)[0]
+    return progress
+
+
+def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, uid: str) -> dict:
+    """A session, its metrics against the expert band (quartiles of expert sessions), events and files."""
+    with catalog.session() as orm:
+        row = owned_session(orm, viewer, uid)
+        participant = row.participant
+        detail = {
+            "uid": row.uid,
+            "status": row.status,
+            "trial": row.trial,
+            "phase": row.phase,
+            "device": row.device,
+            "clock": row.clock,
+            "task": row.task.name,
+            "started_at": row.started_at,
+            "ended_at": row.ended_at,
+            "error": row.error,
+            "participant": {"id": participant.id, "code": participant.code, "group": participant.group_label},
+            "study": {"id": participant.study.id, "name": participant.study.name},
+            "files": [{"name": f.name, "bytes": f.bytes, "sha256": f.sha256} for f in row.files],
+        }
+        values = dict(
+            orm.execute(
+                select(MetricResult.metric, MetricResult.value).where(
+                    MetricResult.session_id == row.id, MetricResult.registry_version == REGISTRY_VERSION
+                )
+            ).all()
+        )
+        detail["annotations"] = [
+            {
+                "time_s": a.time_s,
+                "text": a.text,
+                "author": a.author if viewer.sees_accounts else None,
+            }
+            for a in orm.scalars(select(Annotation).where(Annotation.session_id == row.id))
+        ]
+        band_rows = _expert_band(orm, participant.study_id, row.task_id)
+    detail["metrics"] = [
+        {
+            "metric": name,
+            "unit": REGISTRY[name].unit if name in REGISTRY else "",
+            "better": REGISTRY[name].better if name in REGISTRY else "",
+            "value": value,
+            **band_rows.get(name, {"expert_q1": None, "expert_median": None, "expert_q3": None}),
+        }
+        for name, value in values.items()
+    ]
+    return detail
+
+
+def _expert_band(orm, study_id: int, task_id: int) -> dict[str, dict]:
+    """Per metric, the quartiles of the study's expert sessions on the same task."""
+    rows = orm.execute(
+        select(MetricResult.metric, MetricResult.value)
+        .join(Session, MetricResult.session_id == Session.id)
+        .join(Participant, Session.participant_id == Participant.id)
+        .where(
+            Participant.study_id == study_id,
+            Participant.group_label == "expert",
+            Session.task_id == task_id,
+            Session.status.in_(("complete", "recovered")),
+            MetricResult.registry_version == REGISTRY_VERSION,
+            MetricResult.value.is_not(None),
+        )
+    ).all()
+    if not rows:
+        return {}
+    frame = pd.DataFrame(rows, columns=["metric", "value"])
+    quartiles = frame.groupby("metric")["value"].quantile([0.25, 0.5, 0.75]).unstack()
+    return {
+        name: {"expert_q1": float(q[0.25]), "expert_median": float(q[0.5]), "expert_q3": float(q[0.75])}
+        for name, q in quartiles.iterrows()
+    }
+
+
+def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
+    """The construct-validity table, per-participant values for box plots, and ROC curves."""
+    with catalog.session() as orm:
+        study = owned_study(orm, viewer, study_id, whole=True)
+        info = {"id": study.id, "name": study.name}
+    analysis = analyses.get(study_id).analysis
+    settings = analysis.settings
+    table = summary_table(analysis)
+    metrics = table["metric"].tolist()
+    medians = participant_medians(analysis, metrics)
+    skilled = (medians[settings.group_col] == settings.skilled_group).to_numpy()
+    boxes = {
+        metric: {
+            group: [float(v) for v in medians.loc[medians[settings.group_col] == group, metric].dropna()]
+            for group in settings.groups
+        }
+        for metric in metrics
+    }
+    practice = analysis.sessions[practice_mask(analysis.sessions)]
+    return {
+        "study": info,
+        "groups": list(settings.groups),
+        "level": analysis.validity.level,
+        "n_participants": {str(k): int(v) for k, v in analysis.validity.n_participants.items()},
+        "n_sessions": {str(k): int(v) for k, v in analysis.validity.n_sessions.items()},
+        "practice_sessions": len(practice),
+        "table": records(table),
+        "notes": list(analysis.validity.notes) + list(analysis.notes),
+        "synthetic": analysis.synthetic,
+        "boxes": boxes,
+        "roc": [c for c in (roc_points(medians, m, skilled) for m in metrics) if c is not None],
+        "registry_version": REGISTRY_VERSION,
+    }
+
+
+def session_list(catalog: Catalog, viewer: Viewer, study_id: int | None, limit: int, offset: int) -> dict:
+    """Sessions the viewer may see, newest first."""
+    with catalog.session() as orm:
+        query = select(
+            Session.uid, Session.status, Session.trial, Session.phase, Session.started_at, Participant.code
+        )
+        query = query.join(Participant, Session.participant_id == Participant.id).where(
+            session_filter(viewer)
+        )
+        if study_id is not None:
+            query = query.where(Participant.study_id == study_id)
+        total = orm.scalar(select(func.count()).select_from(query.subquery()))
+        rows = orm.execute(
+            query.order_by(Session.started_at.desc(), Session.id.desc()).limit(limit).offset(offset)
+        )
+        items = [
+            {"uid": u, "status": s, "trial": t, "phase": p, "started_at": a, "participant": c}
+            for u, s, t, p, a, c in rows
+        ]
+    return {"total": int(total), "items": items}
+
+
+def as_float_list(values: np.ndarray, digits: int = 6) -> list[float | None]:
+    return [None if not math.isfinite(v) else round(float(v), digits) for v in values]

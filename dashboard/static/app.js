@@ -1,0 +1,179 @@
+// vascsim dashboard: charts from the page's JSON, the session timeline, the live view.
+"use strict";
+
+const pageData = JSON.parse(document.getElementById("page-data").textContent || "{}");
+const PLOT_CONFIG = { displaylogo: false, responsive: true };
+const COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"];
+
+function plotDiv(parent, id) {
+  const div = document.createElement("div");
+  div.id = id;
+  parent.appendChild(div);
+  return div;
+}
+
+// -- participant progress: one learning curve per benchmarked metric -------------------
+function drawCurves() {
+  const host = document.getElementById("curves");
+  if (!host) return;
+  if (!pageData.curves || !pageData.curves.length) {
+    host.textContent = "No scored sessions yet.";
+    return;
+  }
+  pageData.curves.forEach((curve, k) => {
+    const div = plotDiv(host, "curve-" + k);
+    const passed = curve.trial.map((_, i) => (pageData.sessions[i] || {}).passed);
+    const traces = [{
+      x: curve.trial, y: curve.value, mode: "lines+markers", name: curve.metric,
+      marker: { color: passed.map((p) => (p === false ? "#b42318" : "#1a7f37")), size: 8 },
+      line: { color: "#57606a" },
+      text: curve.phase, hovertemplate: "trial %{x} (%{text}): %{y:.4g}<extra></extra>",
+    }];
+    const shapes = curve.benchmark === null ? [] : [{
+      type: "line", xref: "paper", x0: 0, x1: 1, y0: curve.benchmark, y1: curve.benchmark,
+      line: { color: "#0969da", dash: "dash" },
+    }];
+    Plotly.newPlot(div, traces, {
+      title: { text: curve.metric + " (" + curve.better + " is better; dashed: benchmark)", font: { size: 13 } },
+      xaxis: { title: { text: "trial" }, dtick: 1 }, yaxis: { title: { text: curve.unit } },
+      shapes: shapes, height: 260, margin: { t: 40, b: 40, l: 60, r: 10 }, showlegend: false,
+    }, PLOT_CONFIG);
+  });
+}
+
+// -- session review: signals, video, shared timeline -----------------------------------
+function cursorShape(t) {
+  return { type: "line", xref: "x", yref: "paper", x0: t, x1: t, y0: 0, y1: 1, line: { color: "#d62728", width: 2 } };
+}
+
+async function drawSession() {
+  const host = document.getElementById("signals");
+  const video = document.getElementById("replay");
+  const list = document.getElementById("events");
+  if (!host) return;
+  const response = await fetch("/api/sessions/" + encodeURIComponent(pageData.uid) + "/signals");
+  if (!response.ok) {
+    host.textContent = "Signals unavailable: " + ((await response.json()).error || {}).message;
+    return;
+  }
+  const data = await response.json();
+  host.innerHTML = "";
+  const plots = [];
+  Object.entries(data.signals).forEach(([name, signal], k) => {
+    const div = plotDiv(host, "plot-" + name);
+    div.classList.add("signal-plot");
+    Plotly.newPlot(div, [{
+      x: signal.time, y: signal.values, mode: "lines", name: name, line: { color: COLOURS[k % COLOURS.length] },
+    }], {
+      yaxis: { title: { text: signal.label } }, xaxis: { title: { text: "time (s)" }, range: [0, data.duration_s] },
+      shapes: [cursorShape(0)], height: 220, margin: { t: 10, b: 40, l: 70, r: 10 }, showlegend: false,
+      hovermode: "x",
+    }, PLOT_CONFIG);
+    div.on("plotly_click", (event) => seek(event.points[0].x));
+    plots.push(div);
+  });
+  (data.events || []).forEach((event) => {
+    const item = document.createElement("li");
+    const button = document.createElement("button");
+    button.type = "button";
+    button.className = "event";
+    button.dataset.time = event.time;
+    const angle = event.entry_angle_deg === null ? "" : " (entry " + event.entry_angle_deg + "°)";
+    button.textContent = event.time.toFixed(2) + " s: " + event.kind + angle;
+    button.addEventListener("click", () => seek(event.time));
+    item.appendChild(button);
+    list.appendChild(item);
+  });
+
+  function moveCursor(t) {
+    host.dataset.cursor = t.toFixed(3);
+    plots.forEach((div) => Plotly.relayout(div, { shapes: [cursorShape(t)] }));
+  }
+  function seek(t) {
+    if (video) video.currentTime = t; else moveCursor(t);
+  }
+  if (video) {
+    let last = -1;
+    const follow = () => {
+      if (Math.abs(video.currentTime - last) > 0.02) {
+        last = video.currentTime;
+        moveCursor(last);
+      }
+    };
+    video.addEventListener("timeupdate", follow);
+    video.addEventListener("seeked", follow);
+  }
+  host.dataset.ready = "1";
+}
+
+// -- construct validity: box plots and ROC curves --------------------------------------
+function drawValidity() {
+  const boxes = document.getElementById("boxes");
+  if (!boxes) return;
+  const groups = pageData.groups;
+  Object.entries(pageData.boxes).forEach(([metric, values], k) => {
+    const div = plotDiv(boxes, "box-" + k);
+    Plotly.newPlot(div, groups.map((group, g) => ({
+      y: values[group], name: group, type: "box", boxpoints: "all", jitter: 0.4, pointpos: 0,
+      marker: { color: COLOURS[g] },
+    })), {
+      title: { text: metric, font: { size: 12 } }, height: 260, margin: { t: 35, b: 30, l: 50, r: 10 },
+      showlegend: false,
+    }, PLOT_CONFIG);
+  });
+  const roc = document.getElementById("roc");
+  const traces = pageData.roc.map((curve, k) => ({
+    x: curve.fpr, y: curve.tpr, mode: "lines", name: curve.metric, line: { color: COLOURS[k % COLOURS.length] },
+  }));
+  traces.push({ x: [0, 1], y: [0, 1], mode: "lines", name: "chance", line: { color: "#999", dash: "dot" } });
+  Plotly.newPlot(roc, traces, {
+    xaxis: { title: { text: "false positive rate" }, range: [0, 1] },
+    yaxis: { title: { text: "true positive rate (" + groups[0] + ")" }, range: [0, 1] },
+    height: 420, margin: { t: 10, b: 50, l: 60, r: 10 },
+  }, PLOT_CONFIG);
+}
+
+// -- live view: server-sent events from the recorder's journals ------------------------
+function drawLive() {
+  const host = document.getElementById("live-plots");
+  if (!host) return;
+  const status = document.getElementById("live-status");
+  const list = document.getElementById("live-events");
+  const names = [["force", "force (mN)"], ["tip_speed", "tip speed (mm/s)"], ["stress", "local stress (kPa)"]];
+  const divs = names.map(([name, label], k) => {
+    const div = plotDiv(host, "live-" + name);
+    Plotly.newPlot(div, [{ x: [], y: [], mode: "lines", line: { color: COLOURS[k] } }], {
+      yaxis: { title: { text: label } }, xaxis: { title: { text: "time (s)" } }, height: 200,
+      margin: { t: 10, b: 40, l: 70, r: 10 },
+    }, PLOT_CONFIG);
+    return div;
+  });
+  let received = 0;
+  const source = new EventSource(pageData.source);
+  source.addEventListener("hello", () => { status.textContent = "connected"; });
+  source.addEventListener("samples", (message) => {
+    const data = JSON.parse(message.data);
+    received += data.time.length;
+    names.forEach(([name], k) => Plotly.extendTraces(divs[k], { x: [data.time], y: [data[name]] }, [0], 3000));
+    status.textContent = "receiving: " + received + " samples, t = " + data.time[data.time.length - 1].toFixed(2) + " s";
+    host.dataset.samples = received;
+  });
+  source.addEventListener("event", (message) => {
+    const event = JSON.parse(message.data);
+    const item = document.createElement("li");
+    item.textContent = event.time.toFixed(2) + " s: " + event.kind;
+    list.appendChild(item);
+  });
+  source.addEventListener("end", (message) => {
+    status.textContent = "ended: " + JSON.parse(message.data).reason;
+    source.close();
+  });
+}
+
+document.addEventListener("DOMContentLoaded", () => {
+  const page = document.body.dataset.page;
+  if (page === "participant") drawCurves();
+  if (page === "session") drawSession();
+  if (page === "validity") drawValidity();
+  if (page === "live") drawLive();
+});

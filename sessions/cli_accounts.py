@@ -1,0 +1,87 @@
+"""`vascsim users ...`: dashboard accounts from the command line (the first admin is made here)."""
+
+from __future__ import annotations
+
+import click
+from sqlalchemy import select
+
+from sessions.cli import _catalog, _json, main, user_errors
+from sessions.models import ROLES, Participant, User
+
+
+def _password(value: str | None) -> str:
+    if value is not None:
+        return value
+    return click.prompt("password", hide_input=True, confirmation_prompt=True)
+
+
+@main.group()
+def users() -> None:
+    """Dashboard accounts: admin, supervisor, researcher, trainee."""
+
+
+@users.command("add")
+@click.argument("username")
+@click.option("--role", type=click.Choice(ROLES), required=True, help="What the account may see and do.")
+@click.option(
+    "--participant",
+    "participants",
+    multiple=True,
+    metavar="STUDY:CODE",
+    help="Trainees: a participant whose sessions this account sees (repeatable).",
+)
+@click.option(
+    "--password-stdin", is_flag=True, help="Read the password from the first line of stdin (scripts)."
+)
+@user_errors
+def users_add(username: str, role: str, participants: tuple[str, ...], password_stdin: bool) -> None:
+    """Create an account; the password is prompted for (10+ characters) and stored as an Argon2id hash."""
+    from sessions.accounts import AccountError, create_user, link_participant
+
+    password = click.get_text_stream("stdin").readline().rstrip("\n") if password_stdin else _password(None)
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        user = create_user(orm, username, password, role)
+        for item in participants:
+            study_name, _, code = item.partition(":")
+            if not code:
+                raise AccountError(f"--participant takes STUDY:CODE; got {item!r}")
+            link_participant(orm, user, catalog.participant(orm, catalog.study(orm, study_name), code))
+    click.echo(f"created {role} account {username!r}")
+
+
+@users.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def users_list(as_json: bool) -> None:
+    """Every account with its role, state and linked participants."""
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        rows = []
+        for user in orm.scalars(select(User).order_by(User.username)):
+            codes = orm.scalars(select(Participant.code).where(Participant.user_id == user.id)).all()
+            rows.append(
+                {"username": user.username, "role": user.role, "active": user.active, "participants": codes}
+            )
+    if as_json:
+        _json(rows)
+        return
+    for row in rows:
+        state = "" if row["active"] else " (inactive)"
+        linked = f" -> {', '.join(row['participants'])}" if row["participants"] else ""
+        click.echo(f"{row['username']}: {row['role']}{state}{linked}")
+
+
+@users.command("passwd")
+@click.argument("username")
+@click.option("--password-stdin", is_flag=True, help="Read the new password from stdin.")
+@user_errors
+def users_passwd(username: str, password_stdin: bool) -> None:
+    """Set a new password (signs the account out everywhere)."""
+    from sessions.accounts import set_password, user_named
+
+    password = click.get_text_stream("stdin").readline().rstrip("\n") if password_stdin else _password(None)
+    catalog, _ = _catalog()
+    with catalog.session() as orm:
+        set_password(orm, user_named(orm, username), password)
+    click.echo(f"password of {username!r} changed")
