@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,7 @@ class AnalysisCache:
         self._cache: OrderedDict[int, tuple[tuple, CachedAnalysis]] = OrderedDict()
         self._lock = threading.Lock()
         self._study_locks: dict[int, threading.Lock] = {}
+        self._derived: OrderedDict[tuple, object] = OrderedDict()
 
     def fingerprint(self, study_id: int) -> tuple:
         with self.catalog.session() as orm:
@@ -87,6 +89,19 @@ class AnalysisCache:
                 while len(self._cache) > CACHED_STUDIES:
                     self._cache.popitem(last=False)
             return computed
+
+    def derived(self, study_id: int, name: str, compute: Callable[[], object]) -> object:
+        """``compute()`` kept under the same catalog fingerprint as the study's analysis."""
+        key = (study_id, name, self.fingerprint(study_id))
+        with self._lock:
+            if key in self._derived:
+                return self._derived[key]
+        value = compute()
+        with self._lock:
+            self._derived[key] = value
+            while len(self._derived) > 4 * CACHED_STUDIES:
+                self._derived.popitem(last=False)
+        return value
 
     def _compute(self, study_id: int) -> CachedAnalysis:
         with self.catalog.session() as orm:

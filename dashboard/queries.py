@@ -233,7 +233,10 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
             }
             for a in orm.scalars(select(Annotation).where(Annotation.session_id == row.id))
         ]
-        band_rows = _expert_band(orm, participant.study_id, row.task_id)
+        study_id, task_id = participant.study_id, row.task_id
+    band_rows = analyses.derived(
+        study_id, f"expert-band-{task_id}", lambda: _expert_band(catalog, study_id, task_id)
+    )
     detail["metrics"] = [
         {
             "metric": name,
@@ -247,21 +250,22 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
     return detail
 
 
-def _expert_band(orm, study_id: int, task_id: int) -> dict[str, dict]:
+def _expert_band(catalog: Catalog, study_id: int, task_id: int) -> dict[str, dict]:
     """Per metric, the quartiles of the study's expert sessions on the same task."""
-    rows = orm.execute(
-        select(MetricResult.metric, MetricResult.value)
-        .join(Session, MetricResult.session_id == Session.id)
-        .join(Participant, Session.participant_id == Participant.id)
-        .where(
-            Participant.study_id == study_id,
-            Participant.group_label == "expert",
-            Session.task_id == task_id,
-            Session.status.in_(("complete", "recovered")),
-            MetricResult.registry_version == REGISTRY_VERSION,
-            MetricResult.value.is_not(None),
-        )
-    ).all()
+    with catalog.session() as orm:
+        rows = orm.execute(
+            select(MetricResult.metric, MetricResult.value)
+            .join(Session, MetricResult.session_id == Session.id)
+            .join(Participant, Session.participant_id == Participant.id)
+            .where(
+                Participant.study_id == study_id,
+                Participant.group_label == "expert",
+                Session.task_id == task_id,
+                Session.status.in_(("complete", "recovered")),
+                MetricResult.registry_version == REGISTRY_VERSION,
+                MetricResult.value.is_not(None),
+            )
+        ).all()
     if not rows:
         return {}
     frame = pd.DataFrame(rows, columns=["metric", "value"])
