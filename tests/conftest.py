@@ -1,10 +1,16 @@
 """Shared fixtures: small meshes and models used across the sim tests."""
 
+import os
+import uuid
+
 import numpy as np
+import psycopg
 import pytest
 
 from sim.fem import Material, TissueModel
 from sim.mesh import box_mesh
+
+POSTGRES_ADMIN = os.environ.get("VASCSIM_TEST_POSTGRES", "postgresql://postgres@127.0.0.1:5432/test")
 
 
 @pytest.fixture(scope="session")
@@ -46,3 +52,37 @@ def wall_patch_biphase():
     tissue = BiphaseTissue.build(mesh, fixed)
     tissue.precompute(use_cache=False)
     return tissue
+
+
+# Catalog fixtures: every catalog test runs on SQLite and on the PostgreSQL server at 127.0.0.1:5432.
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def catalog_url(request, tmp_path):
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'catalog.sqlite'}"
+        return
+    name = f"vascsim_{uuid.uuid4().hex[:12]}"
+    with psycopg.connect(POSTGRES_ADMIN, autocommit=True) as admin:
+        admin.execute(f'CREATE DATABASE "{name}"')
+    base = POSTGRES_ADMIN.rsplit("/", 1)[0]
+    yield f"{base}/{name}"
+    with psycopg.connect(POSTGRES_ADMIN, autocommit=True) as admin:
+        admin.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+@pytest.fixture
+def open_catalog():
+    """Opens catalogs and disposes their connection pools at teardown (no connection left to the GC)."""
+    from sessions.catalog import Catalog
+
+    opened = []
+
+    def factory(url):
+        catalog = Catalog(url)
+        opened.append(catalog)
+        return catalog
+
+    yield factory
+    for catalog in opened:
+        catalog.close()

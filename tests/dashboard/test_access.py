@@ -1,0 +1,151 @@
+"""Each role's pages and API calls on SQLite and PostgreSQL: refusals hold, ids cannot be probed."""
+
+from __future__ import annotations
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.dashboard.conftest import PASSWORD
+
+
+def error_of(answer) -> dict:
+    body = answer.json()
+    assert set(body) == {"error"} and set(body["error"]) == {"status", "message"}
+    assert body["error"]["status"] == answer.status_code
+    return body["error"]
+
+
+def test_signed_out_requests_are_refused(seeded):
+    with TestClient(seeded.app) as client:
+        for url in (
+            "/api/me",
+            "/api/studies",
+            f"/api/studies/{seeded.study_id}",
+            f"/api/sessions/{seeded.own_sessions[0]}",
+            "/api/users",
+        ):
+            answer = client.get(url)
+            assert answer.status_code == 401, url
+            assert error_of(answer)["message"] == "sign in first"
+        page = client.get(f"/studies/{seeded.study_id}", follow_redirects=False)
+        assert page.status_code == 303 and page.headers["location"].startswith("/login")
+
+
+def test_trainee_sees_only_their_own_sessions_and_progress(seeded, client_for):
+    client, _ = client_for("trainee")
+    mine = client.get("/api/sessions?limit=500").json()
+    assert sorted(item["uid"] for item in mine["items"]) == sorted(seeded.own_sessions)
+    assert mine["total"] == len(seeded.own_sessions)
+    studies = client.get("/api/studies").json()
+    assert [s["id"] for s in studies] == [seeded.study_id]
+    assert client.get(f"/api/participants/{seeded.own_participant}/progress").status_code == 200
+    assert client.get(f"/participants/{seeded.own_participant}").status_code == 200
+    assert client.get(f"/api/sessions/{seeded.own_sessions[0]}").status_code == 200
+    # another trainee's data answers exactly like data that does not exist
+    for url in (
+        f"/api/participants/{seeded.other_participant}/progress",
+        f"/api/sessions/{seeded.other_sessions[0]}",
+        f"/api/sessions/{seeded.other_sessions[0]}/signals",
+        f"/api/sessions/{seeded.other_sessions[0]}/video",
+        f"/api/sessions/{seeded.other_sessions[0]}/files/samples.parquet",
+    ):
+        answer = client.get(url)
+        assert answer.status_code == 404, url
+        assert "not found" in error_of(answer)["message"]
+    assert client.get(f"/sessions/{seeded.other_sessions[0]}").status_code == 404
+    assert client.get(f"/participants/{seeded.other_participant}").status_code == 404
+    # whole-study views, other studies, administration and the live view are not for trainees
+    assert client.get(f"/api/studies/{seeded.study_id}").status_code == 403
+    assert client.get(f"/api/studies/{seeded.study_id}/validity").status_code == 403
+    # refused by role before any lookup: the same answer for another study and for none at all
+    assert client.get(f"/api/studies/{seeded.other_study_id}").status_code == 403
+    assert client.get("/api/studies/999999").status_code == 403
+    for url in ("/api/users", "/api/stations", "/api/live", "/admin", "/live"):
+        assert client.get(url).status_code == 403, url
+
+
+def test_guessing_ids_finds_nothing_of_anyone_else(seeded, client_for):
+    client, _ = client_for("trainee")
+    with seeded.catalog.session() as orm:
+        from sqlalchemy import select
+
+        from sessions.models import Participant, Session
+
+        every_participant = list(orm.scalars(select(Participant.id)))
+        every_session = list(orm.scalars(select(Session.uid)))
+    for participant_id in [*every_participant, max(every_participant) + 1, 0, -1]:
+        expected = 200 if participant_id == seeded.own_participant else 404
+        assert client.get(f"/api/participants/{participant_id}/progress").status_code == expected
+    for uid in every_session:
+        expected = 200 if uid in seeded.own_sessions else 404
+        assert client.get(f"/api/sessions/{uid}").status_code == expected
+
+
+def test_researcher_sees_studies_pseudonymously_and_nothing_administrative(seeded, client_for):
+    client, _ = client_for("researcher")
+    overview = client.get(f"/api/studies/{seeded.study_id}").json()
+    assert {p["code"] for p in overview["participants"]} >= {seeded.other_code}
+    assert all("account" not in p for p in overview["participants"])  # who is behind a code stays hidden
+    assert client.get(f"/api/studies/{seeded.study_id}/validity").status_code == 200
+    assert client.get(f"/api/sessions/{seeded.other_sessions[0]}").status_code == 200
+    for url in ("/api/users", "/api/stations", "/api/live", "/admin", "/live"):
+        assert client.get(url).status_code == 403, url
+
+
+def test_supervisor_sees_accounts_and_live_view_but_cannot_administer(seeded, client_for):
+    client, csrf = client_for("supervisor")
+    overview = client.get(f"/api/studies/{seeded.study_id}").json()
+    accounts = {p["code"]: p["account"] for p in overview["participants"]}
+    assert accounts[seeded.other_code] == "trainee2"
+    assert client.get("/api/live").status_code == 200
+    assert client.get("/api/users").status_code == 403
+    answer = client.post(
+        "/api/users",
+        json={"username": "mallory", "password": PASSWORD, "role": "admin"},
+        headers={"X-CSRF-Token": csrf},
+    )
+    assert answer.status_code == 403
+
+
+def test_admin_manages_users_tokens_and_studies(seeded, client_for):
+    client, csrf = client_for("admin")
+    headers = {"X-CSRF-Token": csrf}
+    created = client.post(
+        "/api/users",
+        json={"username": "newcomer", "password": PASSWORD, "role": "trainee", "participant_ids": []},
+        headers=headers,
+    )
+    assert created.status_code == 201, created.text
+    assert (
+        client.post(
+            "/api/users",
+            json={"username": "newcomer", "password": PASSWORD, "role": "trainee"},
+            headers=headers,
+        ).json()["error"]["message"]
+        == "user 'newcomer' already exists"
+    )
+    weak = client.post(
+        "/api/users", json={"username": "weak", "password": "short", "role": "trainee"}, headers=headers
+    )
+    assert weak.status_code == 400 and "at least 10 characters" in error_of(weak)["message"]
+    me = client.get("/api/me").json()
+    users = {u["username"]: u["id"] for u in client.get("/api/users").json()}
+    refused = client.patch(f"/api/users/{users[me['username']]}", json={"active": False}, headers=headers)
+    assert refused.status_code == 409
+    token = client.post("/api/stations", json={"station": "bench-1"}, headers=headers)
+    assert token.status_code == 201 and len(token.json()["token"]) >= 40
+    listed = client.get("/api/stations").json()
+    assert [s["station"] for s in listed] == ["bench-1"] and "token" not in listed[0]
+    study = client.post("/api/studies", json={"name": "spring course"}, headers=headers)
+    assert study.status_code == 201
+    assert client.post("/api/studies", json={"name": "spring course"}, headers=headers).status_code == 409
+
+
+@pytest.mark.parametrize("role", ["supervisor", "researcher", "trainee"])
+def test_only_admins_reach_administration(seeded, client_for, role):
+    client, csrf = client_for(role)
+    headers = {"X-CSRF-Token": csrf}
+    assert client.post("/api/stations", json={"station": "x"}, headers=headers).status_code == 403
+    assert client.delete("/api/stations/1", headers=headers).status_code == 403
+    assert client.patch("/api/users/1", json={"active": False}, headers=headers).status_code == 403
+    assert client.post("/api/studies", json={"name": "x"}, headers=headers).status_code == 403

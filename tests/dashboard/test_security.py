@@ -1,0 +1,180 @@
+"""Passwords, cookies, CSRF, sign-in rate limit, redirects, downloads and offline assets (SQLite)."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import select, update
+
+from dashboard.auth import COOKIE, LoginRateLimiter
+from recorder.remote import encode_batch
+from recorder.writer import samples_batch
+from sessions.models import Session, User
+from tests.dashboard.conftest import PASSWORD, seed_dashboard, sign_in
+
+HTTPS = "https://testserver"  # the site sets Secure cookies
+
+
+@pytest.fixture
+def site(tmp_path, open_catalog):
+    return seed_dashboard(
+        open_catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}"),
+        tmp_path / "home",
+        {"login_attempts": 3, "login_window_s": 1.5, "secure_cookies": True},
+    )
+
+
+def _form_token(page: str) -> str:
+    return re.search(r'name="csrf_token" value="([^"]+)"', page).group(1)
+
+
+def test_passwords_are_stored_only_as_argon2id_hashes(site):
+    with site.catalog.session() as orm:
+        stored = orm.scalar(select(User.password_hash).where(User.username == "admin"))
+    assert stored.startswith("$argon2id$") and PASSWORD not in stored
+    with TestClient(site.app, base_url=HTTPS) as client:
+        wrong = client.post("/api/login", json={"username": "admin", "password": PASSWORD + "x"})
+        assert wrong.status_code == 401 and wrong.json()["error"]["message"] == "wrong user name or password"
+        unknown = client.post("/api/login", json={"username": "nobody", "password": PASSWORD})
+        assert unknown.json() == wrong.json()  # an unknown name answers like a wrong password
+
+
+def test_sign_in_cookie_is_httponly_samesite_and_ends_on_the_server(site):
+    with TestClient(site.app, base_url="https://testserver") as client:
+        answer = client.post("/api/login", json={"username": "admin", "password": PASSWORD})
+        cookie = answer.headers["set-cookie"]
+        assert "HttpOnly" in cookie and "SameSite=strict" in cookie and "Secure" in cookie
+        token = client.cookies[COOKIE]
+        csrf = answer.json()["csrf_token"]
+        assert client.post("/api/logout", headers={"X-CSRF-Token": csrf}).status_code == 200
+    with TestClient(site.app, base_url="https://testserver", cookies={COOKIE: token}) as replay:
+        assert replay.get("/api/me").status_code == 401  # the old cookie is worthless
+
+
+def test_unsafe_requests_need_the_csrf_token(site):
+    with TestClient(site.app, base_url=HTTPS) as client:
+        csrf = sign_in(client, "admin")
+        body = {"name": "csrf-study"}
+        assert client.post("/api/studies", json=body).status_code == 403
+        assert client.post("/api/studies", json=body, headers={"X-CSRF-Token": "forged"}).status_code == 403
+        assert client.post("/api/studies", json=body, headers={"X-CSRF-Token": csrf}).status_code == 201
+        # HTML forms carry it as a field
+        assert client.post("/admin/studies", data={"name": "form-study"}).status_code == 403
+        page = client.get("/admin")
+        done = client.post(
+            "/admin/studies", data={"name": "form-study", "csrf_token": _form_token(page.text)}
+        )
+        assert done.status_code == 200 and "created study" in done.text
+
+
+def test_the_sign_in_form_is_csrf_protected_and_redirects_only_on_site(site):
+    with TestClient(site.app, base_url=HTTPS) as client:
+        page = client.get("/login")
+        token = _form_token(page.text)
+        form = {"username": "admin", "password": PASSWORD, "next": "//evil.example/x"}
+        assert client.post("/login", data={**form, "csrf_token": "forged"}).status_code == 403
+        answer = client.post("/login", data={**form, "csrf_token": token}, follow_redirects=False)
+        assert answer.status_code == 303 and answer.headers["location"] == "/"
+
+
+def test_failed_sign_ins_are_rate_limited_per_name_and_address(site):
+    with TestClient(site.app, base_url=HTTPS) as client:
+        for _ in range(3):
+            assert (
+                client.post("/api/login", json={"username": "admin", "password": "nope"}).status_code == 401
+            )
+        limited = client.post("/api/login", json={"username": "admin", "password": PASSWORD})
+        assert limited.status_code == 429 and int(limited.headers["retry-after"]) >= 1
+        assert "too many failed sign-ins" in limited.json()["error"]["message"]
+        assert (
+            client.post("/api/login", json={"username": "researcher", "password": PASSWORD}).status_code
+            == 200
+        )
+        time.sleep(1.6)
+        assert client.post("/api/login", json={"username": "admin", "password": PASSWORD}).status_code == 200
+
+
+def test_rate_limiter_window_slides():
+    limiter = LoginRateLimiter(2, 10.0)
+    limiter.failed("k", at=0.0)
+    limiter.failed("k", at=4.0)
+    assert limiter.retry_after("k", at=5.0) == pytest.approx(5.0)
+    assert limiter.retry_after("k", at=10.0) == 0.0  # the first failure left the window
+    limiter.succeeded("k")
+    assert limiter.retry_after("k", at=5.0) == 0.0
+
+
+def test_downloads_cannot_leave_the_data_directory(site, tmp_path):
+    uid = site.own_sessions[0]
+    with site.catalog.session() as orm:
+        orm.execute(update(Session).where(Session.uid == uid).values(directory="/etc"))
+        row = orm.scalar(select(Session).where(Session.uid == uid))
+        from sessions.models import StreamFile
+
+        orm.add(StreamFile(session_id=row.id, name="passwd", sha256="0" * 64, bytes=1))
+    with TestClient(site.app, base_url=HTTPS) as client:
+        sign_in(client, "admin")
+        outside = client.get(f"/api/sessions/{uid}/files/passwd")
+        assert (
+            outside.status_code == 403 and "outside the data directory" in outside.json()["error"]["message"]
+        )
+        assert client.get(f"/api/sessions/{uid}/files/shadow").status_code == 404  # not a catalogued file
+        assert client.get(f"/api/sessions/{uid}/files/..%2F..%2Fetc%2Fpasswd").status_code == 404
+        assert client.get("/api/studies/1/figures/..%2F..%2Fcatalog.sqlite").status_code == 404
+
+
+def test_every_asset_is_local_and_pages_send_security_headers(site):
+    with TestClient(site.app, base_url=HTTPS) as client:
+        sign_in(client, "admin")
+        pages = [
+            "/",
+            f"/studies/{site.study_id}",
+            f"/studies/{site.study_id}/validity",
+            f"/participants/{site.own_participant}",
+            f"/sessions/{site.own_sessions[0]}",
+            "/admin",
+            "/live",
+            "/login",
+        ]
+        for url in pages:
+            page = client.get(url)
+            assert page.status_code == 200, url
+            assert "default-src 'self'" in page.headers["content-security-policy"]
+            for reference in re.findall(r'(?:src|href)="([^"]+)"', page.text):
+                assert not re.match(r"^(https?:)?//", reference), (url, reference)
+                if reference.startswith("/static/"):
+                    assert client.get(reference).status_code == 200, reference
+        plotly = client.get("/static/vendor/plotly.min.js")
+        assert plotly.status_code == 200 and "javascript" in plotly.headers["content-type"]
+        assert len(plotly.content) > 1_000_000
+        assert client.get("/docs").status_code == 404  # Swagger UI would load from a CDN
+
+
+def test_station_ingest_accepts_only_live_tokens(site):
+    import numpy as np
+
+    from recorder.schema import SAMPLE_COLUMNS
+
+    rows = np.zeros((5, len(SAMPLE_COLUMNS)))
+    rows[:, 0] = np.arange(5) * 1e-3
+    body = encode_batch(samples_batch(rows))
+    with TestClient(site.app, base_url=HTTPS) as client:
+        csrf = sign_in(client, "admin")
+        issued = client.post(
+            "/api/stations", json={"station": "bench-2"}, headers={"X-CSRF-Token": csrf}
+        ).json()
+        url = "/ingest/api/sessions/s1/batches/0"
+        assert client.post(url, content=body, headers={"Authorization": "Bearer wrong"}).status_code == 401
+        accepted = client.post(url, content=body, headers={"Authorization": f"Bearer {issued['token']}"})
+        assert accepted.status_code == 200 and accepted.json()["ack"] == 0
+        assert (site.home / "ingest" / "bench-2" / "s1" / "samples.arrows").exists()
+        client.delete(f"/api/stations/{issued['id']}", headers={"X-CSRF-Token": csrf})
+        again = client.post(
+            "/ingest/api/sessions/s1/batches/1",
+            content=body,
+            headers={"Authorization": f"Bearer {issued['token']}"},
+        )
+        assert again.status_code == 401
