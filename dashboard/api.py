@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi import Path as PathParameter
 from fastapi.responses import FileResponse, StreamingResponse
 from pydantic import BaseModel, Field
 from sqlalchemy import select
@@ -25,6 +26,8 @@ Staff = Annotated[Viewer, Depends(require(*STAFF))]
 Admin = Annotated[Viewer, Depends(require("admin"))]
 Watcher = Annotated[Viewer, Depends(require("admin", "supervisor"))]
 Anyone = Annotated[Viewer, Depends(current_viewer)]
+MAX_ID = 2_147_483_647  # ids are 32-bit in every catalog; larger ones cannot exist
+Id = Annotated[int, PathParameter(ge=1, le=MAX_ID)]
 FIGURES = ("box_plots.png", "box_plots.svg", "roc.png", "roc.svg")
 
 
@@ -37,7 +40,9 @@ class NewUser(BaseModel):
     username: str = Field(min_length=2, max_length=64)
     password: str = Field(min_length=1, max_length=1024)
     role: Literal["admin", "supervisor", "researcher", "trainee"]
-    participant_ids: list[int] = Field(default_factory=list, max_length=100)
+    participant_ids: list[Annotated[int, Field(ge=1, le=2_147_483_647)]] = Field(
+        default_factory=list, max_length=100
+    )
 
 
 class UserChange(BaseModel):
@@ -124,19 +129,19 @@ def studies(request: Request, viewer: Anyone) -> list[dict]:
 
 
 @router.get("/studies/{study_id}", summary="Study overview: participants, latest scores, who needs attention")
-def study(request: Request, study_id: int, viewer: Staff) -> dict:
+def study(request: Request, study_id: Id, viewer: Staff) -> dict:
     state = _state(request)
     return queries.study_overview(state.catalog, state.analyses, viewer, study_id)
 
 
 @router.get("/studies/{study_id}/validity", summary="Construct-validity report")
-def validity(request: Request, study_id: int, viewer: Staff) -> dict:
+def validity(request: Request, study_id: Id, viewer: Staff) -> dict:
     state = _state(request)
     return queries.validity_report(state.catalog, state.analyses, viewer, study_id)
 
 
 @router.get("/studies/{study_id}/validity.csv", response_class=Response, summary="Validity table as CSV")
-def validity_csv(request: Request, study_id: int, viewer: Staff) -> Response:
+def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
     from metrics.report import summary_table
 
     state = _state(request)
@@ -160,7 +165,7 @@ def _plain(name: str) -> str:
     response_class=FileResponse,
     summary="A report figure (box plots or ROC, PNG or SVG)",
 )
-def figure(request: Request, study_id: int, name: str, viewer: Staff) -> FileResponse:
+def figure(request: Request, study_id: Id, name: str, viewer: Staff) -> FileResponse:
     from metrics.report import write_report
 
     if name not in FIGURES:
@@ -184,7 +189,7 @@ def figure(request: Request, study_id: int, name: str, viewer: Staff) -> FileRes
 @router.get(
     "/participants/{participant_id}/progress", summary="Learning curves, pass/fail history, retention"
 )
-def progress(request: Request, participant_id: int, viewer: Anyone) -> dict:
+def progress(request: Request, participant_id: Id, viewer: Anyone) -> dict:
     state = _state(request)
     return queries.participant_progress(state.catalog, state.analyses, viewer, participant_id)
 
@@ -193,7 +198,7 @@ def progress(request: Request, participant_id: int, viewer: Anyone) -> dict:
 def sessions(
     request: Request,
     viewer: Anyone,
-    study_id: int | None = None,
+    study_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
 ) -> dict:
@@ -345,7 +350,7 @@ def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
 
 
 @router.patch("/users/{user_id}", summary="Change an account's role, state or password (admin)")
-def change_user(request: Request, user_id: int, body: UserChange, viewer: Admin) -> dict:
+def change_user(request: Request, user_id: Id, body: UserChange, viewer: Admin) -> dict:
     with _state(request).catalog.session() as orm:
         user = orm.get(User, user_id)
         if user is None:
@@ -379,7 +384,7 @@ def create_station(request: Request, body: NewStation, viewer: Admin) -> dict:
 
 
 @router.delete("/stations/{token_id}", summary="Revoke a station's token (admin)")
-def revoke_station(request: Request, token_id: int, viewer: Admin) -> dict:
+def revoke_station(request: Request, token_id: Id, viewer: Admin) -> dict:
     with _state(request).catalog.session() as orm:
         row = accounts.revoke_station_token(orm, token_id)
         return {"id": row.id, "station": row.station, "revoked_at": row.revoked_at}

@@ -14,7 +14,7 @@ from pydantic import ValidationError
 from sqlalchemy import select
 
 from dashboard import queries
-from dashboard.api import NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
+from dashboard.api import Id, NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
 from dashboard.api import change_user as api_change_user
 from dashboard.api import create_station as api_create_station
 from dashboard.api import create_study as api_create_study
@@ -125,21 +125,21 @@ def home(request: Request) -> Response:
 
 
 @router.get("/studies/{study_id}", response_class=HTMLResponse)
-def study_page(request: Request, study_id: int, viewer: Staff) -> Response:
+def study_page(request: Request, study_id: Id, viewer: Staff) -> Response:
     state = request.app.state
     overview = queries.study_overview(state.catalog, state.analyses, viewer, study_id)
     return render(request, "study.html", viewer, overview, overview=overview)
 
 
 @router.get("/studies/{study_id}/validity", response_class=HTMLResponse)
-def validity_page(request: Request, study_id: int, viewer: Staff) -> Response:
+def validity_page(request: Request, study_id: Id, viewer: Staff) -> Response:
     state = request.app.state
     report = queries.validity_report(state.catalog, state.analyses, viewer, study_id)
     return render(request, "validity.html", viewer, report, report=report)
 
 
 @router.get("/participants/{participant_id}", response_class=HTMLResponse)
-def participant_page(request: Request, participant_id: int, viewer: Anyone) -> Response:
+def participant_page(request: Request, participant_id: Id, viewer: Anyone) -> Response:
     state = request.app.state
     progress = queries.participant_progress(state.catalog, state.analyses, viewer, participant_id)
     return render(request, "participant.html", viewer, progress, progress=progress)
@@ -233,7 +233,7 @@ def admin_create_user(
 @router.post("/admin/users/{user_id}", response_class=HTMLResponse)
 def admin_change_user(
     request: Request,
-    user_id: int,
+    user_id: Id,
     viewer: Admin,
     active: Annotated[str, Form(max_length=5)] = "",
     role: Annotated[str, Form(max_length=16)] = "",
@@ -260,7 +260,7 @@ def admin_create_station(
 
 
 @router.post("/admin/stations/{token_id}/revoke", response_class=HTMLResponse)
-def admin_revoke_station(request: Request, token_id: int, viewer: Admin) -> Response:
+def admin_revoke_station(request: Request, token_id: Id, viewer: Admin) -> Response:
     return _admin_action(
         request, viewer, lambda: api_revoke_station(request, token_id, viewer), "token revoked"
     )
