@@ -69,7 +69,20 @@ async function drawSession() {
       shapes: [cursorShape(0)], height: 220, margin: { t: 10, b: 40, l: 70, r: 10 }, showlegend: false,
       hovermode: "x",
     }, PLOT_CONFIG);
-    div.on("plotly_click", (event) => seek(event.points[0].x));
+    // a click anywhere on the plot area seeks to that time (a drag still zooms). Plotly covers the page
+    // while a button is down, so the press is read on the plot and the release on the window.
+    div.addEventListener("pointerdown", (event) => {
+      const area = div.querySelector(".nsewdrag");
+      if (!area) return;
+      const rect = area.getBoundingClientRect();
+      if (event.clientX < rect.left || event.clientX > rect.right) return;
+      const pressedAt = event.clientX;
+      window.addEventListener("pointerup", (release) => {
+        if (Math.abs(release.clientX - pressedAt) > 4) return;
+        const t = div._fullLayout.xaxis.p2d(pressedAt - rect.left);
+        seek(Math.min(Math.max(t, 0), data.duration_s));
+      }, { once: true });
+    }, true);
     plots.push(div);
   });
   (data.events || []).forEach((event) => {

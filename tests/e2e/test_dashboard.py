@@ -1,0 +1,136 @@
+"""The dashboard in headless Debian Chromium against a real server on 127.0.0.1: sign in, study, participant,
+session review (video plays, the plot cursor follows, events seek), validity plots, role limits, sign out."""
+
+from __future__ import annotations
+
+import pytest
+from sqlalchemy import select
+
+from dashboard.app import create_app
+from dashboard.settings import DashboardSettings
+from metrics.replay.export import ReplaySettings, export_replay
+from sessions.accounts import create_user, link_participant
+from sessions.catalog import Catalog
+from sessions.demo import DEMO_STUDY, DemoSize, run_demo
+from sessions.models import Participant, Session, Study
+from sessions.replaying import replay_inputs
+from tests.dashboard.conftest import running_server
+from tests.e2e.browser import chromium
+
+PASSWORD = "browser-password"
+
+
+@pytest.fixture(scope="module")
+def demo_site(tmp_path_factory):
+    home = tmp_path_factory.mktemp("home")
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    run_demo(
+        catalog,
+        home,
+        DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=2, retention=False),
+    )
+    with catalog.session() as orm:
+        study = orm.scalar(select(Study).where(Study.name == DEMO_STUDY))
+        people = {p.code: p for p in orm.scalars(select(Participant).where(Participant.study_id == study.id))}
+        create_user(orm, "supervisor", PASSWORD, "supervisor")
+        trainee = create_user(orm, "trainee", PASSWORD, "trainee")
+        link_participant(orm, trainee, people["T01"])
+        own = orm.scalar(
+            select(Session.uid).where(Session.participant_id == people["T01"].id).order_by(Session.trial)
+        )
+        other = orm.scalar(select(Session.uid).where(Session.participant_id == people["T02"].id))
+        ids = {"study": study.id, "T01": people["T01"].id}
+    recorded, tissue, experts = replay_inputs(catalog, home, own, versus_group="experts")
+    export_replay(
+        recorded, tissue, home / "replays" / f"{own}-vs.mp4", experts, ReplaySettings(size=(640, 360))
+    )
+    app = create_app(DashboardSettings(home=home, database_url=catalog.url), catalog)
+    with running_server(app) as base:
+        yield base, ids, own, other
+    catalog.close()
+
+
+def _sign_in(page, base: str, username: str) -> None:
+    page.goto(f"{base}/login")
+    page.fill("input[name=username]", username)
+    page.fill("input[name=password]", PASSWORD)
+    page.click("#sign-in")
+    page.wait_for_load_state("networkidle")
+
+
+def _plot_has_data(page, selector: str) -> bool:
+    return page.evaluate(
+        "(s) => [...document.querySelectorAll(s)].some(d => d.querySelector('svg.main-svg') && "
+        "[...d.querySelectorAll('path.js-line, path.point, path.box')].some(p => (p.getAttribute('d') || '').length > 10))",
+        selector,
+    )
+
+
+@pytest.mark.slow
+def test_supervisor_reviews_a_session(demo_site):
+    base, ids, own, _ = demo_site
+    with chromium() as browser:
+        page = browser.new_page()
+        failures = []
+        page.on("pageerror", lambda error: failures.append(str(error)))
+        page.on("requestfailed", lambda request: failures.append(request.url))
+        _sign_in(page, base, "supervisor")
+        page.click(f"a[href='/studies/{ids['study']}']")
+        assert page.locator("#participants tbody tr").count() == 4
+        page.click(f"#participants a[href='/participants/{ids['T01']}']")
+        page.wait_for_selector("#curves svg.main-svg")
+        assert _plot_has_data(page, "#curves > div")
+        page.click(f"a[href='/sessions/{own}']")
+        page.wait_for_selector("#signals[data-ready='1']", timeout=60_000)
+        assert page.locator("#signals .signal-plot").count() >= 2
+        assert _plot_has_data(page, "#signals .signal-plot")
+        assert page.locator("#metrics tbody tr").count() > 10
+        # playing the video moves the cursor on the plots
+        page.evaluate("() => document.getElementById('replay').play()")
+        page.wait_for_function("() => document.getElementById('replay').currentTime > 0.6", timeout=30_000)
+        page.wait_for_function("() => parseFloat(document.getElementById('signals').dataset.cursor) > 0.5")
+        cursor = page.evaluate("() => document.querySelector('#plot-force').layout.shapes[0].x0")
+        assert cursor > 0.5
+        # an event in the list seeks the video, and the cursor follows
+        page.evaluate("() => document.getElementById('replay').pause()")
+        last = page.locator("#events button.event").last
+        when = float(last.get_attribute("data-time"))
+        last.click()
+        page.wait_for_function(
+            "(t) => Math.abs(document.getElementById('replay').currentTime - t) < 0.05", arg=when
+        )
+        page.wait_for_function(
+            "(t) => Math.abs(parseFloat(document.getElementById('signals').dataset.cursor) - t) < 0.1",
+            arg=when,
+        )
+        # clicking a plot seeks the video to that time
+        page.locator("#plot-force").scroll_into_view_if_needed()
+        box = page.locator("#plot-force .nsewdrag").bounding_box()
+        page.mouse.click(box["x"] + box["width"] * 0.25, box["y"] + box["height"] / 2)
+        page.wait_for_function(
+            "(t) => Math.abs(document.getElementById('replay').currentTime - t) > 0.2", arg=when
+        )
+        assert page.evaluate("() => document.getElementById('replay').error") is None
+        page.goto(f"{base}/studies/{ids['study']}/validity")
+        page.wait_for_selector("#roc svg.main-svg")
+        assert _plot_has_data(page, "#boxes > div")
+        page.click("#sign-out")
+        page.wait_for_url(f"{base}/login")
+        page.goto(f"{base}/")
+        assert page.url.startswith(f"{base}/login")
+        assert failures == []
+
+
+@pytest.mark.slow
+def test_trainee_cannot_reach_another_trainees_session(demo_site):
+    base, ids, own, other = demo_site
+    with chromium() as browser:
+        page = browser.new_page()
+        _sign_in(page, base, "trainee")
+        assert page.url == f"{base}/participants/{ids['T01']}"  # straight to their own progress
+        answer = page.goto(f"{base}/sessions/{other}")
+        assert answer.status == 404 and "not found" in page.inner_text("main")
+        assert page.goto(f"{base}/studies/{ids['study']}").status == 403
+        assert page.goto(f"{base}/sessions/{own}").status == 200
+        page.click("#sign-out")
+        page.wait_for_url(f"{base}/login")
