@@ -61,7 +61,8 @@ def _sign_in(page, base: str, username: str) -> None:
 def _plot_has_data(page, selector: str) -> bool:
     return page.evaluate(
         "(s) => [...document.querySelectorAll(s)].some(d => d.querySelector('svg.main-svg') && "
-        "[...d.querySelectorAll('path.js-line, path.point, path.box')].some(p => (p.getAttribute('d') || '').length > 10))",
+        "[...d.querySelectorAll('path.js-line, path.point, path.box')]"
+        ".some(p => (p.getAttribute('d') || '').length > 10))",
         selector,
     )
 
