@@ -264,7 +264,7 @@ def demo(small: bool, as_json: bool) -> None:
     report (HTML, Markdown, CSV, figures). Re-running replaces the previous demo
     study; participants are labelled synthetic everywhere.
     """
-    from sessions.demo import DemoSize, run_demo
+    from sessions.demo import DEMO_STUDY, DemoSize, run_demo
 
     catalog, home = _catalog()
     size = DemoSize(2, 2, 3, 3, True) if small else DemoSize()
@@ -324,6 +324,12 @@ def demo(small: bool, as_json: bool) -> None:
             f"replay a trainee against the experts: vascsim replay {first_trainee.iloc[0]} "
             "--vs-group experts --mode side-by-side"
         )
+    with catalog.session() as orm:
+        study_id = catalog.study(orm, DEMO_STUDY).id
+    click.echo(
+        "open the results in the dashboard: vascsim users add NAME --role admin; vascsim serve; "
+        f"then http://127.0.0.1:8000/studies/{study_id}"
+    )
 
 
 @main.group()

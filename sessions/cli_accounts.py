@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import click
 from sqlalchemy import select
 
@@ -38,7 +40,7 @@ def users_add(username: str, role: str, participants: tuple[str, ...], password_
     """Create an account; the password is prompted for (10+ characters) and stored as an Argon2id hash."""
     from sessions.accounts import AccountError, create_user, link_participant
 
-    password = click.get_text_stream("stdin").readline().rstrip("\n") if password_stdin else _password(None)
+    password = sys.stdin.readline().rstrip("\n") if password_stdin else _password(None)
     catalog, _ = _catalog()
     with catalog.session() as orm:
         user = create_user(orm, username, password, role)
@@ -80,7 +82,7 @@ def users_passwd(username: str, password_stdin: bool) -> None:
     """Set a new password (signs the account out everywhere)."""
     from sessions.accounts import set_password, user_named
 
-    password = click.get_text_stream("stdin").readline().rstrip("\n") if password_stdin else _password(None)
+    password = sys.stdin.readline().rstrip("\n") if password_stdin else _password(None)
     catalog, _ = _catalog()
     with catalog.session() as orm:
         set_password(orm, user_named(orm, username), password)

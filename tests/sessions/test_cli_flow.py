@@ -134,9 +134,11 @@ def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
     result = CliRunner().invoke(main, ["demo", "--small"])
     assert result.exit_code == 0, result.output
     lines = result.stdout.strip().splitlines()
-    report = Path(lines[-2].rsplit("full report: ", 1)[1])
+    report = Path(lines[-3].rsplit("full report: ", 1)[1])
     assert report.is_file() and report.name == "report.html"
-    assert lines[-1].startswith("replay a trainee against the experts: vascsim replay S-")
-    uid = lines[-1].split("vascsim replay ", 1)[1].split()[0]
+    assert lines[-2].startswith("replay a trainee against the experts: vascsim replay S-")
+    uid = lines[-2].split("vascsim replay ", 1)[1].split()[0]
+    assert lines[-1].startswith("open the results in the dashboard: vascsim users add NAME --role admin")
+    assert lines[-1].endswith("http://127.0.0.1:8000/studies/1")  # the demo study of a fresh catalog
     shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
     assert shown["status"] == "complete"
