@@ -86,3 +86,12 @@ def open_catalog():
     yield factory
     for catalog in opened:
         catalog.close()
+
+
+@pytest.fixture
+def home(tmp_path, catalog_url, monkeypatch):
+    """VASCSIM_HOME and VASCSIM_DATABASE_URL for CLI tests."""
+    folder = tmp_path / "home"
+    monkeypatch.setenv("VASCSIM_HOME", str(folder))
+    monkeypatch.setenv("VASCSIM_DATABASE_URL", catalog_url)
+    return folder
