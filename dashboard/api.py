@@ -19,7 +19,7 @@ from dashboard.errors import ERROR_RESPONSES, DashboardError, not_found
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from sessions import accounts
-from sessions.models import ROLES, Participant, Session, StationToken, Study, User
+from sessions.models import Participant, Session, StationToken, Study, User
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 Staff = Annotated[Viewer, Depends(require(*STAFF))]
@@ -398,6 +398,3 @@ def create_study(request: Request, body: NewStudy, viewer: Admin) -> dict:
             raise DashboardError(409, f"study {body.name!r} already exists")
         study = catalog.study(orm, body.name, create=True, description=body.description)
         return {"id": study.id, "name": study.name, "description": study.description}
-
-
-ROLE_NAMES = ROLES

@@ -12,6 +12,7 @@ from fastapi import APIRouter, Depends, Form, Request
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from pydantic import ValidationError
 from sqlalchemy import select
+from starlette.concurrency import run_in_threadpool
 
 from dashboard import queries
 from dashboard.api import Id, NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
@@ -79,8 +80,6 @@ async def login_form(
     await check_csrf(request, request.cookies.get(PRE_LOGIN_COOKIE, ""))
     response = RedirectResponse(_safe_next(next), status_code=303)
     try:
-        from starlette.concurrency import run_in_threadpool
-
         await run_in_threadpool(sign_in, request, response, username, password)
     except DashboardError as error:
         if error.status not in (401, 429):

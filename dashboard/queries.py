@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pandas as pd
 from sqlalchemy import func, select
 
@@ -331,7 +330,3 @@ def session_list(catalog: Catalog, viewer: Viewer, study_id: int | None, limit: 
             for u, s, t, p, a, c in rows
         ]
     return {"total": int(total), "items": items}
-
-
-def as_float_list(values: np.ndarray, digits: int = 6) -> list[float | None]:
-    return [None if not math.isfinite(v) else round(float(v), digits) for v in values]
