@@ -77,6 +77,7 @@ def test_asymptotic_matches_scipy():
     assert ours.p_value == pytest.approx(reference.pvalue, rel=1e-12)
 
 
+@settings(max_examples=30)  # statsmodels' multipletests costs ~60 ms a call here
 @given(st.lists(st.floats(0, 1), min_size=1, max_size=25))
 def test_holm_matches_statsmodels(p):
     expected = multipletests(p, method="holm")[1]
