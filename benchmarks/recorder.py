@@ -10,10 +10,26 @@ Run:  .venv/bin/python benchmarks/recorder.py
 - record() from a forked producer paced at 1 kHz while this process's writer
   thread flushes (the real-time layout: the haptic process records);
 - durability lag: time from record() to the sample being fsynced, p50/p99/max.
+
+Network ingest (``--part ingest``): one central-recorder server process (uvicorn,
+``recorder.ingest``) on this machine; N simulated stations (default 50, asyncio in
+this process) each generate 1 kHz samples and send a 100-sample batch every
+100 ms (their local flush interval) over WebSocket or HTTP on loopback, for
+``--seconds``. Printed: per-sample durability lag (sample generated -> its batch
+acknowledged, i.e. fsynced by the server), batch round trip, server CPU, and
+after closing every session, the samples stored per session against those sent
+(zero loss means every sample exactly once, in order).
+
+    .venv/bin/python benchmarks/recorder.py                       # everything
+    .venv/bin/python benchmarks/recorder.py --part ingest --stations 50 --transport websocket
 """
 
 from __future__ import annotations
 
+import argparse
+import asyncio
+import json
+import os
 import sys
 import tempfile
 import time
@@ -25,6 +41,8 @@ import numpy as np
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
 from recorder import COLUMN, SAMPLE_COLUMNS, SessionWriter  # noqa: E402
+from recorder.remote import encode_batch, pack_frame  # noqa: E402
+from recorder.writer import samples_batch  # noqa: E402
 from sim.runtime.realtime import _sleep_until  # noqa: E402
 
 
@@ -133,7 +151,208 @@ def throughput(directory: str, samples: int = 3_000_000) -> float:
     return written / elapsed
 
 
-def main() -> None:
+SERVER = """
+import sys, json, uvicorn
+from recorder.ingest import IngestStore, create_app
+tokens = json.loads(sys.argv[2])
+uvicorn.run(create_app(IngestStore(sys.argv[1], tokens)), host="127.0.0.1", port=int(sys.argv[3]),
+            log_level="warning", ws_max_size=16 * 2**20, ws_per_message_deflate=False)
+"""
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class BatchTemplate:
+    """Valid sample batches made by patching a template's time column and sequence digits, so the
+    load generator (sharing the two cores with the server) spends microseconds per batch, not the
+    ~0.6 ms a fresh Arrow encoding costs. The server checks them like any other batch."""
+
+    def __init__(self, batch_size: int) -> None:
+        rows = np.zeros((batch_size, len(SAMPLE_COLUMNS)))
+        rows[:, COLUMN["tool_qw"]] = 1.0
+        rows[:, COLUMN["local_stress"]] = np.nan
+        rows[:, COLUMN["tool_x"]] = 0.01 * np.sin(np.arange(batch_size))
+        rows[:, COLUMN["time"]] = 1e9 + np.pi * np.arange(batch_size)  # a pattern found only once
+        self.template = encode_batch(samples_batch(rows), 10**11)  # twelve digits to overwrite
+        self.time_at = self.template.index(rows[:, COLUMN["time"]].tobytes())
+        self.sequence_at = self.template.index(b"100000000000")
+        self.batch_size = batch_size
+
+    def body(self, sequence: int, times: np.ndarray) -> bytes:
+        data = bytearray(self.template)
+        data[self.time_at : self.time_at + 8 * self.batch_size] = times.astype("<f8").tobytes()
+        data[self.sequence_at : self.sequence_at + 12] = f"{sequence:012d}".encode()
+        return bytes(data)
+
+
+class StartLine:
+    """Stations connect first; the clock starts once all are connected (a connection storm is not
+    what is measured), each station offset by its share of one batch interval, as independent
+    machines would be."""
+
+    def __init__(self, stations: int) -> None:
+        self.stations, self.connected, self.go, self.start = stations, 0, asyncio.Event(), 0.0
+
+    async def connected_wait(self) -> float:
+        self.connected += 1
+        if self.connected == self.stations:
+            self.start = time.perf_counter() + 0.2
+            self.go.set()
+        await self.go.wait()
+        return self.start
+
+
+async def _station(index, base, transport, seconds, line, acks, batch_size=100, interval=0.1):
+    """One simulated station: a batch of ``batch_size`` 1 kHz samples every ``interval`` seconds."""
+    import httpx
+    import websockets
+
+    token = {"Authorization": f"Bearer token-{index}"}
+    template = BatchTemplate(batch_size)
+    batches = int(seconds / interval)
+    session = f"bench-{index}"
+    sent_at: dict[int, float] = {}
+
+    def body(sequence: int) -> bytes:
+        return template.body(sequence, (sequence * batch_size + np.arange(batch_size)) * 1e-3)
+
+    async def wait_until(deadline: float) -> None:
+        delay = deadline - time.perf_counter()
+        if delay > 0:
+            await asyncio.sleep(delay)
+
+    start = 0.0
+    offset = interval * index / line.stations
+
+    def acknowledged(sequence: int) -> None:
+        now = time.perf_counter()
+        generated = start + (sequence * batch_size + np.arange(batch_size)) * 1e-3
+        acks.append((now - generated, now - sent_at.pop(sequence)))
+
+    if transport == "websocket":
+        url = base.replace("http://", "ws://") + f"/api/sessions/{session}/ws"
+        async with websockets.connect(
+            url, additional_headers=token, max_size=None, compression=None
+        ) as socket:
+            start = await line.connected_wait() + offset
+
+            async def receive() -> None:
+                for _ in range(batches):
+                    answer = json.loads(await socket.recv())
+                    if answer["status"] != 200:
+                        raise RuntimeError(f"station {index}: {answer}")
+                    acknowledged(answer["ack"])
+
+            receiver = asyncio.create_task(receive())
+            for sequence in range(batches):
+                await wait_until(start + (sequence + 1) * interval)
+                payload = pack_frame("samples", sequence, body(sequence))
+                sent_at[sequence] = time.perf_counter()
+                await socket.send(payload)
+            await receiver
+    else:
+        async with httpx.AsyncClient(base_url=base, headers=token, timeout=30) as client:
+            await client.get("/")  # open the connection (the answer, 404, does not matter)
+            start = await line.connected_wait() + offset
+            for sequence in range(batches):
+                await wait_until(start + (sequence + 1) * interval)
+                payload = body(sequence)
+                sent_at[sequence] = time.perf_counter()
+                answer = await client.post(f"/api/sessions/{session}/samples/{sequence}", content=payload)
+                if answer.status_code != 200:
+                    raise RuntimeError(f"station {index}: {answer.text}")
+                acknowledged(sequence)
+    return batches
+
+
+async def _close_all(base: str, stations: int, sent: list[int]) -> list[dict]:
+    import httpx
+
+    answers = []
+    async with httpx.AsyncClient(base_url=base, timeout=120) as client:
+        for index in range(stations):
+            answer = await client.post(
+                f"/api/sessions/bench-{index}/close",
+                json={"batches": {"samples": sent[index], "events": 0}},
+                headers={"Authorization": f"Bearer token-{index}"},
+            )
+            answers.append(answer.json())
+    return answers
+
+
+def ingest_load(stations: int, seconds: float, transport: str) -> dict:
+    """Run one ingest load test against a fresh server process; returns its figures."""
+    import socket
+    import subprocess
+
+    from recorder import open_session
+
+    with tempfile.TemporaryDirectory() as root:
+        with socket.socket() as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        tokens = {f"token-{i}": f"station-{i}" for i in range(stations)}
+        server = subprocess.Popen([sys.executable, "-c", SERVER, root, json.dumps(tokens), str(port)])
+        try:
+            for _ in range(300):
+                try:
+                    socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                    break
+                except OSError:
+                    time.sleep(0.05)
+            base = f"http://127.0.0.1:{port}"
+            acks: list = []
+            cpu_before, wall_before = _cpu_seconds(server.pid), time.perf_counter()
+
+            async def run() -> list[int]:
+                line = StartLine(stations)
+                return await asyncio.gather(
+                    *[_station(i, base, transport, seconds, line, acks) for i in range(stations)]
+                )
+
+            sent = asyncio.run(run())
+            cpu = (_cpu_seconds(server.pid) - cpu_before) / (time.perf_counter() - wall_before)
+            closed = asyncio.run(_close_all(base, stations, sent))
+        finally:
+            server.terminate()
+            server.wait()
+        lost = 0
+        for index in range(stations):
+            times = open_session(Path(root) / f"station-{index}" / f"bench-{index}").samples.column("time")
+            expected = np.arange(sent[index] * 100) * 1e-3
+            stored = times.to_numpy()
+            if len(stored) != len(expected) or not np.array_equal(stored, expected):
+                lost += abs(len(expected) - len(stored)) or 1
+    lags = np.concatenate([lag for lag, _ in acks])
+    round_trips = np.array([rt for _, rt in acks])
+    return {
+        "stations": stations,
+        "transport": transport,
+        "samples_sent": sum(sent) * 100,
+        "samples_lost_or_wrong": lost,
+        "closed": sum(1 for c in closed if c.get("closed")),
+        "lag_ms": np.percentile(lags, [50, 99, 100]) * 1e3,
+        "round_trip_ms": np.percentile(round_trips, [50, 99, 100]) * 1e3,
+        "server_cpu_cores": cpu,
+    }
+
+
+def print_ingest(result: dict) -> None:
+    lag, rt = result["lag_ms"], result["round_trip_ms"]
+    print(
+        f"ingest {result['stations']} stations x 1 kHz over {result['transport']}: "
+        f"durability lag p50={lag[0]:.0f} ms p99={lag[1]:.0f} ms max={lag[2]:.0f} ms; "
+        f"batch round trip p50={rt[0]:.1f} ms p99={rt[1]:.1f} ms max={rt[2]:.1f} ms; "
+        f"server CPU {result['server_cpu_cores']:.2f} cores; "
+        f"{result['samples_sent']:,} samples sent, {result['samples_lost_or_wrong']} lost or wrong, "
+        f"{result['closed']}/{result['stations']} sessions closed"
+    )
+
+
+def in_process() -> None:
     all_costs, all_lags = [], []
     for _ in range(5):
         with tempfile.TemporaryDirectory() as directory:
@@ -179,6 +398,29 @@ def main() -> None:
         f"sustained in-process throughput: median {np.median(rates):,.0f} samples/s "
         f"(runs: {', '.join(f'{r:,.0f}' for r in rates)})"
     )
+
+
+def main() -> None:
+    formatter = argparse.RawDescriptionHelpFormatter
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=formatter)
+    parser.add_argument("--part", choices=["all", "in-process", "ingest"], default="all")
+    parser.add_argument("--stations", type=int, nargs="+", default=[50], help="station counts to run")
+    parser.add_argument("--seconds", type=float, default=30.0, help="length of each ingest run")
+    parser.add_argument("--transport", choices=["websocket", "http", "both"], default="both")
+    parser.add_argument("--repeats", type=int, default=3, help="ingest runs per setting (median printed)")
+    options = parser.parse_args()
+    if options.part in ("all", "in-process"):
+        in_process()
+    if options.part in ("all", "ingest"):
+        transports = ["websocket", "http"] if options.transport == "both" else [options.transport]
+        for stations in options.stations:
+            for transport in transports:
+                runs = [ingest_load(stations, options.seconds, transport) for _ in range(options.repeats)]
+                for run in runs:
+                    print_ingest(run)
+                median = sorted(runs, key=lambda r: r["lag_ms"][1])[len(runs) // 2]
+                print("median run (by p99 lag):", end=" ")
+                print_ingest(median)
 
 
 if __name__ == "__main__":

@@ -16,8 +16,8 @@ from dashboard.auth import LoginRateLimiter
 from dashboard.errors import install_error_handlers
 from dashboard.settings import DashboardSettings
 from dashboard.signals import SignalCache
-from recorder.remote import IngestStore
-from recorder.remote import create_app as create_ingest_app
+from recorder.ingest import IngestStore
+from recorder.ingest import create_app as create_ingest_app
 from sessions.catalog import Catalog
 
 HERE = Path(__file__).parent
@@ -95,7 +95,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
 
 
 def _ingest_store(settings: DashboardSettings, catalog: Catalog) -> IngestStore:
-    """Remote stations' HTTP ingest store (recorder.remote), authorised by the catalog's station tokens."""
+    """Remote stations' ingest store (recorder.ingest), authorised by the catalog's station tokens."""
     from sessions.accounts import station_for_token
 
     def station_of(token: str) -> str | None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -11,8 +10,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from recorder.schema import SAMPLE_COLUMNS, SCHEMA_VERSION, RecorderError
-from recorder.writer import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, sha256_of
+from recorder.schema import EVENT_SCHEMA, SAMPLE_SCHEMA, SCHEMA_VERSION, RecorderError
+from recorder.writer import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, read_header, sha256_of
 
 
 @dataclass(frozen=True)
@@ -45,13 +44,7 @@ def _frame(table: pa.Table, library: str):
 def open_session(path: str | Path, verify: bool = True) -> Session:
     """Open a closed (or recovered) session directory; raises RecorderError naming what is wrong."""
     path = Path(path)
-    header_path = path / HEADER_FILE
-    if not header_path.is_file():
-        raise RecorderError(f"{path} is not a session directory (no {HEADER_FILE})")
-    try:
-        header = json.loads(header_path.read_text())
-    except json.JSONDecodeError as error:
-        raise RecorderError(f"{header_path} is not valid JSON: {error}") from error
+    header = read_header(path)
     version = header.get("schema_version")
     if version != SCHEMA_VERSION:
         raise RecorderError(
@@ -62,11 +55,8 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
         if (path / SAMPLES_JOURNAL).exists():
             raise RecorderError(f"{path} was not closed (a crash?); run `vascsim recover {path}` first")
         raise RecorderError(f"{path} is still marked as recording but has no journal")
-    samples = _read_checked(path, SAMPLES_FILE, header.get("samples", {}), verify)
-    events = _read_checked(path, EVENTS_FILE, header.get("events", {}), verify)
-    missing = [c for c in SAMPLE_COLUMNS if c not in samples.column_names]
-    if missing:
-        raise RecorderError(f"{path / SAMPLES_FILE} lacks column(s) {', '.join(missing)}")
+    samples = _read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA)
+    events = _read_checked(path, EVENTS_FILE, header.get("events"), verify, EVENT_SCHEMA)
     times = samples.column("time").to_numpy()
     backwards = np.flatnonzero(np.diff(times) < 0)
     if backwards.size:
@@ -78,8 +68,10 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
     return Session(path, header, samples, events)
 
 
-def _read_checked(path: Path, name: str, record: dict[str, Any], verify: bool) -> pa.Table:
+def _read_checked(path: Path, name: str, record: Any, verify: bool, schema: pa.Schema) -> pa.Table:
     file = path / name
+    if not isinstance(record, dict):
+        raise RecorderError(f"{path / HEADER_FILE} does not describe {name} (no file record in the header)")
     if not file.is_file():
         raise RecorderError(f"{file} is missing")
     if verify:
@@ -90,10 +82,19 @@ def _read_checked(path: Path, name: str, record: dict[str, Any], verify: bool) -
             raise RecorderError(f"{file} does not match its recorded SHA-256 (corrupted or altered)")
     try:
         table = pq.read_table(file)
-    except (pa.ArrowInvalid, OSError) as error:
+    except (pa.ArrowException, OSError) as error:
         raise RecorderError(f"{file} cannot be read (truncated or not Parquet): {error}") from error
     if record.get("rows") is not None and table.num_rows != record["rows"]:
         raise RecorderError(f"{file} has {table.num_rows} rows; its header says {record['rows']}")
+    expected = {field.name: field.type for field in schema}
+    found = {field.name: field.type for field in table.schema}
+    if found != expected:
+        differing = sorted(set(expected.items()) ^ set(found.items()), key=str)
+        names = ", ".join(dict.fromkeys(name for name, _ in differing))
+        raise RecorderError(
+            f"{file} does not have the {schema.metadata[b'vascsim.schema'].decode()} "
+            f"schema (column(s) {names} missing, extra or of another type)"
+        )
     return table
 
 

@@ -23,6 +23,7 @@ import mmap
 import os
 import threading
 import time as clock
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +63,20 @@ def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
     os.replace(temporary, path)
 
 
+def read_header(directory: Path) -> dict[str, Any]:
+    """A session directory's ``header.json``; RecorderError if it is missing, damaged or not an object."""
+    path = directory / HEADER_FILE
+    try:
+        header = json.loads(path.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise RecorderError(f"{directory} is not a session directory (no {HEADER_FILE})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise RecorderError(f"{path} is not valid JSON (damaged?): {error}") from error
+    if not isinstance(header, dict):
+        raise RecorderError(f"{path} holds a JSON {type(header).__name__}, not a session header object")
+    return header
+
+
 def samples_batch(rows: NDArray[np.float64]) -> pa.RecordBatch:
     """An Arrow batch of the sample schema from (n, columns) float rows."""
     columns = np.ascontiguousarray(rows.T)
@@ -78,6 +93,9 @@ class SessionWriter:
 
     header: session metadata (participant, session ids, task, mesh hash,
         materials, model parameters, device, software version, clock mode, ...).
+    mirror: called from the writer thread with ("samples" | "events", batch) for every batch
+        once it is durable here, e.g. ``recorder.station.StationUploader.submit`` to stream the
+        session to a central recorder as well.
     Single producer: call ``record`` from one thread (the haptic loop).
     """
 
@@ -87,12 +105,14 @@ class SessionWriter:
         header: dict[str, Any],
         flush_interval: float = 0.1,
         capacity: int = 1 << 16,
+        mirror: Callable[[str, pa.RecordBatch], object] | None = None,
     ) -> None:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         if (self.directory / SAMPLES_FILE).exists() or (self.directory / SAMPLES_JOURNAL).exists():
             raise RecorderError(f"session directory {self.directory} already holds a recording")
         self.flush_interval = flush_interval
+        self.mirror = mirror
         self.header = {
             **header,
             "schema_version": SCHEMA_VERSION,
@@ -200,30 +220,34 @@ class SessionWriter:
         """Make everything queued so far durable (journal append + fsync)."""
         started = clock.perf_counter()
         head, tail = int(self._counters[0]), int(self._counters[1])
+        written: list[tuple[str, pa.RecordBatch]] = []
         if head > tail:
             start, stop = tail % self._capacity, head % self._capacity
             if start < stop:  # one contiguous slice: no gather copy
-                self._sample_stream.write_batch(samples_batch(self._ring[start:stop]))
+                batch = samples_batch(self._ring[start:stop])
             else:
-                self._sample_stream.write_batch(
-                    samples_batch(self._ring[np.arange(tail, head) % self._capacity])
-                )
+                batch = samples_batch(self._ring[np.arange(tail, head) % self._capacity])
+            self._sample_stream.write_batch(batch)
+            written.append(("samples", batch))
         self._note_drops()
         with self._events_lock:
             events, self._events = self._events, []
         if events:
             columns = list(zip(*events, strict=True))
-            self._event_stream.write_batch(
-                pa.RecordBatch.from_arrays(
-                    [pa.array(c, type=f.type) for c, f in zip(columns, EVENT_SCHEMA, strict=True)],
-                    schema=EVENT_SCHEMA,
-                )
+            batch = pa.RecordBatch.from_arrays(
+                [pa.array(c, type=f.type) for c, f in zip(columns, EVENT_SCHEMA, strict=True)],
+                schema=EVENT_SCHEMA,
             )
+            self._event_stream.write_batch(batch)
+            written.append(("events", batch))
         for sink in (self._sample_sink, self._event_sink):
             sink.flush()
             os.fsync(sink.fileno())
         self._counters[1] = head
         self.durable_samples = head
+        if self.mirror is not None:
+            for stream, batch in written:
+                self.mirror(stream, batch)
         self.flush_seconds.append(clock.perf_counter() - started)
 
     def _note_drops(self) -> None:
@@ -262,17 +286,23 @@ class SessionWriter:
 
 
 def read_journal(path: Path, schema: pa.Schema) -> tuple[pa.Table, bool]:
-    """Every complete batch of an IPC journal; the flag says whether a torn tail was cut off."""
+    """Every complete, valid batch of an IPC journal; the flag says whether a torn or damaged tail
+    was cut off (reading stops at the first batch that does not validate)."""
     batches, torn = [], False
     try:
         with pa.OSFile(str(path), "rb") as source:
             reader = ipc.open_stream(source)
+            if not reader.schema.equals(schema, check_metadata=False):
+                kind = schema.metadata[b"vascsim.schema"].decode()
+                raise RecorderError(f"{path} does not hold the {kind} schema (damaged journal header)")
             while True:
                 try:
-                    batches.append(reader.read_next_batch())
+                    batch = reader.read_next_batch()
                 except StopIteration:
                     break
-    except (pa.ArrowInvalid, OSError, EOFError):
+                batch.validate(full=True)
+                batches.append(batch)
+    except (pa.ArrowException, OSError, EOFError):
         torn = True
     return pa.Table.from_batches(batches, schema=schema), torn
 
@@ -293,7 +323,7 @@ def same_values(a: pa.Table, b: pa.Table) -> bool:
 
 def finalize(directory: Path, status: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """Journals -> verified Parquet files with SHA-256 in the header; journals removed last."""
-    header = json.loads((directory / HEADER_FILE).read_text())
+    header = read_header(directory)
     for journal, target, schema, key in (
         (SAMPLES_JOURNAL, SAMPLES_FILE, SAMPLE_SCHEMA, "samples"),
         (EVENTS_JOURNAL, EVENTS_FILE, EVENT_SCHEMA, "events"),
@@ -334,8 +364,13 @@ def recover(directory: str | Path) -> dict[str, Any]:
         raise RecorderError(f"{directory} has no journal to recover (nothing was being recorded there)")
     if not (directory / HEADER_FILE).exists():
         raise RecorderError(f"{directory} has a journal but no header.json; cannot tell which session it is")
+    header = read_header(directory)
+    if header.get("schema_version") != SCHEMA_VERSION:
+        raise RecorderError(
+            f"{directory / HEADER_FILE}: schema version {header.get('schema_version')!r} is not one this "
+            f"vascsim writes ({SCHEMA_VERSION}); the journal is left as it is"
+        )
     table, _ = read_journal(directory / SAMPLES_JOURNAL, SAMPLE_SCHEMA)
-    header = json.loads((directory / HEADER_FILE).read_text())
     last = float(table.column("time").to_numpy()[-1]) if table.num_rows else None
     lost = {
         "recovered": True,

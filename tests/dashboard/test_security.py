@@ -160,20 +160,20 @@ def test_station_ingest_accepts_only_live_tokens(site):
 
     rows = np.zeros((5, len(SAMPLE_COLUMNS)))
     rows[:, 0] = np.arange(5) * 1e-3
-    body = encode_batch(samples_batch(rows))
+    body = encode_batch(samples_batch(rows), 0)
     with TestClient(site.app, base_url=HTTPS) as client:
         csrf = sign_in(client, "admin")
         issued = client.post(
             "/api/stations", json={"station": "bench-2"}, headers={"X-CSRF-Token": csrf}
         ).json()
-        url = "/ingest/api/sessions/s1/batches/0"
+        url = "/ingest/api/sessions/s1/samples/0"
         assert client.post(url, content=body, headers={"Authorization": "Bearer wrong"}).status_code == 401
         accepted = client.post(url, content=body, headers={"Authorization": f"Bearer {issued['token']}"})
         assert accepted.status_code == 200 and accepted.json()["ack"] == 0
         assert (site.home / "ingest" / "bench-2" / "s1" / "samples.arrows").exists()
         client.delete(f"/api/stations/{issued['id']}", headers={"X-CSRF-Token": csrf})
         again = client.post(
-            "/ingest/api/sessions/s1/batches/1",
+            "/ingest/api/sessions/s1/samples/1",
             content=body,
             headers={"Authorization": f"Bearer {issued['token']}"},
         )
