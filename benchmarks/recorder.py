@@ -13,9 +13,9 @@ Run:  .venv/bin/python benchmarks/recorder.py
 
 Network ingest (``--part ingest``): one central-recorder server process (uvicorn,
 ``recorder.ingest``) on this machine; N simulated stations (default 50, asyncio in
-this process) each generate 1 kHz samples and send a 100-sample batch every
-100 ms (their local flush interval) over WebSocket or HTTP on loopback, for
-``--seconds``. Printed: per-sample durability lag (sample generated -> its batch
+this process) each send their session header, then generate 1 kHz samples and
+send a 100-sample batch every 100 ms (their local flush interval) over WebSocket
+or HTTP on loopback, for ``--seconds``. Printed: per-sample durability lag (sample generated -> its batch
 acknowledged, i.e. fsynced by the server), batch round trip, server CPU, and
 after closing every session, the samples stored per session against those sent
 (zero loss means every sample exactly once, in order).
@@ -189,9 +189,9 @@ class BatchTemplate:
 
 
 class StartLine:
-    """Stations connect first; the clock starts once all are connected (a connection storm is not
-    what is measured), each station offset by its share of one batch interval, as independent
-    machines would be."""
+    """Stations connect and send their session header first (a station's session starts with its
+    header: the central recorder opens the session's files then); the clock starts once all have,
+    each station offset by its share of one batch interval, as independent machines would be."""
 
     def __init__(self, stations: int) -> None:
         self.stations, self.connected, self.go, self.start = stations, 0, asyncio.Event(), 0.0
@@ -205,15 +205,48 @@ class StartLine:
         return self.start
 
 
+class LeanHttp:
+    """A minimal HTTP/1.1 keep-alive client on asyncio streams: the load generator shares the two
+    cores with the server, and httpx's ~2 ms of CPU per request would make it the bottleneck."""
+
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, host: str, auth: str):
+        self.reader, self.writer, self.host, self.auth = reader, writer, host, auth
+
+    @classmethod
+    async def connect(cls, base: str, auth: str) -> LeanHttp:
+        host, port = base.removeprefix("http://").split(":")
+        reader, writer = await asyncio.open_connection(host, int(port))
+        return cls(reader, writer, f"{host}:{port}", auth)
+
+    async def request(self, method: str, path: str, body: bytes | str) -> tuple[int, str]:
+        data = body.encode() if isinstance(body, str) else body
+        head = (
+            f"{method} {path} HTTP/1.1\r\nHost: {self.host}\r\nAuthorization: {self.auth}\r\n"
+            f"Content-Length: {len(data)}\r\n\r\n"
+        )
+        self.writer.write(head.encode() + data)
+        status_line = await self.reader.readline()
+        length = 0
+        while (line := await self.reader.readline()) not in (b"\r\n", b""):
+            name, _, value = line.decode("latin-1").partition(":")
+            if name.strip().lower() == "content-length":
+                length = int(value)
+        answer = await self.reader.readexactly(length)
+        return int(status_line.split()[1]), answer.decode()
+
+    def close(self) -> None:
+        self.writer.close()
+
+
 async def _station(index, base, transport, seconds, line, acks, batch_size=100, interval=0.1):
     """One simulated station: a batch of ``batch_size`` 1 kHz samples every ``interval`` seconds."""
-    import httpx
     import websockets
 
     token = {"Authorization": f"Bearer token-{index}"}
     template = BatchTemplate(batch_size)
     batches = int(seconds / interval)
     session = f"bench-{index}"
+    header = {"participant": f"P{index:02d}", "task": "benchmark", "device": "simulated station"}
     sent_at: dict[int, float] = {}
 
     def body(sequence: int) -> bytes:
@@ -237,6 +270,9 @@ async def _station(index, base, transport, seconds, line, acks, batch_size=100, 
         async with websockets.connect(
             url, additional_headers=token, max_size=None, compression=None
         ) as socket:
+            await socket.send(json.dumps({"op": "header", "header": header}))  # as a station starts
+            if json.loads(await socket.recv())["status"] != 200:
+                raise RuntimeError(f"station {index}: header refused")
             start = await line.connected_wait() + offset
 
             async def receive() -> None:
@@ -254,17 +290,23 @@ async def _station(index, base, transport, seconds, line, acks, batch_size=100, 
                 await socket.send(payload)
             await receiver
     else:
-        async with httpx.AsyncClient(base_url=base, headers=token, timeout=30) as client:
-            await client.get("/")  # open the connection (the answer, 404, does not matter)
+        client = await LeanHttp.connect(base, token["Authorization"])
+        try:
+            status, text = await client.request("PUT", f"/api/sessions/{session}/header", json.dumps(header))
+            if status != 200:
+                raise RuntimeError(f"station {index}: {text}")
             start = await line.connected_wait() + offset
             for sequence in range(batches):
                 await wait_until(start + (sequence + 1) * interval)
                 payload = body(sequence)
                 sent_at[sequence] = time.perf_counter()
-                answer = await client.post(f"/api/sessions/{session}/samples/{sequence}", content=payload)
-                if answer.status_code != 200:
-                    raise RuntimeError(f"station {index}: {answer.text}")
+                path = f"/api/sessions/{session}/samples/{sequence}"
+                status, text = await client.request("POST", path, payload)
+                if status != 200:
+                    raise RuntimeError(f"station {index}: {text}")
                 acknowledged(sequence)
+        finally:
+            client.close()
     return batches
 
 

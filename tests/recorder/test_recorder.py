@@ -13,6 +13,8 @@ import duckdb
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from recorder import (
     COLUMN,
@@ -23,6 +25,7 @@ from recorder import (
     open_session,
     recover,
 )
+from recorder.writer import TRANSPOSE_BLOCK_ROWS, columns_of
 
 
 def rows(n, start=0):
@@ -212,3 +215,16 @@ def test_every_event_kind_the_simulator_emits_has_a_place_in_the_schema():
 
     assert set(NEEDLE_KINDS) <= set(EVENT_KINDS)
     assert set(RUNTIME_KINDS) <= set(EVENT_KINDS)
+
+
+@given(
+    n=st.integers(0, 3 * TRANSPOSE_BLOCK_ROWS + 7),
+    width=st.integers(1, 40),
+    seed=st.integers(0, 2**32 - 1),
+)
+@settings(max_examples=40, deadline=None)
+def test_blocked_transpose_equals_the_plain_one(n, width, seed):
+    data = np.random.default_rng(seed).normal(size=(n, width))
+    columns = columns_of(data)
+    assert columns.flags.c_contiguous and columns.shape == (width, n)
+    np.testing.assert_array_equal(columns, data.T)
