@@ -133,6 +133,9 @@ class BiphaseTissue:
         if soft.mesh is not stiff.mesh or not np.array_equal(soft.contact_nodes, stiff.contact_nodes):
             raise ModelError("the soft and stiff models must share one mesh and one set of contact nodes")
         self.soft, self.stiff = soft, stiff
+        # with one Poisson ratio the stiff phase's K0 is (E2/E1) times the soft one's: its inverse
+        # is the soft inverse scaled, so one factorisation and one set of column solves serve both
+        stiff.share_inverse_with(soft)
         self.parameters = parameters or BiphaseParameters()
         self._depths: dict[int, float] = {}
 

@@ -118,6 +118,7 @@ class TissueModel:
         self._columns: OrderedDict[int, NDArray[np.float64]] = OrderedDict()
         self._column_budget = column_cache_bytes
         self._column_lock = threading.Lock()
+        self._inverse_of: tuple[TissueModel, float] | None = None  # (base, s): K0 = s K0_base
 
     # -- assembly --------------------------------------------------------------
     @cached_property
@@ -141,6 +142,9 @@ class TissueModel:
     @cached_property
     def penalty(self) -> float:
         """The penalty constant C (N/m) on fixed and contact dofs."""
+        if self._inverse_of is not None and self._requested_penalty is None:
+            base, scale = self._inverse_of
+            return scale * base.penalty  # = penalty_factor x the largest diagonal entry of s K_base
         if self._requested_penalty is not None:
             if not (np.isfinite(self._requested_penalty) and self._requested_penalty > 0):
                 raise ModelError(f"penalty must be a positive number of N/m; got {self._requested_penalty}")
@@ -155,11 +159,57 @@ class TissueModel:
 
     @cached_property
     def _factor(self):
+        if self._inverse_of is not None:
+            base, scale = self._inverse_of
+            return lambda rhs: base._factor(rhs) / scale
         return sparse_cholesky(self.penalised_stiffness())
 
     def factorize(self) -> None:
         """Factorise K0 now (on-demand mode does it lazily on the first contact otherwise)."""
         self._factor  # noqa: B018 - the cached property does the work
+        if self._inverse_of is not None:
+            self._inverse_of[0].factorize()
+
+    def share_inverse_with(self, base: TissueModel) -> float | None:
+        """Take K0^-1 from ``base`` when this model's K0 is a positive multiple s of base's.
+
+        That holds when both share the mesh, the fixed dofs, the contact candidates and the
+        penalty rule, and every element's Lame parameters are base's times one common s (e.g.
+        the biphase model's two phases: the same Poisson ratio, E2 = s E1). Then K0^-1 =
+        K0_base^-1 / s exactly, so this model neither factorises nor solves columns of its own:
+        it divides base's. Returns s, or None (nothing shared) when the models are not so related.
+        """
+        scale = self._stiffness_scale_of(base)
+        if scale is None or "_factor" in self.__dict__ or "penalty" in self.__dict__:
+            return None
+        self._inverse_of = (base, scale)
+        return scale
+
+    def _stiffness_scale_of(self, base: TissueModel) -> float | None:
+        """s with K0 = s K0_base, or None."""
+        if base is self or base._inverse_of is not None:
+            return None
+        same_structure = (
+            self.mesh is base.mesh
+            and np.array_equal(self.fixed_dofs, base.fixed_dofs)
+            and np.array_equal(self.contact_nodes, base.contact_nodes)
+        )
+        if not same_structure:
+            return None
+        (lam, mu), (base_lam, base_mu) = self._lame, base._lame
+        scale = float(mu[0] / base_mu[0])
+        if not (
+            scale > 0
+            and np.allclose(mu, scale * base_mu, rtol=1e-12, atol=0.0)
+            and np.allclose(lam, scale * base_lam, rtol=1e-12, atol=0.0)
+        ):
+            return None
+        if self._requested_penalty is None and base._requested_penalty is None:
+            return scale if self._penalty_factor == base._penalty_factor else None
+        if self._requested_penalty is not None and base._requested_penalty is not None:
+            ratio = self._requested_penalty / base._requested_penalty
+            return scale if abs(ratio - scale) <= 1e-12 * scale else None
+        return None
 
     def surface_von_mises(self, displacement: NDArray[np.float64]) -> NDArray[np.float64]:
         """(F,) von Mises stress (Pa) of the element under each exterior triangle, from a full field."""
@@ -185,6 +235,17 @@ class TissueModel:
         With ``use_cache`` the result is read from / written to ``cache_dir``
         (default :func:`sim.fem.cache.default_cache_dir`), verified by checksum.
         """
+        if self._inverse_of is not None:
+            base, scale = self._inverse_of
+            start = time.perf_counter()
+            source = base._precomputed or base.precompute(cache_dir, use_cache)
+            self._precomputed = Precomputation(
+                self.contact_nodes,
+                source.matrix / scale,
+                {"derived": time.perf_counter() - start},
+                source.from_cache,
+            )
+            return self._precomputed
         directory = Path(cache_dir) if cache_dir is not None else cache.default_cache_dir()
         key = self.cache_key()
         start = time.perf_counter()
@@ -237,6 +298,9 @@ class TissueModel:
     def _nodes_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs: cached ones reused, the rest
         solved together in one multi-right-hand-side solve (on-demand mode)."""
+        if self._inverse_of is not None:
+            base, scale = self._inverse_of
+            return base._nodes_columns(nodes) / scale
         with self._column_lock:
             known = {int(n): self._columns[int(n)] for n in nodes if int(n) in self._columns}
             for n in known:

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim.errors import ModelError
@@ -104,3 +104,56 @@ def test_parameter_validation(options, message):
 def test_negative_speed_rejected():
     with pytest.raises(ModelError, match="needle_speed must be a non-negative"):
         BiphaseParameters().strain_limit_at(-1.0)
+
+
+def independent(model, scale):
+    """A TissueModel like ``model`` with E scaled by ``scale``, sharing nothing with it."""
+    from sim.fem import TissueModel
+
+    return TissueModel(model.mesh, model.material.scaled(scale), model.fixed_dofs // 3)
+
+
+@settings(max_examples=15, deadline=None)
+@given(scale=st.floats(0.1, 10.0), corner=st.integers(0, 10**6), strain=st.floats(0.0, 0.3))
+def test_a_scaled_model_shares_the_inverse_exactly(small_box, scale, corner, strain):
+    from sim.fem import Material, TissueModel
+
+    base = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"])
+    shared = TissueModel(small_box, Material(20e3 * scale, 0.45), small_box.node_sets["z0"])
+    assert shared.share_inverse_with(base) == pytest.approx(scale, rel=1e-12)
+    alone = independent(base, scale)
+    assert shared.penalty == pytest.approx(alone.penalty, rel=1e-12)
+    triangle = small_box.surface_triangles[corner % len(small_box.surface_triangles)]
+    contacts = {int(n): np.array([0.0, 0.0, -strain * 1e-3]) for n in triangle}
+    ours = shared.solve(contacts, full_field=True)
+    theirs = alone.solve(contacts, full_field=True)
+    np.testing.assert_allclose(ours.reaction_forces, theirs.reaction_forces, rtol=1e-8, atol=1e-14)
+    np.testing.assert_allclose(ours.displacement, theirs.displacement, rtol=1e-8, atol=1e-15)
+    handle, reference = shared.contact(triangle), alone.contact(triangle)
+    drive = np.full((3, 3), 1e-4)
+    np.testing.assert_allclose(handle.reaction_forces(drive), reference.reaction_forces(drive), rtol=1e-8)
+    assert "_stiffness" not in shared.__dict__  # it never assembled, let alone factorised, its own K0
+
+
+def test_precomputed_stiff_phase_is_the_soft_one_scaled(cube, tmp_path):
+    tissue = BiphaseTissue.build(cube, cube.node_sets["z0"])
+    soft, stiff = tissue.precompute(cache_dir=tmp_path)
+    alone = independent(tissue.soft, tissue.parameters.stiff_modulus / tissue.parameters.soft_modulus)
+    reference = alone.precompute(use_cache=False)
+    np.testing.assert_allclose(
+        stiff.matrix, reference.matrix, rtol=1e-9, atol=1e-12 * np.abs(reference.matrix).max()
+    )
+    np.testing.assert_array_equal(stiff.matrix, soft.matrix / 2.0)  # E2 = 2 E1: scaling by 2 is exact
+    assert "derived" in stiff.seconds
+
+
+def test_models_that_are_not_multiples_share_nothing(small_box):
+    from sim.fem import Material, TissueModel
+
+    base = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"])
+    other_nu = TissueModel(small_box, Material(40e3, 0.40), small_box.node_sets["z0"])
+    other_support = TissueModel(small_box, Material(40e3, 0.45), small_box.node_sets["z1"])
+    explicit = TissueModel(small_box, Material(40e3, 0.45), small_box.node_sets["z0"], penalty=1e6)
+    for model in (other_nu, other_support, explicit, base):
+        assert model.share_inverse_with(base) is None
+        assert model._inverse_of is None
