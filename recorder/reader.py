@@ -92,7 +92,7 @@ def _read_checked(path: Path, name: str, record: Any, verify: bool, schema: pa.S
         differing = sorted(set(expected.items()) ^ set(found.items()), key=str)
         names = ", ".join(dict.fromkeys(name for name, _ in differing))
         raise RecorderError(
-            f"{file} does not have the {schema.metadata[b'vascsim.schema'].decode()} "
+            f"{file} does not have the {_stream_name(schema)} "
             f"schema (column(s) {names} missing, extra or of another type)"
         )
     return table
@@ -108,3 +108,9 @@ def list_sessions(root: str | Path) -> tuple[list[Session], dict[Path, str]]:
         except RecorderError as error:
             bad[header.parent] = str(error)
     return good, bad
+
+
+def _stream_name(schema: pa.Schema) -> str:
+    """"samples", "events" or "scene": the stream a schema describes, for messages."""
+    metadata = schema.metadata or {}
+    return (metadata.get(b"vascsim.schema") or metadata.get(b"stream") or b"expected").decode()

@@ -108,4 +108,4 @@ def read_scene(session) -> pa.Table | None:
     record = session.header.get("scene")
     if record is None:
         return None
-    return _read_checked(session.path, SCENE_FILE, record, verify=True)
+    return _read_checked(session.path, SCENE_FILE, record, True, SCENE_SCHEMA)
