@@ -9,10 +9,12 @@ stress colour map of the deformed wall and the heads-up panel.
 
 from __future__ import annotations
 
+import collections
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +29,7 @@ from metrics.tissue import with_tissue_fields
 from sim.fem.fields import TissueFieldReplay
 
 MODES = ("ghost", "side-by-side")
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -142,6 +145,8 @@ def export_replay(
     stills: a folder for ``insertion.png`` (the frame at the pierce), ``stress_insertion.exr``
     (surface von Mises in Pa seen along the wall normal) and ``signals.png``/``.svg``.
     """
+    from threadpoolctl import threadpool_limits
+
     from metrics.replay.video import VideoWriter, check_video_path
     from sim.render import TissueRenderer
 
@@ -183,25 +188,29 @@ def export_replay(
     insertion = insertion_frame_index(streams, scene.track.times) if stills is not None else None
     written: list[Path] = []
     render_time = 0.0
+    # the expert's moment matching each frame, in one pass over the alignment
+    expert_times = (
+        reference.medoid_alignment.reference_time_at(scene.track.times) if expert_scene is not None else None
+    )
+
+    def scene_frames(k: int):
+        """Frame k's scene (and the expert's beside it): the tissue state solved for that frame."""
+        expert_k = None if expert_times is None else expert_scene.index_at(float(expert_times[k]))
+        if split:
+            return scene.frame(k), expert_scene.frame(expert_k)
+        ghost_needle = expert_scene.track.needle[expert_k] if expert_k is not None else None
+        return scene.frame(k, ghost_path, ghost_needle), None
+
     try:
-        with VideoWriter(out, settings.size, settings.fps) as writer:
-            for k in range(total):
-                when = float(scene.track.times[k])
-                expert_k = None
-                if expert_scene is not None:
-                    expert_k = expert_scene.index_at(
-                        float(reference.medoid_alignment.reference_time_at(when))
-                    )
+        # one BLAS thread: idle OpenBLAS workers spin and would take the cores the rasteriser needs
+        with VideoWriter(out, settings.size, settings.fps) as writer, threadpool_limits(1):
+            for k, (frame, expert_frame) in enumerate(frames_ahead(scene_frames, total)):
                 began = time.perf_counter()
-                ghost_needle = (
-                    expert_scene.track.needle[expert_k] if expert_k is not None and not split else None
-                )
-                frame = scene.frame(k, ghost_path, ghost_needle)
                 pixels = renderers[0].render(frame)
                 if k == 0 and split:
                     renderers[1].set_camera(*renderers[0].plotter.camera_position)
                 if split:
-                    right = renderers[1].render(expert_scene.frame(expert_k))
+                    right = renderers[1].render(expert_frame)
                     label_view(pixels, f"trainee {streams.participant_id or ''}".strip(), scale)
                     label_view(right, f"expert {reference.medoid.participant_id or ''}".strip(), scale)
                     pixels = np.hstack([pixels, right])
@@ -228,6 +237,27 @@ def export_replay(
     seconds = time.perf_counter() - started
     timings["total"] = seconds
     return ReplayResult(Path(out), total, seconds, timings, written)
+
+
+def frames_ahead(make: Callable[[int], T], total: int, depth: int = 2) -> Iterator[T]:
+    """make(0), ..., make(total - 1), each computed in a worker thread up to ``depth`` items ahead
+    of the consumer: the next frame's tissue state is solved while this one renders (VTK's render
+    call releases the interpreter lock). An exception in ``make`` is raised here, in order."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pending: collections.deque = collections.deque()
+    with ThreadPoolExecutor(1, thread_name_prefix="vascsim-replay-state") as worker:
+        try:
+            for k in range(min(depth, total)):
+                pending.append(worker.submit(make, k))
+            for k in range(total):
+                item = pending.popleft().result()
+                if k + depth < total:
+                    pending.append(worker.submit(make, k + depth))
+                yield item
+        finally:
+            for future in pending:
+                future.cancel()
 
 
 def _write_insertion_stills(

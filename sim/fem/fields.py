@@ -126,7 +126,16 @@ class TissueFieldReplay:
         self._surface = self.mesh.surface_elements
         self._cache: dict[tuple[int, ...], list[tuple[object, NDArray, NDArray]]] = {}
         self._cache_size = cache_size
-        self._stress_operators = [surface_stress_operator(model, self._surface) for model in _phases(tissue)]
+        phases = _phases(tissue)
+        # A phase whose K0 is s times the first one's (the biphase stiff phase with one Poisson
+        # ratio) has columns G/s and a stress operator s*S: the same stress per unit reaction and
+        # reactions s times the first phase's for the same drive, so it needs no arrays of its own.
+        self._scales = [1.0] + [_scale_to(model, phases[0]) for model in phases[1:]]
+        self._stress_operators = [
+            surface_stress_operator(model, self._surface)
+            for model, scale in zip(phases, self._scales, strict=True)
+            if scale is None or model is phases[0]
+        ]
 
     def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray, NDArray]]:
         """Per phase: the contact handle, K0^-1 columns at the contact dofs (3N, 3k), and the surface
@@ -135,7 +144,8 @@ class TissueFieldReplay:
         parts = self._cache.get(key)
         if parts is None:
             parts = []
-            for model, operator in zip(_phases(self.tissue), self._stress_operators, strict=True):
+            own = [m for m, scale in zip(_phases(self.tissue), self._scales, strict=True) if scale is None]
+            for model, operator in zip(_phases(self.tissue)[:1] + own, self._stress_operators, strict=True):
                 columns = model._nodes_columns(nodes)
                 unit_stress = (operator @ columns).T.reshape(columns.shape[1], len(self._surface), 3, 3)
                 parts.append((model.contact(nodes), columns, unit_stress))
@@ -163,17 +173,31 @@ class TissueFieldReplay:
         if ids.size == 0:
             return np.zeros((self.mesh.n_nodes, 3)), np.zeros(len(self._surface))
         share = self.soft_share(ids, drive, needle_speed)
-        displacement = np.zeros((self.mesh.n_nodes, 3))
-        stress = np.zeros((len(self._surface), 3, 3))
-        for (handle, columns, unit_stress), fraction in zip(
-            self._phase_parts(ids), (share, 1.0 - share), strict=False
-        ):
+        parts = self._phase_parts(ids)
+        own = iter(parts[1:])
+        # per distinct set of arrays: the reactions its displacement and its stress answer to
+        by_part: dict[int, list] = {}
+        for scale, fraction in zip(self._scales, (share, 1.0 - share), strict=False):
+            part = parts[0] if scale is not None else next(own)
             if fraction == 0.0:
                 continue
-            reactions = handle.reaction_forces(fraction * drive).reshape(-1)
-            displacement += (columns @ reactions).reshape(-1, 3)
-            stress += np.tensordot(reactions, unit_stress, axes=1)
+            handle = part[0]
+            reactions = handle.reaction_forces(fraction * drive).reshape(-1)  # of the part's own model
+            sums = by_part.setdefault(id(part), [part, 0.0, 0.0])
+            sums[1] = sums[1] + reactions  # displacement: G/s times s R
+            sums[2] = sums[2] + (scale if scale is not None else 1.0) * reactions  # stress: S G R s
+        displacement = np.zeros((self.mesh.n_nodes, 3))
+        stress = np.zeros((len(self._surface), 3, 3))
+        for (_, columns, unit_stress), displacement_reactions, stress_reactions in by_part.values():
+            displacement += (columns @ displacement_reactions).reshape(-1, 3)
+            stress += np.tensordot(stress_reactions, unit_stress, axes=1)
         return displacement, von_mises_of_stress(stress)
+
+
+def _scale_to(model: TissueModel, base: TissueModel) -> float | None:
+    """s if ``model`` takes its K0^-1 from ``base`` as K0_base^-1 / s (TissueModel.share_inverse_with)."""
+    shared = model._inverse_of
+    return shared[1] if shared is not None and shared[0] is base else None
 
 
 def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):
