@@ -18,7 +18,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -119,6 +119,8 @@ class TissueModel:
         self._column_budget = column_cache_bytes
         self._column_lock = threading.Lock()
         self._inverse_of: tuple[TissueModel, float] | None = None  # (base, s): K0 = s K0_base
+        self.column_solver: Callable[[NDArray[np.int64]], NDArray[np.float64]] | None = None
+        """Solves on-demand columns in place of :meth:`solve_columns` (e.g. in a worker process)."""
 
     # -- assembly --------------------------------------------------------------
     @cached_property
@@ -307,9 +309,8 @@ class TissueModel:
                 self._columns.move_to_end(n)
         missing = [int(n) for n in nodes if int(n) not in known]
         if missing:
-            rhs = np.zeros((3 * self.mesh.n_nodes, 3 * len(missing)), order="F")
-            rhs[node_dofs(np.array(missing)), np.arange(3 * len(missing))] = 1.0
-            solved = self._factor(rhs)
+            solve = self.column_solver or self.solve_columns
+            solved = solve(np.array(missing, dtype=np.int64))
             with self._column_lock:
                 for i, node in enumerate(missing):
                     columns = np.ascontiguousarray(solved[:, 3 * i : 3 * i + 3])
@@ -317,6 +318,12 @@ class TissueModel:
                     known[node] = self._columns[node] = columns
                 self._evict_columns()
         return np.hstack([known[int(n)] for n in nodes])
+
+    def solve_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
+        """(3N, 3k) columns of K0^-1 at the nodes' dofs, in one multi-right-hand-side solve."""
+        rhs = np.zeros((3 * self.mesh.n_nodes, 3 * len(nodes)), order="F")
+        rhs[node_dofs(np.asarray(nodes, dtype=np.int64)), np.arange(3 * len(nodes))] = 1.0
+        return self._factor(rhs)
 
     def _evict_columns(self) -> None:
         """Drop least recently used columns beyond the memory budget (lock held)."""

@@ -20,7 +20,6 @@ from __future__ import annotations
 import collections
 import heapq
 import math
-import threading
 import time as wallclock
 import traceback
 from collections.abc import Callable
@@ -35,6 +34,7 @@ from sim.fem import BiphaseTissue, TissueModel
 from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
 from sim.runtime.logs import HapticColumns, interpolate_force
+from sim.runtime.prefetch import Prefetcher
 from sim.runtime.safety import ForceSafety, SafetySettings
 from sim.runtime.telemetry import LayerSummary, LoopTelemetry
 
@@ -212,55 +212,6 @@ def _on_demand(tissue: TissueModel | BiphaseTissue) -> bool:
     )
 
 
-class Prefetcher:
-    """A background worker solving on-demand contact columns for nodes the needle approaches."""
-
-    def __init__(self, tissue: TissueModel | BiphaseTissue) -> None:
-        self.models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
-        self.on_demand = any(model.precomputation is None for model in self.models)
-        for model in self.models:
-            model.factorize()  # now, not on the first contact
-        mesh = tissue.mesh
-        self._nodes = (
-            mesh.surface_nodes
-        )  # the exit can be on any face (lumen, wound edge), not only candidates
-        self._points = mesh.points[self._nodes]
-        self._requested: set[int] = set()
-        self._queue: collections.deque = collections.deque()
-        self._wake = threading.Event()
-        self._closed = False
-        self._thread = threading.Thread(target=self._work, name="vascsim-prefetch", daemon=True)
-        self._thread.start()
-
-    def near(self, point: NDArray[np.float64], radius: float) -> None:
-        """Ask for the surface nodes within ``radius`` of ``point`` not requested yet, nearest first."""
-        squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
-        close = np.flatnonzero(squared <= radius * radius)
-        close = self._nodes[close[np.argsort(squared[close])]]
-        fresh = [int(n) for n in close if int(n) not in self._requested]
-        if fresh:
-            self._requested.update(fresh)
-            self._queue.appendleft(fresh)  # the newest request is where the needle is now
-            self._wake.set()
-
-    def _work(self) -> None:
-        while not self._closed:
-            self._wake.wait(0.1)
-            self._wake.clear()
-            while self._queue and not self._closed:
-                batch = self._queue.popleft()
-                chunk, rest = batch[:1], batch[1:]  # one node at a time: newer requests overtake
-                if rest:
-                    self._queue.appendleft(rest)
-                for model in self.models:
-                    model.prefetch(np.array(chunk))
-                    wallclock.sleep(0.001)  # let the FEM thread in between solves
-
-    def close(self) -> None:
-        self._closed = True
-        self._wake.set()
-
-
 class Simulation:
     """One needle, one tissue, one device, run by layers at their rates."""
 
@@ -300,7 +251,8 @@ class Simulation:
         self._previous_frame: GraphicsSnapshot | None = None
         self._safety_seen = 0
         self.contact_latencies: list[float] = []  # s, graphics frame -> first force for a new contact
-        self._prefetcher = Prefetcher(tissue) if _on_demand(tissue) else None
+        self._tissue = tissue
+        self._prefetcher: Prefetcher | None = None  # started for the length of a run (a worker process)
 
     # -- the four steps ----------------------------------------------------------------
     def haptic_step(self, now: float) -> None:
@@ -428,10 +380,17 @@ class Simulation:
             )
         self._emit(RuntimeEvent("stopped", now, "runtime", self.stop_reason or ""))
 
+    def _start_prefetching(self) -> None:
+        """Start solving on-demand columns ahead of contact, if some contact could need them; before
+        any of the run's threads start (the worker is forked)."""
+        if self._prefetcher is None and _on_demand(self._tissue):
+            self._prefetcher = Prefetcher(self._tissue)
+
     def close(self) -> None:
-        """Stop the background prefetch worker."""
+        """Stop the background prefetch worker (runs do at their end)."""
         if self._prefetcher is not None:
-            self._prefetcher.close()
+            prefetcher, self._prefetcher = self._prefetcher, None
+            prefetcher.close()
 
     def _result(self, end: float, wall: float) -> RunResult:
         return RunResult(
@@ -460,17 +419,21 @@ class Simulation:
         heapq.heapify(queue)
         start_wall = wallclock.perf_counter()
         now = 0.0
-        while self.stop_reason is None:
-            now, rank, count, layer = queue[0]
-            if now > duration:
-                break
-            began = wallclock.perf_counter()
-            try:
-                steps[layer](now)
-            except Exception as error:  # any layer's failure stops the session cleanly
-                self.fail(layer, now, error)
-            self.telemetry[layer].record(now, wallclock.perf_counter() - began)
-            heapq.heapreplace(queue, ((count + 1) * periods[layer], rank, count + 1, layer))
+        self._start_prefetching()
+        try:
+            while self.stop_reason is None:
+                now, rank, count, layer = queue[0]
+                if now > duration:
+                    break
+                began = wallclock.perf_counter()
+                try:
+                    steps[layer](now)
+                except Exception as error:  # any layer's failure stops the session cleanly
+                    self.fail(layer, now, error)
+                self.telemetry[layer].record(now, wallclock.perf_counter() - began)
+                heapq.heapreplace(queue, ((count + 1) * periods[layer], rank, count + 1, layer))
+        finally:
+            self.close()
         self._wind_down(now)
         return self._result(min(now, duration), wallclock.perf_counter() - start_wall)
 
@@ -478,4 +441,8 @@ class Simulation:
         """Wall-clock time: the haptic layer in its own process, the others in threads."""
         from sim.runtime.realtime import run_realtime
 
-        return run_realtime(self, duration, pin_cpus)
+        self._start_prefetching()
+        try:
+            return run_realtime(self, duration, pin_cpus)
+        finally:
+            self.close()

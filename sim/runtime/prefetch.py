@@ -1,0 +1,168 @@
+"""On-demand contact columns solved ahead of contact, in a process of their own.
+
+A contact on nodes whose K0^-1 columns are not known needs a sparse solve (~20 ms
+per node on a 10k-node mesh). scikit-sparse keeps the interpreter lock during a
+CHOLMOD solve, so a solve in any thread of the simulation process stops the FEM and
+graphics threads for its whole length. :class:`ColumnWorker` therefore forks a
+process that inherits the parent's factorisation and solves there; the parent only
+waits on a pipe (which releases the lock) and caches what comes back.
+:class:`Prefetcher` asks it for the surface nodes near the needle tip, nearest
+first, so a contact change rarely waits for a solve at all.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import threading
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.errors import SolverError
+from sim.fem import BiphaseTissue, TissueModel
+
+WORKER_NICENESS = 10
+"""The column worker yields to the simulation's own layers (FEM, graphics, display)."""
+
+
+class ColumnWorker:
+    """A forked process solving columns of ``model``'s K0^-1 with the factorisation it inherited.
+
+    ``solve(nodes)`` returns the (3N, 3k) columns at the nodes' dofs, exactly what the model
+    would solve itself; it is safe to call from several threads (one request at a time).
+    """
+
+    def __init__(self, model: TissueModel) -> None:
+        import multiprocessing
+
+        model.factorize()  # in this process: the child inherits it (factorising after fork deadlocks)
+        self.model = model
+        self._owner = os.getpid()
+        self._lock = threading.Lock()
+        context = multiprocessing.get_context("fork")
+        self._pipe, child_end = context.Pipe()
+        self._process = context.Process(
+            target=_serve, args=(model, child_end), name="vascsim-columns", daemon=True
+        )
+        self._process.start()
+        child_end.close()
+
+    def solve(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
+        ids = np.ascontiguousarray(nodes, dtype=np.int64)
+        if os.getpid() != self._owner:  # a process forked later (the display) solves with its own copy
+            return self.model.solve_columns(ids)
+        with self._lock:
+            try:
+                self._pipe.send_bytes(ids.tobytes())
+                answer = self._pipe.recv_bytes()
+            except (EOFError, OSError) as error:
+                status = self._process.exitcode
+                raise SolverError(
+                    f"the column worker process stopped (exit code {status}); columns of nodes "
+                    f"{ids.tolist()} were not solved"
+                ) from error
+        if answer[:1] != b"O":  # "O" + columns, or "E" + the worker's error
+            message = answer[1:].decode(errors="replace")
+            raise SolverError(f"the column worker could not solve nodes {ids.tolist()}: {message}")
+        rows = 3 * self.model.mesh.n_nodes
+        return np.frombuffer(answer, dtype=np.float64, offset=1).reshape(3 * len(ids), rows).T
+
+    def close(self) -> None:
+        with self._lock:
+            try:
+                self._pipe.send_bytes(b"")
+            except OSError:
+                pass
+            self._pipe.close()
+        self._process.join(timeout=5.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+
+
+def _serve(model: TissueModel, pipe) -> None:
+    """The worker's loop: node ids in, columns out (row-major (3k, 3N) float64); empty request = stop."""
+    from threadpoolctl import threadpool_limits
+
+    os.nice(WORKER_NICENESS)
+    with threadpool_limits(1):
+        while True:
+            try:
+                request = pipe.recv_bytes()
+            except (EOFError, OSError):
+                return
+            if not request:
+                return
+            nodes = np.frombuffer(request, dtype=np.int64)
+            try:
+                columns = model.solve_columns(nodes)
+            except Exception as error:  # sent back and raised in the parent, with the nodes named
+                pipe.send_bytes(b"E" + f"{type(error).__name__}: {error}".encode())
+                continue
+            pipe.send_bytes(b"O" + np.ascontiguousarray(columns.T).tobytes())
+
+
+def _own_inverse_models(tissue: TissueModel | BiphaseTissue) -> list[TissueModel]:
+    """The models that solve their own columns (a biphase stiff phase sharing the soft inverse does not)."""
+    models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
+    return [model for model in models if model._inverse_of is None]
+
+
+class Prefetcher:
+    """A background thread asking column workers for the nodes the needle approaches."""
+
+    def __init__(self, tissue: TissueModel | BiphaseTissue) -> None:
+        self.models = _own_inverse_models(tissue)
+        self.on_demand = any(model.precomputation is None for model in self.models)
+        self.workers = [ColumnWorker(model) for model in self.models]
+        for model, worker in zip(self.models, self.workers, strict=True):
+            model.column_solver = worker.solve
+        mesh = tissue.mesh
+        self._nodes = (
+            mesh.surface_nodes
+        )  # the exit can be on any face (lumen, wound edge), not only candidates
+        self._points = mesh.points[self._nodes]
+        self._requested: set[int] = set()
+        self._queue: collections.deque = collections.deque()
+        self._wake = threading.Event()
+        self._closed = False
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._work, name="vascsim-prefetch", daemon=True)
+        self._thread.start()
+
+    def near(self, point: NDArray[np.float64], radius: float) -> None:
+        """Ask for the surface nodes within ``radius`` of ``point`` not requested yet, nearest first."""
+        if self.error is not None:
+            raise SolverError(f"column prefetching failed: {self.error}") from self.error
+        squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
+        close = np.flatnonzero(squared <= radius * radius)
+        close = self._nodes[close[np.argsort(squared[close])]]
+        fresh = [int(n) for n in close if int(n) not in self._requested]
+        if fresh:
+            self._requested.update(fresh)
+            self._queue.appendleft(fresh)  # the newest request is where the needle is now
+            self._wake.set()
+
+    def _work(self) -> None:
+        try:
+            while not self._closed:
+                self._wake.wait(0.1)
+                self._wake.clear()
+                while self._queue and not self._closed:
+                    batch = self._queue.popleft()
+                    chunk, rest = batch[:1], batch[1:]  # one node at a time: newer requests overtake
+                    if rest:
+                        self._queue.appendleft(rest)
+                    for model in self.models:
+                        model.prefetch(np.array(chunk))
+        except BaseException as error:  # raised in the graphics layer at its next request
+            self.error = error
+
+    def close(self) -> None:
+        self._closed = True
+        self._wake.set()
+        self._thread.join(timeout=10.0)
+        for model, worker in zip(self.models, self.workers, strict=True):
+            model.column_solver = None
+            worker.close()

@@ -1,0 +1,72 @@
+"""On-demand columns solved in a worker process: the same columns, errors that name the nodes, no
+solve in the simulation process (where a CHOLMOD solve would hold the interpreter lock)."""
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from sim.errors import SolverError
+from sim.fem import BiphaseTissue, Material, TissueModel
+from sim.runtime.prefetch import ColumnWorker, Prefetcher
+
+
+@pytest.fixture
+def model(small_box):
+    return TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"])
+
+
+def test_the_worker_solves_exactly_the_columns_the_model_would(model):
+    worker = ColumnWorker(model)
+    try:
+        nodes = np.array([5, 17, 3])
+        np.testing.assert_array_equal(worker.solve(nodes), model.solve_columns(nodes))
+    finally:
+        worker.close()
+
+
+def test_a_dead_worker_is_named_with_the_nodes_it_did_not_solve(model):
+    worker = ColumnWorker(model)
+    os.kill(worker._process.pid, signal.SIGKILL)
+    worker._process.join()
+    with pytest.raises(SolverError, match=r"column worker process stopped .*nodes \[4, 9\]"):
+        worker.solve(np.array([4, 9]))
+    worker.close()
+
+
+def test_a_failing_solve_is_reported_not_swallowed(model):
+    worker = ColumnWorker(model)
+    try:
+        with pytest.raises(SolverError, match=r"could not solve nodes \[100000\]: IndexError"):
+            worker.solve(np.array([100000]))
+        assert worker.solve(np.array([1])).shape == (3 * model.mesh.n_nodes, 3)  # still serving
+    finally:
+        worker.close()
+
+
+def test_prefetched_columns_come_from_the_worker_process(small_box, monkeypatch):
+    tissue = BiphaseTissue.build(small_box, small_box.node_sets["z0"])
+    expected = {n: tissue.soft.solve_columns(np.array([n])) for n in (0, 1)}
+    prefetcher = Prefetcher(tissue)
+    assert prefetcher.models == [tissue.soft]  # the stiff phase shares the soft inverse: nothing to solve
+
+    def not_here(nodes):
+        raise AssertionError("a column was solved in the simulation process")
+
+    monkeypatch.setattr(tissue.soft, "solve_columns", not_here)  # the forked worker kept the real one
+    try:
+        prefetcher.near(small_box.points[0], radius=1e-9)  # node 0 only
+        prefetcher.near(small_box.points[1], radius=1e-9)
+        deadline = time.monotonic() + 30
+        while (
+            0 not in tissue.soft._columns or 1 not in tissue.soft._columns
+        ) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert prefetcher.error is None
+        np.testing.assert_array_equal(tissue.soft._nodes_columns(np.array([0])), expected[0])
+        np.testing.assert_array_equal(tissue.stiff._nodes_columns(np.array([1])), expected[1] / 2.0)
+    finally:
+        prefetcher.close()
+    assert tissue.soft.column_solver is None and not prefetcher.workers[0]._process.is_alive()
