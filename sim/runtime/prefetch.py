@@ -21,7 +21,10 @@ from numpy.typing import NDArray
 
 from sim.errors import SolverError
 from sim.fem import BiphaseTissue, TissueModel
+from sim.geometry import ray_triangle_distances
 
+AHEAD_NODES = 6
+"""Surface nodes nearest the point the tip is heading for, solved right after that triangle's own."""
 WORKER_NICENESS = 10
 """The column worker yields to the simulation's own layers (FEM, graphics, display)."""
 
@@ -119,10 +122,11 @@ class Prefetcher:
         for model, worker in zip(self.models, self.workers, strict=True):
             model.column_solver = worker.solve
         mesh = tissue.mesh
-        self._nodes = (
-            mesh.surface_nodes
-        )  # the exit can be on any face (lumen, wound edge), not only candidates
+        # an exit can be on any face (lumen, wound edge), not only on contact candidates
+        self._nodes = mesh.surface_nodes
         self._points = mesh.points[self._nodes]
+        self._triangles = mesh.surface_triangles
+        self._corners = mesh.points[self._triangles]
         self._requested: set[int] = set()
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
@@ -143,6 +147,33 @@ class Prefetcher:
             self._requested.update(fresh)
             self._queue.appendleft(fresh)  # the newest request is where the needle is now
             self._wake.set()
+
+    def ahead(self, tip: NDArray[np.float64], direction: NDArray[np.float64], reach: float) -> None:
+        """Ask first for the nodes of the surface triangle the tip is heading for: the first one a ray
+        from ``tip`` along ``direction`` meets within ``reach`` (m), and the nodes around it."""
+        if self.error is not None:
+            raise SolverError(f"column prefetching failed: {self.error}") from self.error
+        unit = direction / max(float(np.linalg.norm(direction)), 1e-300)
+        distances = ray_triangle_distances(tip, unit, self._corners)
+        first = int(np.argmin(distances))
+        if not distances[first] <= reach:
+            return
+        hit = tip + distances[first] * unit
+        squared = np.einsum("ij,ij->i", self._points - hit, self._points - hit)
+        around = self._nodes[np.argsort(squared)[:AHEAD_NODES]]
+        heading = list(dict.fromkeys([*map(int, self._triangles[first]), *map(int, around)]))
+        waiting = [n for n in heading if self._needs_columns(n)]
+        if waiting:
+            self._requested.update(waiting)
+            self._queue.appendleft(waiting)  # before everything else: this is where the next contact is
+            self._wake.set()
+
+    def _needs_columns(self, node: int) -> bool:
+        """Whether some model has neither precomputed nor cached columns for ``node``."""
+        return any(
+            (model.precomputation is None or model._candidate_row[node] < 0) and node not in model._columns
+            for model in self.models
+        )
 
     def _work(self) -> None:
         try:

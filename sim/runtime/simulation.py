@@ -52,6 +52,8 @@ class RuntimeSettings:
     prefetch_radius: in on-demand mode the graphics layer asks a background worker to
     solve the contact columns of surface nodes within this distance of the needle tip,
     so a contact change rarely waits for a solve.
+    prefetch_reach: before those, the nodes of the surface triangle a ray along the tip's
+    tangent meets within this distance (m): the next contact, or the exit face.
     """
 
     haptic_rate: float = 1000.0
@@ -61,6 +63,7 @@ class RuntimeSettings:
     force_delay: float = 1.0 / 30.0
     safety: SafetySettings = field(default_factory=SafetySettings)
     prefetch_radius: float = 0.002
+    prefetch_reach: float = 0.01
 
     def __post_init__(self) -> None:
         if not 200.0 <= self.fem_rate <= 1000.0:
@@ -72,6 +75,9 @@ class RuntimeSettings:
         for name in ("graphics_rate", "display_rate"):
             if not 1.0 <= getattr(self, name) <= 240.0:
                 raise RuntimeError_(f"{name} must be 1-240 Hz; got {getattr(self, name)}")
+        for name in ("prefetch_radius", "prefetch_reach"):
+            if not 0.0 <= getattr(self, name) <= 0.1:
+                raise RuntimeError_(f"{name} must be 0-0.1 m; got {getattr(self, name)}")
         if not 0.0 <= self.force_delay <= 0.2:
             raise RuntimeError_(f"force_delay must be 0-0.2 s; got {self.force_delay}")
 
@@ -331,7 +337,10 @@ class Simulation:
         ):
             # Precomputed models only need columns for nodes off the candidates, i.e. where
             # a needle inside the wall may come out.
-            self._prefetcher.near(fem.needle_vertices[0], self.settings.prefetch_radius)
+            tip = fem.needle_vertices[0]
+            if fem.tip_tangent is not None:
+                self._prefetcher.ahead(tip, fem.tip_tangent, self.settings.prefetch_reach)
+            self._prefetcher.near(tip, self.settings.prefetch_radius)
         self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
         if self.on_graphics is not None:
             self.on_graphics(now, fem)

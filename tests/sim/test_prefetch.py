@@ -70,3 +70,26 @@ def test_prefetched_columns_come_from_the_worker_process(small_box, monkeypatch)
     finally:
         prefetcher.close()
     assert tissue.soft.column_solver is None and not prefetcher.workers[0]._process.is_alive()
+
+
+def test_the_triangle_the_tip_heads_for_is_solved_first(small_box):
+    from sim.geometry import ray_triangle_distances
+
+    tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"])
+    top = small_box.points[:, 2].max()
+    tip = np.array([0.0021, 0.0023, top + 0.002])
+    down = np.array([0.0, 0.0, -1.0])
+    corners = small_box.points[small_box.surface_triangles]
+    expected = small_box.surface_triangles[np.argmin(ray_triangle_distances(tip, down, corners))]
+    prefetcher = Prefetcher(tissue)
+    try:
+        prefetcher._closed = True  # keep the request queue as asked, unserved
+        prefetcher._thread.join()
+        prefetcher.near(tip, radius=0.01)  # a wide sphere first ...
+        prefetcher.ahead(tip, down, reach=0.01)  # ... is overtaken by where the tip is going
+        assert prefetcher._queue[0][:3] == [int(n) for n in expected]
+        prefetcher.ahead(tip, -down, reach=0.01)  # heading away: nothing new
+        prefetcher.ahead(tip, down, reach=0.001)  # out of reach: nothing new
+        assert len(prefetcher._queue) == 2
+    finally:
+        prefetcher.close()
