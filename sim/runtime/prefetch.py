@@ -89,6 +89,9 @@ def _serve(model: TissueModel, pipe) -> None:
     from threadpoolctl import threadpool_limits
 
     os.nice(WORKER_NICENESS)
+    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    if len(cores) > 1:  # off the last core, which the real-time haptic process takes
+        os.sched_setaffinity(0, set(cores[:-1]))
     with threadpool_limits(1):
         while True:
             try:
@@ -127,6 +130,8 @@ class Prefetcher:
         self._points = mesh.points[self._nodes]
         self._triangles = mesh.surface_triangles
         self._corners = mesh.points[self._triangles]
+        self._centres = self._corners.mean(axis=1)
+        self._radii = np.linalg.norm(self._corners - self._centres[:, None], axis=2).max(axis=1)
         self._requested: set[int] = set()
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
@@ -154,14 +159,19 @@ class Prefetcher:
         if self.error is not None:
             raise SolverError(f"column prefetching failed: {self.error}") from self.error
         unit = direction / max(float(np.linalg.norm(direction)), 1e-300)
-        distances = ray_triangle_distances(tip, unit, self._corners)
+        # only triangles whose bounding sphere is within reach of the tip can be met
+        offset = self._centres - tip
+        near = np.flatnonzero(np.einsum("ij,ij->i", offset, offset) <= (reach + self._radii) ** 2)
+        if near.size == 0:
+            return
+        distances = ray_triangle_distances(tip, unit, self._corners[near])
         first = int(np.argmin(distances))
         if not distances[first] <= reach:
             return
         hit = tip + distances[first] * unit
         squared = np.einsum("ij,ij->i", self._points - hit, self._points - hit)
-        around = self._nodes[np.argsort(squared)[:AHEAD_NODES]]
-        heading = list(dict.fromkeys([*map(int, self._triangles[first]), *map(int, around)]))
+        around = self._nodes[np.argpartition(squared, AHEAD_NODES)[:AHEAD_NODES]]
+        heading = list(dict.fromkeys([*map(int, self._triangles[near[first]]), *map(int, around)]))
         waiting = [n for n in heading if self._needs_columns(n)]
         if waiting:
             self._requested.update(waiting)
