@@ -209,13 +209,18 @@ class RunResult:
 
 
 def _on_demand(tissue: TissueModel | BiphaseTissue) -> bool:
-    """Whether some contact could need columns solved on demand (no precomputation, or
-    surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through)."""
+    """Whether some contact could need columns solved on demand (no precomputation, or free
+    surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through;
+    nodes held fixed on all three axes are not worth a worker: the tissue is clamped there)."""
     models = (tissue.soft, tissue.stiff) if isinstance(tissue, BiphaseTissue) else (tissue,)
-    return any(
-        model.precomputation is None or len(np.setdiff1d(tissue.mesh.surface_nodes, model.contact_nodes))
-        for model in models
-    )
+    for model in models:
+        if model.precomputation is None:
+            return True
+        fixed = np.flatnonzero(np.bincount(model.fixed_dofs // 3, minlength=tissue.mesh.n_nodes) == 3)
+        free_surface = np.setdiff1d(tissue.mesh.surface_nodes, fixed)
+        if len(np.setdiff1d(free_surface, model.contact_nodes)):
+            return True
+    return False
 
 
 class Simulation:
@@ -426,9 +431,9 @@ class Simulation:
         # (scheduled time, layer order, step count, layer): times are count * period, exact.
         queue = [(0.0, i, 0, layer) for i, layer in enumerate(LAYERS)]
         heapq.heapify(queue)
+        self._start_prefetching()
         start_wall = wallclock.perf_counter()
         now = 0.0
-        self._start_prefetching()
         try:
             while self.stop_reason is None:
                 now, rank, count, layer = queue[0]

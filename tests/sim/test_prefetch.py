@@ -93,3 +93,17 @@ def test_the_triangle_the_tip_heads_for_is_solved_first(small_box):
         assert len(prefetcher._queue) == 2
     finally:
         prefetcher.close()
+
+
+def test_a_worker_is_started_only_where_a_contact_could_need_columns(small_box, tmp_path):
+    from sim.runtime.simulation import _on_demand
+
+    fixed = small_box.node_sets["z0"]
+    on_demand = TissueModel(small_box, Material(20e3, 0.45), fixed)
+    assert _on_demand(on_demand)
+    every_free_node = TissueModel(small_box, Material(20e3, 0.45), fixed)
+    every_free_node.precompute(tmp_path)  # candidates: every surface node not clamped
+    assert not _on_demand(every_free_node)
+    top_only = TissueModel(small_box, Material(20e3, 0.45), fixed, contact_nodes=small_box.node_sets["z1"])
+    top_only.precompute(tmp_path)  # the sides are free surface outside the candidates
+    assert _on_demand(top_only)
