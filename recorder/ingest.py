@@ -283,17 +283,6 @@ class IngestStore:
                     self._sessions[key] = opened
             return self._sessions[key]
 
-    def accept(
-        self, station: str, session_id: str, stream: str, sequence: int, body: bytes
-    ) -> dict[str, Any]:
-        """Store one batch durably (or recognise it as already stored); the acknowledgement, or
-        RemoteError. The web application uses ``stage`` and a group commit instead."""
-        session = self.session(station, session_id)
-        answer, journal = self.stage(session, stream, sequence, body)
-        if journal is not None:
-            journal.sync()
-        return answer
-
     def stage(
         self, session: _RemoteSession, stream: str, sequence: int, body: bytes
     ) -> tuple[dict[str, Any], _Journal | None]:

@@ -126,26 +126,30 @@ class TissueFieldReplay:
         self._surface = self.mesh.surface_elements
         self._cache: dict[tuple[int, ...], list[tuple[object, NDArray, NDArray]]] = {}
         self._cache_size = cache_size
-        phases = _phases(tissue)
         # A phase whose K0 is s times the first one's (the biphase stiff phase with one Poisson
         # ratio) has columns G/s and a stress operator s*S: the same stress per unit reaction and
         # reactions s times the first phase's for the same drive, so it needs no arrays of its own.
-        self._scales = [1.0] + [_scale_to(model, phases[0]) for model in phases[1:]]
-        self._stress_operators = [
-            surface_stress_operator(model, self._surface)
-            for model, scale in zip(phases, self._scales, strict=True)
-            if scale is None or model is phases[0]
-        ]
+        # _layout: per phase, (index of the arrays it uses in _part_models, its reaction scale).
+        phases = _phases(tissue)
+        self._part_models: list[TissueModel] = []
+        self._layout: list[tuple[int, float]] = []
+        for model in phases:
+            source = model.inverse_source
+            if source is not None and source[0] is phases[0]:
+                self._layout.append((0, source[1]))
+            else:
+                self._layout.append((len(self._part_models), 1.0))
+                self._part_models.append(model)
+        self._stress_operators = [surface_stress_operator(m, self._surface) for m in self._part_models]
 
     def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray, NDArray]]:
-        """Per phase: the contact handle, K0^-1 columns at the contact dofs (3N, 3k), and the surface
-        elements' stress per unit reaction (3k, F, 3, 3), so a frame is two small products."""
+        """Per model with arrays of its own: the contact handle, K0^-1 columns at the contact dofs
+        (3N, 3k), and the surface elements' stress per unit reaction (3k, F, 3, 3)."""
         key = tuple(int(n) for n in nodes)
         parts = self._cache.get(key)
         if parts is None:
             parts = []
-            own = [m for m, scale in zip(_phases(self.tissue), self._scales, strict=True) if scale is None]
-            for model, operator in zip(_phases(self.tissue)[:1] + own, self._stress_operators, strict=True):
+            for model, operator in zip(self._part_models, self._stress_operators, strict=True):
                 columns = model._nodes_columns(nodes)
                 unit_stress = (operator @ columns).T.reshape(columns.shape[1], len(self._surface), 3, 3)
                 parts.append((model.contact(nodes), columns, unit_stress))
@@ -174,30 +178,24 @@ class TissueFieldReplay:
             return np.zeros((self.mesh.n_nodes, 3)), np.zeros(len(self._surface))
         share = self.soft_share(ids, drive, needle_speed)
         parts = self._phase_parts(ids)
-        own = iter(parts[1:])
-        # per distinct set of arrays: the reactions its displacement and its stress answer to
-        by_part: dict[int, list] = {}
-        for scale, fraction in zip(self._scales, (share, 1.0 - share), strict=False):
-            part = parts[0] if scale is not None else next(own)
+        # per set of arrays: the reactions its displacement (G/s . sR) and its stress (S G . sR) take
+        displacement_reactions: list = [None] * len(parts)
+        stress_reactions: list = [None] * len(parts)
+        for (index, scale), fraction in zip(self._layout, (share, 1.0 - share), strict=False):
             if fraction == 0.0:
                 continue
-            handle = part[0]
-            reactions = handle.reaction_forces(fraction * drive).reshape(-1)  # of the part's own model
-            sums = by_part.setdefault(id(part), [part, 0.0, 0.0])
-            sums[1] = sums[1] + reactions  # displacement: G/s times s R
-            sums[2] = sums[2] + (scale if scale is not None else 1.0) * reactions  # stress: S G R s
+            reactions = parts[index][0].reaction_forces(fraction * drive).reshape(-1)
+            for sums, value in ((displacement_reactions, reactions), (stress_reactions, scale * reactions)):
+                sums[index] = value if sums[index] is None else sums[index] + value
         displacement = np.zeros((self.mesh.n_nodes, 3))
         stress = np.zeros((len(self._surface), 3, 3))
-        for (_, columns, unit_stress), displacement_reactions, stress_reactions in by_part.values():
-            displacement += (columns @ displacement_reactions).reshape(-1, 3)
-            stress += np.tensordot(stress_reactions, unit_stress, axes=1)
+        for (_, columns, unit_stress), moved, stressed in zip(
+            parts, displacement_reactions, stress_reactions, strict=True
+        ):
+            if moved is not None:
+                displacement += (columns @ moved).reshape(-1, 3)
+                stress += np.tensordot(stressed, unit_stress, axes=1)
         return displacement, von_mises_of_stress(stress)
-
-
-def _scale_to(model: TissueModel, base: TissueModel) -> float | None:
-    """s if ``model`` takes its K0^-1 from ``base`` as K0_base^-1 / s (TissueModel.share_inverse_with)."""
-    shared = model._inverse_of
-    return shared[1] if shared is not None and shared[0] is base else None
 
 
 def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):

@@ -102,9 +102,10 @@ class TissueModel:
                 "the nodes the vessel is held by (e.g. mesh.node_sets['z0'])"
             )
         _check_rigid_motion_fixed(mesh.points, self.fixed_dofs)
-        fully_fixed = np.flatnonzero(np.bincount(self.fixed_dofs // 3, minlength=mesh.n_nodes) == 3)
+        self.clamped_nodes = np.flatnonzero(np.bincount(self.fixed_dofs // 3, minlength=mesh.n_nodes) == 3)
+        """Nodes held on all three axes."""
         if contact_nodes is None:
-            candidates = np.setdiff1d(mesh.surface_nodes, fully_fixed)
+            candidates = np.setdiff1d(mesh.surface_nodes, self.clamped_nodes)
         else:
             candidates = _node_ids(contact_nodes, mesh.n_nodes, "contact_nodes")
         if candidates.size == 0:
@@ -186,6 +187,18 @@ class TissueModel:
             return None
         self._inverse_of = (base, scale)
         return scale
+
+    @property
+    def inverse_source(self) -> tuple[TissueModel, float] | None:
+        """(base, s) when this model takes K0^-1 as base's divided by s (:meth:`share_inverse_with`)."""
+        return self._inverse_of
+
+    def needs_solve(self, node: int) -> bool:
+        """Whether a contact on ``node`` would need its columns solved (not precomputed, not cached)."""
+        if self._inverse_of is not None:
+            return self._inverse_of[0].needs_solve(node)
+        precomputed = self._precomputed is not None and self._candidate_row[node] >= 0
+        return not precomputed and node not in self._columns
 
     def _stiffness_scale_of(self, base: TissueModel) -> float | None:
         """s with K0 = s K0_base, or None."""

@@ -112,7 +112,7 @@ def _serve(model: TissueModel, pipe) -> None:
 def _own_inverse_models(tissue: TissueModel | BiphaseTissue) -> list[TissueModel]:
     """The models that solve their own columns (a biphase stiff phase sharing the soft inverse does not)."""
     models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
-    return [model for model in models if model._inverse_of is None]
+    return [model for model in models if model.inverse_source is None]
 
 
 class Prefetcher:
@@ -142,8 +142,7 @@ class Prefetcher:
 
     def near(self, point: NDArray[np.float64], radius: float) -> None:
         """Ask for the surface nodes within ``radius`` of ``point`` not requested yet, nearest first."""
-        if self.error is not None:
-            raise SolverError(f"column prefetching failed: {self.error}") from self.error
+        self._raise_if_failed()
         squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
         close = np.flatnonzero(squared <= radius * radius)
         close = self._nodes[close[np.argsort(squared[close])]]
@@ -156,8 +155,7 @@ class Prefetcher:
     def ahead(self, tip: NDArray[np.float64], direction: NDArray[np.float64], reach: float) -> None:
         """Ask first for the nodes of the surface triangle the tip is heading for: the first one a ray
         from ``tip`` along ``direction`` meets within ``reach`` (m), and the nodes around it."""
-        if self.error is not None:
-            raise SolverError(f"column prefetching failed: {self.error}") from self.error
+        self._raise_if_failed()
         unit = direction / max(float(np.linalg.norm(direction)), 1e-300)
         # only triangles whose bounding sphere is within reach of the tip can be met
         offset = self._centres - tip
@@ -172,18 +170,16 @@ class Prefetcher:
         squared = np.einsum("ij,ij->i", self._points - hit, self._points - hit)
         around = self._nodes[np.argpartition(squared, AHEAD_NODES)[:AHEAD_NODES]]
         heading = list(dict.fromkeys([*map(int, self._triangles[near[first]]), *map(int, around)]))
-        waiting = [n for n in heading if self._needs_columns(n)]
+        waiting = [n for n in heading if any(model.needs_solve(n) for model in self.models)]
         if waiting:
             self._requested.update(waiting)
             self._queue.appendleft(waiting)  # before everything else: this is where the next contact is
             self._wake.set()
 
-    def _needs_columns(self, node: int) -> bool:
-        """Whether some model has neither precomputed nor cached columns for ``node``."""
-        return any(
-            (model.precomputation is None or model._candidate_row[node] < 0) and node not in model._columns
-            for model in self.models
-        )
+    def _raise_if_failed(self) -> None:
+        """The worker thread's failure, raised in the asking (graphics) layer."""
+        if self.error is not None:
+            raise SolverError(f"column prefetching failed: {self.error}") from self.error
 
     def _work(self) -> None:
         try:

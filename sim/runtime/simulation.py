@@ -216,8 +216,7 @@ def _on_demand(tissue: TissueModel | BiphaseTissue) -> bool:
     for model in models:
         if model.precomputation is None:
             return True
-        fixed = np.flatnonzero(np.bincount(model.fixed_dofs // 3, minlength=tissue.mesh.n_nodes) == 3)
-        free_surface = np.setdiff1d(tissue.mesh.surface_nodes, fixed)
+        free_surface = np.setdiff1d(tissue.mesh.surface_nodes, model.clamped_nodes)
         if len(np.setdiff1d(free_surface, model.contact_nodes)):
             return True
     return False
