@@ -111,6 +111,6 @@ def list_sessions(root: str | Path) -> tuple[list[Session], dict[Path, str]]:
 
 
 def _stream_name(schema: pa.Schema) -> str:
-    """"samples", "events" or "scene": the stream a schema describes, for messages."""
+    """ "samples", "events" or "scene": the stream a schema describes, for messages."""
     metadata = schema.metadata or {}
     return (metadata.get(b"vascsim.schema") or metadata.get(b"stream") or b"expected").decode()

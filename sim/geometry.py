@@ -33,6 +33,50 @@ def ray_triangle_distances(
     return np.where(hit, t, np.inf)
 
 
+def bounding_spheres(triangles: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(T, 3) centroids and (T,) radii (m) of spheres around each triangle of (T, 3, 3) corners.
+
+    Every point of a triangle lies within its sphere (the sphere is convex and holds all corners).
+    """
+    centres = triangles.mean(axis=1)
+    radii = np.linalg.norm(triangles - centres[:, None], axis=2).max(axis=1)
+    return centres, radii
+
+
+def ray_may_hit(
+    origin: NDArray[np.float64],
+    unit: NDArray[np.float64],
+    centres: NDArray[np.float64],
+    radii: NDArray[np.float64],
+    reach: float = np.inf,
+) -> NDArray[np.int64]:
+    """Indices of the triangles a ray from ``origin`` along ``unit`` (unit length) may meet within
+    ``reach`` (m): those whose bounding sphere it passes through. Conservative: a triangle the ray
+    meets is always among them, so :func:`ray_triangle_distances` on these alone gives the same
+    nearest hit as on all triangles, at a fraction of the cost on a large surface."""
+    offset = centres - origin
+    along = offset @ unit
+    across = np.einsum("ij,ij->i", offset, offset) - along * along
+    margin = radii * (1.0 + 1e-9) + 1e-12
+    keep = (across <= margin * margin) & (along >= -margin) & (along <= reach + margin)
+    return np.flatnonzero(keep)
+
+
+def circle_through(
+    a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float] | None:
+    """Centre (3,) and radius (m) of the circle through three points, None when they are collinear."""
+    ab, ac = b - a, c - a
+    normal = np.cross(ab, ac)
+    squared = float(np.dot(normal, normal))
+    if squared <= 1e-18 * float(np.dot(ab, ab)) * float(np.dot(ac, ac)):
+        return None
+    centre = a + (np.dot(ac, ac) * np.cross(normal, ab) + np.dot(ab, ab) * np.cross(ac, normal)) / (
+        2.0 * squared
+    )
+    return centre, float(np.linalg.norm(a - centre))
+
+
 def vertex_normals(points: NDArray[np.float64], triangles: NDArray[np.int64]) -> NDArray[np.float64]:
     """(N, 3) area-weighted unit normals at vertices (zero for vertices on no triangle)."""
     a, b, c = (points[triangles[:, k]] for k in range(3))

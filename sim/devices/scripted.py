@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.devices.base import SCRIPTED_LIMITS, DeviceError, DeviceIdentity, DeviceLimits, DeviceSample
+from sim.geometry import circle_through
 from sim.needle import Needle, Pose, rotation_about
 
 Trajectory = Callable[[float], tuple[Pose, bool]]
@@ -368,16 +369,13 @@ def _unit(v: ArrayLike) -> NDArray[np.float64]:
 def _needle_circle(needle: Needle) -> tuple[NDArray[np.float64], float, float]:
     """(centre in the holder frame, arc angle swage -> tip (rad), radius) of a curved needle."""
     a, b, c = needle.vertices[0], needle.vertices[len(needle.vertices) // 2], needle.vertices[-1]
-    ab, ac = b - a, c - a
-    normal = np.cross(ab, ac)
-    if np.linalg.norm(normal) < 1e-15:
+    circle = circle_through(a, b, c)
+    if circle is None:
         raise DeviceError("a suturing pass needs a curved needle")
-    centre = a + (np.dot(ac, ac) * np.cross(normal, ab) + np.dot(ab, ab) * np.cross(ac, normal)) / (
-        2 * np.dot(normal, normal)
-    )
+    centre, radius = circle
     tip, swage = a - centre, c - centre
     angle = (math.atan2(tip[1], tip[0]) - math.atan2(swage[1], swage[0])) % (2 * math.pi)
-    return centre, angle, float(np.linalg.norm(tip))
+    return centre, angle, radius
 
 
 def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Trajectory, float]:

@@ -163,6 +163,10 @@ class BiphaseTissue:
         """Precompute both phases (the paper's Phi1 and Phi2)."""
         return (self.soft.precompute(cache_dir, use_cache), self.stiff.precompute(cache_dir, use_cache))
 
+    def warm_contact_caches(self) -> None:
+        """See :meth:`TissueModel.warm_contact_caches` (depths are cast in the soft phase)."""
+        self.soft.warm_contact_caches()
+
     def depth_under(self, nodes: NDArray[np.int64]) -> float:
         """Mean tissue depth (m) under contact nodes, cached per node."""
         for node in nodes:

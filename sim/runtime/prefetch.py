@@ -19,14 +19,42 @@ import threading
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.collision.mesh import CollisionMesh
 from sim.errors import SolverError
 from sim.fem import BiphaseTissue, TissueModel
-from sim.geometry import ray_triangle_distances
+from sim.geometry import circle_through
 
 AHEAD_NODES = 6
 """Surface nodes nearest the point the tip is heading for, solved right after that triangle's own."""
 WORKER_NICENESS = 10
 """The column worker yields to the simulation's own layers (FEM, graphics, display)."""
+
+
+def arc_ahead(needle_vertices: NDArray[np.float64], reach: float, segments: int = 16) -> NDArray[np.float64]:
+    """Where the tip goes if the needle keeps to its own curve: (segments + 1, 3) points (m) from the
+    tip along ``reach`` (m) of arc. A curved needle turned by the wrist follows its circle (the circle
+    through its tip, middle and swage vertices); a straight one its axis."""
+    tip, middle, swage = needle_vertices[0], needle_vertices[len(needle_vertices) // 2], needle_vertices[-1]
+    circle = circle_through(tip, middle, swage)
+    if circle is None:
+        return line_ahead(tip, tip - needle_vertices[1], reach)
+    centre, radius = circle
+    radial = (tip - centre) / radius
+    normal = np.cross(middle - centre, tip - centre)
+    forward = np.cross(normal, radial)  # in the needle's plane, perpendicular to the radius at the tip
+    forward /= np.linalg.norm(forward)
+    if forward @ (tip - middle) < 0:
+        forward = -forward
+    angles = np.linspace(0.0, reach / radius, segments + 1)
+    return centre + radius * (np.cos(angles)[:, None] * radial + np.sin(angles)[:, None] * forward)
+
+
+def line_ahead(tip: NDArray[np.float64], direction: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
+    """(2, 3) points: the tip and ``reach`` (m) further along ``direction`` (e.g. its motion)."""
+    length = float(np.linalg.norm(direction))
+    if not length > 0:
+        return tip[None].copy()
+    return np.stack([tip, tip + reach * direction / length])
 
 
 class ColumnWorker:
@@ -118,7 +146,7 @@ def _own_inverse_models(tissue: TissueModel | BiphaseTissue) -> list[TissueModel
 class Prefetcher:
     """A background thread asking column workers for the nodes the needle approaches."""
 
-    def __init__(self, tissue: TissueModel | BiphaseTissue) -> None:
+    def __init__(self, tissue: TissueModel | BiphaseTissue, collision: CollisionMesh | None = None) -> None:
         self.models = _own_inverse_models(tissue)
         self.on_demand = any(model.precomputation is None for model in self.models)
         self.workers = [ColumnWorker(model) for model in self.models]
@@ -129,9 +157,7 @@ class Prefetcher:
         self._nodes = mesh.surface_nodes
         self._points = mesh.points[self._nodes]
         self._triangles = mesh.surface_triangles
-        self._corners = mesh.points[self._triangles]
-        self._centres = self._corners.mean(axis=1)
-        self._radii = np.linalg.norm(self._corners - self._centres[:, None], axis=2).max(axis=1)
+        self._collision = collision or CollisionMesh(mesh)
         self._requested: set[int] = set()
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
@@ -152,25 +178,27 @@ class Prefetcher:
             self._queue.appendleft(fresh)  # the newest request is where the needle is now
             self._wake.set()
 
-    def ahead(self, tip: NDArray[np.float64], direction: NDArray[np.float64], reach: float) -> None:
-        """Ask first for the nodes of the surface triangle the tip is heading for: the first one a ray
-        from ``tip`` along ``direction`` meets within ``reach`` (m), and the nodes around it."""
+    def ahead(self, path: NDArray[np.float64]) -> None:
+        """Ask first for the nodes of the surface triangles a predicted tip path meets: ``path`` is
+        (P, 3) points (m) from the tip along the way it is going (:func:`arc_ahead`,
+        :func:`line_ahead`). The first two crossings count (the next contact, then the exit face on
+        the far side of the wall), each with the surface nodes nearest its crossing point."""
         self._raise_if_failed()
-        unit = direction / max(float(np.linalg.norm(direction)), 1e-300)
-        # only triangles whose bounding sphere is within reach of the tip can be met
-        offset = self._centres - tip
-        near = np.flatnonzero(np.einsum("ij,ij->i", offset, offset) <= (reach + self._radii) ** 2)
-        if near.size == 0:
+        if len(path) < 2:
             return
-        distances = ray_triangle_distances(tip, unit, self._corners[near])
-        first = int(np.argmin(distances))
-        if not distances[first] <= reach:
+        travelled = np.ascontiguousarray(path[::-1])  # the collision query wants the tip end first
+        hits = self._collision.query(travelled)
+        if len(hits) == 0:
             return
-        hit = tip + distances[first] * unit
-        squared = np.einsum("ij,ij->i", self._points - hit, self._points - hit)
-        around = self._nodes[np.argpartition(squared, AHEAD_NODES)[:AHEAD_NODES]]
-        heading = list(dict.fromkeys([*map(int, self._triangles[near[first]]), *map(int, around)]))
-        waiting = [n for n in heading if any(model.needs_solve(n) for model in self.models)]
+        along = len(path) - 2 - hits.segment  # path segment index, from the tip outwards
+        order = np.lexsort((hits.t, along))[:2]
+        points = hits.points(travelled[1:], travelled[:-1])[order]
+        heading: list[int] = []
+        for triangle, point in zip(hits.triangle[order], points, strict=True):
+            squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
+            around = self._nodes[np.argpartition(squared, AHEAD_NODES)[:AHEAD_NODES]]
+            heading += [*map(int, self._triangles[triangle]), *map(int, around)]
+        waiting = [n for n in dict.fromkeys(heading) if any(model.needs_solve(n) for model in self.models)]
         if waiting:
             self._requested.update(waiting)
             self._queue.appendleft(waiting)  # before everything else: this is where the next contact is

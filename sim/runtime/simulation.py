@@ -34,7 +34,7 @@ from sim.fem import BiphaseTissue, TissueModel
 from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
 from sim.runtime.logs import HapticColumns, interpolate_force
-from sim.runtime.prefetch import Prefetcher
+from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead
 from sim.runtime.safety import ForceSafety, SafetySettings
 from sim.runtime.telemetry import LayerSummary, LoopTelemetry
 
@@ -260,9 +260,13 @@ class Simulation:
         self.error_layer: str | None = None
         self._previous_frame: GraphicsSnapshot | None = None
         self._safety_seen = 0
-        self.contact_latencies: list[float] = []  # s, graphics frame -> first force for a new contact
+        self.contact_latencies: dict[str, list[float]] = {"contact_start": [], "exit": []}
+        """Wall seconds from the graphics frame that found a contact change (a first touch, or the
+        exit face) to the end of the FEM step that gave the exact forces for its triangle."""
         self._tissue = tissue
+        tissue.warm_contact_caches()
         self._prefetcher: Prefetcher | None = None  # started for the length of a run (a worker process)
+        self._previous_tip: NDArray[np.float64] | None = None  # at the last graphics frame
 
     # -- the four steps ----------------------------------------------------------------
     def haptic_step(self, now: float) -> None:
@@ -294,16 +298,16 @@ class Simulation:
             return
         for event in self.interaction.hold(holder.time, holder.pose, holder.grip):
             self._emit(event)
-        new_contact_since = None
+        changed: list[tuple[str, float]] = []
         while self.global_queue:
             frame_time, vertices, hits, posted = self.global_queue.popleft()
             for event in self.interaction.apply_global(frame_time, vertices, hits):
                 self._emit(event)
-                if event.kind == "contact_start":
-                    new_contact_since = posted
+                if event.kind in self.contact_latencies:
+                    changed.append((event.kind, posted))
         step = self.interaction.fem_step(now)
-        if new_contact_since is not None:
-            self.contact_latencies.append(wallclock.perf_counter() - new_contact_since)
+        for kind, posted in changed:
+            self.contact_latencies[kind].append(wallclock.perf_counter() - posted)
         for event in step.events:
             self._emit(event)
         self.forces.push(now, step.needle_force)
@@ -336,18 +340,31 @@ class Simulation:
         posted = wallclock.perf_counter()
         hits = self.interaction.collision.query(fem.needle_vertices)
         self.global_queue.append((now, fem.needle_vertices, hits, posted))
-        if self._prefetcher is not None and (
-            self._prefetcher.on_demand or fem.state in ("pierced", "exited")
-        ):
-            # Precomputed models only need columns for nodes off the candidates, i.e. where
-            # a needle inside the wall may come out.
-            tip = fem.needle_vertices[0]
-            if fem.tip_tangent is not None:
-                self._prefetcher.ahead(tip, fem.tip_tangent, self.settings.prefetch_reach)
-            self._prefetcher.near(tip, self.settings.prefetch_radius)
+        if self._prefetcher is not None:
+            self._prefetch_ahead_of(fem)
         self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
         if self.on_graphics is not None:
             self.on_graphics(now, fem)
+
+    def _prefetch_ahead_of(self, fem: FemSnapshot) -> None:
+        """Ask for the columns the next contact changes will need (graphics layer, on-demand columns).
+
+        Precomputed models only need columns for nodes off the candidates, i.e. where a needle in
+        the wall may come out: from the first touch on, the exit face its curve is heading for.
+        The path's crossings go ahead of the sphere around the tip (the later request is served first).
+        """
+        tip = fem.needle_vertices[0]
+        previous, self._previous_tip = self._previous_tip, tip
+        prefetcher, reach = self._prefetcher, self.settings.prefetch_reach
+        if not (prefetcher.on_demand or fem.state in ("contact", "pierced", "exited")):
+            return
+        if prefetcher.on_demand or fem.state in ("pierced", "exited"):
+            prefetcher.near(tip, self.settings.prefetch_radius)
+        if fem.state == "free":  # not yet touching: the needle goes where the hand moves it
+            if previous is not None:
+                prefetcher.ahead(line_ahead(tip, tip - previous, reach))
+        else:  # in contact or in the wall: the tip follows the needle's own curve
+            prefetcher.ahead(arc_ahead(fem.needle_vertices, reach))
 
     def display_step(self, now: float) -> None:
         frame, self._previous_frame = self._previous_frame, self.graphics.get()
@@ -397,7 +414,7 @@ class Simulation:
         """Start solving on-demand columns ahead of contact, if some contact could need them; before
         any of the run's threads start (the worker is forked)."""
         if self._prefetcher is None and _on_demand(self._tissue):
-            self._prefetcher = Prefetcher(self._tissue)
+            self._prefetcher = Prefetcher(self._tissue, self.interaction.collision)
 
     def close(self) -> None:
         """Stop the background prefetch worker (runs do at their end)."""

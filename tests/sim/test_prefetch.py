@@ -10,7 +10,7 @@ import pytest
 
 from sim.errors import SolverError
 from sim.fem import BiphaseTissue, Material, TissueModel
-from sim.runtime.prefetch import ColumnWorker, Prefetcher
+from sim.runtime.prefetch import ColumnWorker, Prefetcher, arc_ahead, line_ahead
 
 
 @pytest.fixture
@@ -86,13 +86,54 @@ def test_the_triangle_the_tip_heads_for_is_solved_first(small_box):
         prefetcher._closed = True  # keep the request queue as asked, unserved
         prefetcher._thread.join()
         prefetcher.near(tip, radius=0.01)  # a wide sphere first ...
-        prefetcher.ahead(tip, down, reach=0.01)  # ... is overtaken by where the tip is going
+        prefetcher.ahead(line_ahead(tip, down, reach=0.01))  # ... is overtaken by where the tip is going
         assert prefetcher._queue[0][:3] == [int(n) for n in expected]
-        prefetcher.ahead(tip, -down, reach=0.01)  # heading away: nothing new
-        prefetcher.ahead(tip, down, reach=0.001)  # out of reach: nothing new
+        prefetcher.ahead(line_ahead(tip, -down, reach=0.01))  # heading away: nothing new
+        prefetcher.ahead(line_ahead(tip, down, reach=0.001))  # out of reach: nothing new
         assert len(prefetcher._queue) == 2
     finally:
         prefetcher.close()
+
+
+def test_a_path_through_the_wall_asks_for_the_exit_face_after_the_entry(small_box):
+    """A path entering the top face and leaving through the bottom one: both faces' triangles, in order."""
+    tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["x0"])
+    low, high = small_box.points.min(axis=0), small_box.points.max(axis=0)
+    tip = np.array([0.41, 0.43, 0.0]) * (high - low) + low + [0, 0, (high - low)[2] + 1e-3]
+    path = line_ahead(tip, np.array([0.0, 0.0, -1.0]), reach=(high - low)[2] + 2e-3)
+    prefetcher = Prefetcher(tissue)
+    try:
+        prefetcher._closed = True
+        prefetcher._thread.join()
+        prefetcher.ahead(path)
+        heights = small_box.points[prefetcher._queue[0], 2]
+        assert np.allclose(heights[:3], high[2])  # the entry triangle first ...
+        on_bottom = np.flatnonzero(np.isclose(heights, low[2]))
+        assert len(on_bottom) >= 3 and on_bottom.min() > 2  # ... then the exit face's
+    finally:
+        prefetcher.close()
+
+
+def test_the_arc_ahead_continues_the_needle_circle():
+    from sim.geometry import circle_through
+    from sim.needle import Needle
+
+    needle = Needle.curved()
+    path = arc_ahead(needle.vertices, reach=0.004, segments=8)
+    v = needle.vertices
+    centre, radius = circle_through(v[0], v[len(v) // 2], v[-1])
+    np.testing.assert_allclose(np.linalg.norm(path - centre, axis=1), radius, rtol=1e-9)
+    np.testing.assert_allclose(path[0], needle.vertices[0], atol=1e-15)
+    steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    chord = 2 * radius * np.sin(0.004 / radius / 8 / 2)
+    np.testing.assert_allclose(steps, chord, rtol=1e-9)
+    # it goes on from the tip, away from the rest of the needle
+    assert np.linalg.norm(path[1] - needle.vertices[1]) > np.linalg.norm(path[0] - needle.vertices[1])
+
+
+def test_a_straight_needle_looks_ahead_along_its_axis():
+    vertices = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.001], [0.0, 0.0, 0.002]])
+    np.testing.assert_allclose(arc_ahead(vertices, reach=0.01), [[0, 0, 0], [0, 0, -0.01]])
 
 
 def test_a_worker_is_started_only_where_a_contact_could_need_columns(small_box, tmp_path):
