@@ -137,7 +137,6 @@ class BiphaseTissue:
         # is the soft inverse scaled, so one factorisation and one set of column solves serve both
         stiff.share_inverse_with(soft)
         self.parameters = parameters or BiphaseParameters()
-        self._depths: dict[int, float] = {}
 
     @classmethod
     def build(
@@ -168,11 +167,8 @@ class BiphaseTissue:
         self.soft.warm_contact_caches()
 
     def depth_under(self, nodes: NDArray[np.int64]) -> float:
-        """Mean tissue depth (m) under contact nodes, cached per node."""
-        for node in nodes:
-            if int(node) not in self._depths:
-                self._depths[int(node)] = self.soft.tissue_depth(int(node))
-        return float(np.mean([self._depths[int(n)] for n in nodes]))
+        """Mean tissue depth (m) under contact nodes (cast in the soft phase, cached per node)."""
+        return float(np.mean([self.soft.tissue_depth(int(n)) for n in nodes]))
 
     def strain_of(self, tool_displacement: NDArray[np.float64], depth: float) -> float:
         """Indentation strain |d| / h."""
@@ -244,9 +240,17 @@ class BiphaseTissue:
     def contact(self, nodes: ArrayLike) -> BiphaseContact:
         """A per-tick handle for a fixed contact set in both phases."""
         ids = np.asarray(nodes, dtype=np.int64).ravel()
-        return BiphaseContact(
-            self.soft.contact(ids), self.stiff.contact(ids), self.parameters, self.depth_under(ids)
-        )
+        soft = self.soft.contact(ids)
+        shared = self.stiff.inverse_source
+        if (
+            shared is not None
+            and shared[0] is self.soft
+            and self.stiff.penalty == shared[1] * self.soft.penalty
+        ):
+            stiff = soft.scaled(shared[1])  # K0 and C both s times the soft phase's: no second gather
+        else:
+            stiff = self.stiff.contact(ids)
+        return BiphaseContact(soft, stiff, self.parameters, self.depth_under(ids))
 
 
 class BiphaseContact:

@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -116,10 +117,11 @@ class TissueModel:
         self._penalty_factor = penalty_factor
         self._requested_penalty = penalty
         self._precomputed: Precomputation | None = None
-        self._columns: OrderedDict[int, NDArray[np.float64]] = OrderedDict()
+        self._columns: OrderedDict[int, _CachedColumns] = OrderedDict()
         self._column_budget = column_cache_bytes
         self._column_lock = threading.Lock()
         self._inverse_of: tuple[TissueModel, float] | None = None  # (base, s): K0 = s K0_base
+        self._depths: dict[int, float] = {}  # tissue depth (m) under surface nodes, as cast
         self.column_solver: Callable[[NDArray[np.int64]], NDArray[np.float64]] | None = None
         """Solves on-demand columns in place of :meth:`solve_columns` (e.g. in a worker process)."""
 
@@ -310,12 +312,16 @@ class TissueModel:
         return self._precomputed
 
     # -- columns -------------------------------------------------------------------
-    def _nodes_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
-        """(3N, 3k) columns of K0^-1 at the nodes' dofs: cached ones reused, the rest
-        solved together in one multi-right-hand-side solve (on-demand mode)."""
+    def _nodes_columns(
+        self, nodes: NDArray[np.int64], rows: NDArray[np.int64] | None = None, *, at_candidates: bool = False
+    ) -> NDArray[np.float64]:
+        """(3N, 3k) columns of K0^-1 at the nodes' dofs, only their ``rows`` (dof ids), or only the
+        candidates' dofs (kept beside each cached column, cut when it was solved): cached ones
+        reused, the rest solved together in one multi-right-hand-side solve (on-demand mode).
+        A contact change so copies (3n, 3k) rows, never whole (3N, 3k) blocks."""
         if self._inverse_of is not None:
             base, scale = self._inverse_of
-            return base._nodes_columns(nodes) / scale
+            return base._nodes_columns(nodes, rows, at_candidates=at_candidates) / scale
         with self._column_lock:
             known = {int(n): self._columns[int(n)] for n in nodes if int(n) in self._columns}
             for n in known:
@@ -326,11 +332,15 @@ class TissueModel:
             solved = solve(np.array(missing, dtype=np.int64))
             with self._column_lock:
                 for i, node in enumerate(missing):
-                    columns = np.ascontiguousarray(solved[:, 3 * i : 3 * i + 3])
-                    columns.flags.writeable = False
-                    known[node] = self._columns[node] = columns
+                    known[node] = self._columns[node] = _CachedColumns.of(
+                        solved[:, 3 * i : 3 * i + 3], self._candidate_dofs
+                    )
                 self._evict_columns()
-        return np.hstack([known[int(n)] for n in nodes])
+        if at_candidates:
+            return np.hstack([known[int(n)].at_candidates for n in nodes])
+        if rows is None:
+            return np.hstack([known[int(n)].full for n in nodes])
+        return np.hstack([known[int(n)].full[rows] for n in nodes])
 
     def solve_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs, in one multi-right-hand-side solve."""
@@ -354,6 +364,10 @@ class TissueModel:
         if ids.size:
             self._nodes_columns(ids)
 
+    @cached_property
+    def _candidate_dofs(self) -> NDArray[np.int64]:
+        return node_dofs(self.contact_nodes)
+
     def _contact_columns(self, nodes: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
         """(G rows x 3k columns, G_JJ block, ids of the rows) for a contact set."""
         if self._precomputed is not None:
@@ -363,9 +377,9 @@ class TissueModel:
                 columns = self._precomputed.matrix[:, dofs_local]
                 return columns, columns[dofs_local], self.contact_nodes
             return self._mixed_columns(nodes, rows)
-        full = self._nodes_columns(nodes)
-        block = full[node_dofs(nodes)]
-        return full[node_dofs(self.contact_nodes)], block, self.contact_nodes
+        columns = self._nodes_columns(nodes, at_candidates=True)
+        block = self._nodes_columns(nodes, node_dofs(nodes))
+        return columns, block, self.contact_nodes
 
     def _mixed_columns(
         self, nodes: NDArray[np.int64], rows: NDArray[np.int64]
@@ -375,12 +389,12 @@ class TissueModel:
         g = self._precomputed.matrix
         inside = rows >= 0
         in_pos, out_pos = node_dofs(np.flatnonzero(inside)), node_dofs(np.flatnonzero(~inside))
-        full_out = self._nodes_columns(nodes[~inside])  # (3N, 3m) columns of K0^-1
+        outside = nodes[~inside]  # their columns of K0^-1, at the candidates' and the contact's dofs
         columns = np.empty((g.shape[0], 3 * len(nodes)))
         columns[:, in_pos] = g[:, node_dofs(rows[inside])]
-        columns[:, out_pos] = full_out[node_dofs(self.contact_nodes)]
+        columns[:, out_pos] = self._nodes_columns(outside, at_candidates=True)
         block = np.empty((3 * len(nodes), 3 * len(nodes)))
-        block[:, out_pos] = full_out[node_dofs(nodes)]
+        block[:, out_pos] = self._nodes_columns(outside, node_dofs(nodes))
         block[np.ix_(in_pos, in_pos)] = columns[np.ix_(node_dofs(rows[inside]), in_pos)]
         block[np.ix_(out_pos, in_pos)] = block[np.ix_(in_pos, out_pos)].T
         return columns, block, self.contact_nodes
@@ -473,7 +487,14 @@ class TissueModel:
         return bounding_spheres(self.mesh.points[self.mesh.surface_triangles])
 
     def tissue_depth(self, node: int) -> float:
-        """Thickness of tissue (m) under a surface node, along its inward normal."""
+        """Thickness of tissue (m) under a surface node, along its inward normal; cached per node
+        (the column prefetcher casts ahead of contact, so a contact change rarely pays for it)."""
+        depth = self._depths.get(node)
+        if depth is None:
+            depth = self._depths[node] = self._cast_depth(node)
+        return depth
+
+    def _cast_depth(self, node: int) -> float:
         inward = -self._vertex_normals[node]
         if not np.any(inward):
             raise ModelError(f"node {node} is not on the exterior surface")
@@ -487,6 +508,24 @@ class TissueModel:
         if not np.isfinite(depth):
             raise ModelError(f"no opposite surface found under node {node}")
         return depth
+
+
+class _CachedColumns(NamedTuple):
+    """One node's three K0^-1 columns (3N, 3), and their rows at the contact candidates' dofs."""
+
+    full: NDArray[np.float64]
+    at_candidates: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, columns: NDArray[np.float64], candidate_dofs: NDArray[np.int64]) -> _CachedColumns:
+        full = np.ascontiguousarray(columns)
+        at_candidates = np.ascontiguousarray(full[candidate_dofs])
+        full.flags.writeable = at_candidates.flags.writeable = False
+        return cls(full, at_candidates)
+
+    @property
+    def nbytes(self) -> int:
+        return self.full.nbytes + self.at_candidates.nbytes
 
 
 def _check_rigid_motion_fixed(points: NDArray[np.float64], fixed_dofs: NDArray[np.int64]) -> None:

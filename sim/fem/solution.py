@@ -83,6 +83,20 @@ class ContactHandle:
         self._columns = np.ascontiguousarray(columns)
         self.surface_nodes = surface_nodes
 
+    def scaled(self, factor: float) -> ContactHandle:
+        """The handle of a tissue whose K0 and penalty are both ``factor`` times this one's: the
+        capacitance I + C G_JJ is unchanged, so the effective stiffness scales by ``factor`` and
+        the displacement columns by 1 / ``factor`` (exact up to rounding)."""
+        handle = object.__new__(ContactHandle)
+        handle.nodes, handle.penalty, handle.surface_nodes = (
+            self.nodes,
+            factor * self.penalty,
+            self.surface_nodes,
+        )
+        handle._stiffness = factor * self._stiffness
+        handle._columns = self._columns / factor
+        return handle
+
     @property
     def stiffness(self) -> NDArray[np.float64]:
         """(3k, 3k) matrix mapping intended displacements (m) to reaction forces (N)."""

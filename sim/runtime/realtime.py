@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import gc
 import os
+import sys
 import threading
 import time as clock
 from collections.abc import Callable
@@ -41,6 +42,9 @@ from sim.runtime.telemetry import LoopTelemetry
 
 SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
+GIL_SWITCH_INTERVAL = 2e-4
+"""s a thread may keep the interpreter lock while another waits for it (Python's default is 5 ms):
+the FEM thread waking for its step must not wait out a graphics frame's collision query."""
 
 
 def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True) -> RunResult:
@@ -313,20 +317,31 @@ def _run_other_layers(simulation: Simulation, duration: float, control: ControlB
     }
     if simulation.renderer is None:
         steps["display"] = simulation.display_step  # nothing to render: a cheap thread
-    with threadpool_limits(1):
-        threads = [
-            threading.Thread(
-                target=_layer_loop,
-                args=(simulation, layer, steps[layer], duration, control),
-                name=f"vascsim-{layer}",
-                daemon=True,
-            )
-            for layer in steps
-        ]
-        for thread in threads:
-            thread.start()
-        for thread in threads:
-            thread.join(duration + 10.0)
+    switch_interval = sys.getswitchinterval()
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)
+    try:
+        with threadpool_limits(1):
+            _run_threads(simulation, steps, duration, control)
+    finally:
+        sys.setswitchinterval(switch_interval)
+
+
+def _run_threads(
+    simulation: Simulation, steps: dict[str, Callable[[float], None]], duration: float, control: ControlBlock
+) -> None:
+    threads = [
+        threading.Thread(
+            target=_layer_loop,
+            args=(simulation, layer, steps[layer], duration, control),
+            name=f"vascsim-{layer}",
+            daemon=True,
+        )
+        for layer in steps
+    ]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(duration + 10.0)
 
 
 def _layer_loop(

@@ -337,11 +337,11 @@ class Simulation:
         fem = self.fem.get()
         if fem is None:
             return
+        if self._prefetcher is not None:  # first, so the FEM thread applying the query's result
+            self._prefetch_ahead_of(fem)  # does not share the interpreter with this work
         posted = wallclock.perf_counter()
         hits = self.interaction.collision.query(fem.needle_vertices)
         self.global_queue.append((now, fem.needle_vertices, hits, posted))
-        if self._prefetcher is not None:
-            self._prefetch_ahead_of(fem)
         self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
         if self.on_graphics is not None:
             self.on_graphics(now, fem)
@@ -350,14 +350,13 @@ class Simulation:
         """Ask for the columns the next contact changes will need (graphics layer, on-demand columns).
 
         Precomputed models only need columns for nodes off the candidates, i.e. where a needle in
-        the wall may come out: from the first touch on, the exit face its curve is heading for.
-        The path's crossings go ahead of the sphere around the tip (the later request is served first).
+        the wall may come out: the exit face its curve is heading for. The nodes the path crosses
+        also get their tissue depth cast in the background (a first touch needs it). The path's
+        crossings go ahead of the sphere around the tip (the later request is served first).
         """
         tip = fem.needle_vertices[0]
         previous, self._previous_tip = self._previous_tip, tip
         prefetcher, reach = self._prefetcher, self.settings.prefetch_reach
-        if not (prefetcher.on_demand or fem.state in ("contact", "pierced", "exited")):
-            return
         if prefetcher.on_demand or fem.state in ("pierced", "exited"):
             prefetcher.near(tip, self.settings.prefetch_radius)
         if fem.state == "free":  # not yet touching: the needle goes where the hand moves it

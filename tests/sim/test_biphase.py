@@ -183,3 +183,27 @@ def test_replayed_fields_of_the_shared_inverse_equal_independent_phases(small_bo
     theirs = TissueFieldReplay(alone).state(triangle, drive, speed)
     np.testing.assert_allclose(ours[0], theirs[0], rtol=1e-9, atol=1e-18)
     np.testing.assert_allclose(ours[1], theirs[1], rtol=1e-8, atol=1e-9)
+
+
+@settings(max_examples=10, deadline=None)
+@given(corner=st.integers(0, 10**6), precomputed=st.booleans())
+def test_the_stiff_contact_derived_from_the_soft_one_equals_an_independent_stiff_model(
+    small_box, corner, precomputed, tmp_path_factory
+):
+    """BiphaseTissue.contact scales the soft handle for the stiff phase; an independent stiff
+    TissueModel (own K0, own factorisation) must give the same forces and displacements."""
+    tissue = BiphaseTissue.build(small_box, small_box.node_sets["z0"])
+    scale = tissue.parameters.stiff_modulus / tissue.parameters.soft_modulus
+    alone = independent(tissue.soft, scale)
+    if precomputed:
+        tissue.precompute(cache_dir=tmp_path_factory.mktemp("cache"))
+        alone.precompute(use_cache=False)
+    triangle = small_box.surface_triangles[corner % len(small_box.surface_triangles)]
+    ours, theirs = tissue.contact(triangle).stiff, alone.contact(triangle)
+    drive = np.linspace(-1e-4, 1e-4, 9).reshape(3, 3)
+    reactions = theirs.reaction_forces(drive)
+    np.testing.assert_allclose(ours.reaction_forces(drive), reactions, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(
+        ours.surface_displacement(reactions), theirs.surface_displacement(reactions), rtol=1e-8, atol=1e-15
+    )
+    assert ours.penalty == pytest.approx(theirs.penalty, rel=1e-12)

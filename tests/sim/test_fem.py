@@ -376,7 +376,8 @@ def test_precompute_cache_round_trip_and_corruption(tmp_path, small_box):
 
 
 def test_on_demand_cache_is_memory_bounded(cube):
-    column_bytes = 3 * cube.n_nodes * 3 * 8
+    model = TissueModel(cube, Material(20e3, 0.45), cube.node_sets["z0"])
+    column_bytes = 3 * (cube.n_nodes + len(model.contact_nodes)) * 3 * 8  # full, and at the candidates
     model = TissueModel(cube, Material(20e3, 0.45), cube.node_sets["z0"], column_cache_bytes=4 * column_bytes)
     for node in cube.node_sets["z1"][:10]:
         model.solve({int(node): (0, 0, -1e-4)})
