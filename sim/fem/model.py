@@ -494,6 +494,10 @@ class TissueModel:
             depth = self._depths[node] = self._cast_depth(node)
         return depth
 
+    def knows_depth(self, node: int) -> bool:
+        """Whether :meth:`tissue_depth` of ``node`` is cached."""
+        return node in self._depths
+
     def _cast_depth(self, node: int) -> float:
         inward = -self._vertex_normals[node]
         if not np.any(inward):

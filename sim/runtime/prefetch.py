@@ -26,8 +26,11 @@ from sim.geometry import circle_through
 
 AHEAD_NODES = 6
 """Surface nodes nearest the point the tip is heading for, solved right after that triangle's own."""
-WORKER_NICENESS = 10
-"""The column worker yields to the simulation's own layers (FEM, graphics, display)."""
+SOLVE_CHUNK = 3
+"""Nodes solved together (one multi-right-hand-side solve): a triangle's."""
+WORKER_NICENESS = 5
+"""The column worker yields to the FEM and graphics layers; the display process (niceness 10)
+yields to it: exact forces at the exit face matter more than a rendered frame."""
 
 
 def arc_ahead(needle_vertices: NDArray[np.float64], reach: float, segments: int = 16) -> NDArray[np.float64]:
@@ -159,8 +162,7 @@ class Prefetcher:
         self._points = mesh.points[self._nodes]
         self._triangles = mesh.surface_triangles
         self._collision = collision or CollisionMesh(mesh)
-        self._requested: set[int] = set()  # ever asked for
-        self._served: set[int] = set()  # columns (where needed) and depth ready
+        self._pending: set[int] = set()  # queued, not served yet
         self._last_ahead: list[int] = []
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
@@ -175,16 +177,17 @@ class Prefetcher:
         squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
         close = np.flatnonzero(squared <= radius * radius)
         close = self._nodes[close[np.argsort(squared[close])]]
-        fresh = [int(n) for n in close if int(n) not in self._requested]
+        # not queued already, and not cached (a column evicted from the model's cache is asked again)
+        fresh = [int(n) for n in close if int(n) not in self._pending and self._needs_columns(int(n))]
         if fresh:
-            self._requested.update(fresh)
+            self._pending.update(fresh)
             self._queue.appendleft(fresh)  # the newest request is where the needle is now
             self._wake.set()
 
-    def ahead(self, path: NDArray[np.float64]) -> None:
+    def ahead(self, path: NDArray[np.float64], crossings: int = 2) -> None:
         """Ask first for the nodes of the surface triangles a predicted tip path meets: ``path`` is
         (P, 3) points (m) from the tip along the way it is going (:func:`arc_ahead`,
-        :func:`line_ahead`). The first two crossings count (the next contact, then the exit face on
+        :func:`line_ahead`). The first ``crossings`` count (the next contact, then the exit face on
         the far side of the wall), each with the surface nodes nearest its crossing point."""
         self._raise_if_failed()
         if len(path) < 2:
@@ -194,20 +197,27 @@ class Prefetcher:
         if len(hits) == 0:
             return
         along = len(path) - 2 - hits.segment  # path segment index, from the tip outwards
-        order = np.lexsort((hits.t, along))[:2]
+        order = np.lexsort((hits.t, along))[:crossings]
         points = hits.points(travelled[1:], travelled[:-1])[order]
         heading: list[int] = []
         for triangle, point in zip(hits.triangle[order], points, strict=True):
             squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
             around = self._nodes[np.argpartition(squared, AHEAD_NODES)[:AHEAD_NODES]]
             heading += [*map(int, self._triangles[triangle]), *map(int, around)]
-        # not yet served (columns and depth), even if a sphere request already holds them further back
-        waiting = [n for n in dict.fromkeys(heading) if n not in self._served]
+        # columns or depth missing, even if a sphere request already holds them further back
+        waiting = [
+            n
+            for n in dict.fromkeys(heading)
+            if self._needs_columns(n) or not self._depth_model.knows_depth(n)
+        ]
         if waiting and waiting != self._last_ahead:
             self._last_ahead = waiting
-            self._requested.update(waiting)
+            self._pending.update(waiting)
             self._queue.appendleft(waiting)  # before everything else: this is where the next contact is
             self._wake.set()
+
+    def _needs_columns(self, node: int) -> bool:
+        return any(model.needs_solve(node) for model in self.models)
 
     def _cast_depths(self, nodes: list[int]) -> None:
         """The tissue depth under the nodes too (a contact needs it; ~0.1 ms a node at 10k nodes)."""
@@ -229,13 +239,15 @@ class Prefetcher:
                 self._wake.clear()
                 while self._queue and not self._closed:
                     batch = self._queue.popleft()
-                    chunk, rest = batch[:1], batch[1:]  # one node at a time: newer requests overtake
+                    # a triangle at a time: newer requests overtake, and one solve of three nodes
+                    # costs 29 ms where three of one cost 53 (10k nodes)
+                    chunk, rest = batch[:SOLVE_CHUNK], batch[SOLVE_CHUNK:]
                     if rest:
                         self._queue.appendleft(rest)
                     for model in self.models:
                         model.prefetch(np.array(chunk))
                     self._cast_depths(chunk)
-                    self._served.update(chunk)
+                    self._pending.difference_update(chunk)
         except BaseException as error:  # raised in the graphics layer at its next request
             self.error = error
 

@@ -359,9 +359,9 @@ class Simulation:
         prefetcher, reach = self._prefetcher, self.settings.prefetch_reach
         if prefetcher.on_demand or fem.state in ("pierced", "exited"):
             prefetcher.near(tip, self.settings.prefetch_radius)
-        if fem.state == "free":  # not yet touching: the needle goes where the hand moves it
-            if previous is not None:
-                prefetcher.ahead(line_ahead(tip, tip - previous, reach))
+        if fem.state == "free":  # not yet touching: the needle goes where the hand moves it, and
+            if previous is not None:  # where it will come out depends on how it is then turned
+                prefetcher.ahead(line_ahead(tip, tip - previous, reach), crossings=1)
         else:  # in contact or in the wall: the tip follows the needle's own curve
             prefetcher.ahead(arc_ahead(fem.needle_vertices, reach))
 

@@ -148,3 +148,26 @@ def test_a_worker_is_started_only_where_a_contact_could_need_columns(small_box, 
     top_only = TissueModel(small_box, Material(20e3, 0.45), fixed, contact_nodes=small_box.node_sets["z1"])
     top_only.precompute(tmp_path)  # the sides are free surface outside the candidates
     assert _on_demand(top_only)
+
+
+def test_a_column_evicted_from_the_cache_is_asked_for_again(small_box):
+    column_bytes = 3 * small_box.n_nodes * 3 * 8
+    tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"], column_cache_bytes=1)
+    prefetcher = Prefetcher(tissue)
+    try:
+        prefetcher._closed = True  # serve the queue by hand
+        prefetcher._thread.join()
+        prefetcher.near(small_box.points[0], radius=1e-9)
+        assert prefetcher._queue.popleft() == [0]
+        prefetcher._pending.clear()
+        tissue.prefetch([0])
+        prefetcher.near(small_box.points[0], radius=1e-9)
+        assert not prefetcher._queue  # cached: nothing to ask
+        tissue.prefetch([1])  # the budget holds one node's columns: node 0's are evicted
+        assert 0 not in tissue._columns and column_bytes > 1
+        prefetcher.near(small_box.points[0], radius=1e-9)
+        assert list(prefetcher._queue) == [[0]]
+        prefetcher.near(small_box.points[0], radius=1e-9)
+        assert list(prefetcher._queue) == [[0]]  # queued once, not once per frame
+    finally:
+        prefetcher.close()
