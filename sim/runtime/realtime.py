@@ -42,6 +42,10 @@ from sim.runtime.telemetry import LoopTelemetry
 
 SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
+LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
+"""SCHED_FIFO priorities of the FEM and graphics threads (the haptic process has 50). They sleep
+most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
+the column worker's or the display's CPU time, which showed as contact-change latency."""
 GIL_SWITCH_INTERVAL = 2e-4
 """s a thread may keep the interpreter lock while another waits for it (Python's default is 5 ms):
 the FEM thread waking for its step must not wait out a graphics frame's collision query."""
@@ -258,8 +262,8 @@ def _haptic_process(
         control.haptic_state = ControlBlock.FINISHED
 
 
-def _try_realtime_priority() -> bool:
-    """SCHED_FIFO for the haptic process where permitted (root or CAP_SYS_NICE).
+def _try_realtime_priority(priority: int = 50) -> bool:
+    """SCHED_FIFO for the calling thread where permitted (root or CAP_SYS_NICE).
 
     With both cores busy, the kernel balances other processes onto the haptic core
     and preempts the 1 kHz loop for milliseconds; a real-time class stops that. The
@@ -268,7 +272,7 @@ def _try_realtime_priority() -> bool:
     if not hasattr(os, "sched_setscheduler"):
         return False
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (PermissionError, OSError):
         return False
     return True
@@ -329,10 +333,13 @@ def _run_other_layers(simulation: Simulation, duration: float, control: ControlB
 def _run_threads(
     simulation: Simulation, steps: dict[str, Callable[[float], None]], duration: float, control: ControlBlock
 ) -> None:
+    # the FEM layer also steps as soon as a global-CD frame is posted, so a contact change waits
+    # for no FEM period (up to 2 ms at 500 Hz) before its exact forces
+    wakes = {"fem": simulation.global_posted}
     threads = [
         threading.Thread(
             target=_layer_loop,
-            args=(simulation, layer, steps[layer], duration, control),
+            args=(simulation, layer, steps[layer], duration, control, wakes.get(layer)),
             name=f"vascsim-{layer}",
             daemon=True,
         )
@@ -345,8 +352,16 @@ def _run_threads(
 
 
 def _layer_loop(
-    simulation: Simulation, layer: str, step: Callable[[float], None], duration: float, control: ControlBlock
+    simulation: Simulation,
+    layer: str,
+    step: Callable[[float], None],
+    duration: float,
+    control: ControlBlock,
+    wake: threading.Event | None = None,
 ) -> None:
+    """Steps at start + k * period; with ``wake``, also one step whenever it is set between two."""
+    if layer in LAYER_PRIORITIES:
+        _try_realtime_priority(LAYER_PRIORITIES[layer])
     period = simulation.settings.period(layer)
     start = control.start
     record = simulation.telemetry[layer].record
@@ -354,8 +369,11 @@ def _layer_loop(
     while True:
         deadline = start + k * period
         wait = deadline - clock.perf_counter()
+        woken = False
         if wait > 0:
-            clock.sleep(wait)
+            woken = wake.wait(wait) if wake is not None else bool(clock.sleep(wait))
+        if wake is not None:
+            wake.clear()  # this step takes whatever was posted until now
         now = clock.perf_counter() - start
         if (
             now > duration
@@ -372,6 +390,8 @@ def _layer_loop(
             control.request_stop()
             return
         record(now, clock.perf_counter() - began)
+        if woken:
+            continue  # an extra step: the scheduled one still follows at its deadline
         k += 1
         late = clock.perf_counter() - (start + k * period)
         if late > period:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import collections
 import heapq
 import math
+import threading
 import time as wallclock
 import traceback
 from collections.abc import Callable
@@ -246,6 +247,7 @@ class Simulation:
         self.forces = ForceHistory()
         self.haptic_log = HapticLog()
         self.global_queue: collections.deque = collections.deque()
+        self.global_posted = threading.Event()  # set with each frame queued (wakes the real-time FEM thread)
         self.events: list[NeedleEvent | RuntimeEvent] = []
         self.telemetry = {layer: LoopTelemetry(layer, self.settings.period(layer)) for layer in LAYERS}
         self.renderer = renderer
@@ -342,6 +344,7 @@ class Simulation:
         posted = wallclock.perf_counter()
         hits = self.interaction.collision.query(fem.needle_vertices)
         self.global_queue.append((now, fem.needle_vertices, hits, posted))
+        self.global_posted.set()
         self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
         if self.on_graphics is not None:
             self.on_graphics(now, fem)
