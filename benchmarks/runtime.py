@@ -17,6 +17,7 @@ For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
 from __future__ import annotations
 
 import argparse
+import os
 
 import numpy as np
 
@@ -29,9 +30,23 @@ from sim.runtime import RuntimeSettings, Simulation
 from sim.scenarios import practice_passes, scenario
 
 
-def report(name: str, simulation: Simulation, result) -> None:
+def stolen_seconds() -> list[float]:
+    """CPU time each core has lost to the hypervisor since boot (s), from /proc/stat."""
+    ticks = os.sysconf("SC_CLK_TCK")
+    with open("/proc/stat") as stat:
+        lines = [line.split() for line in stat if line.startswith("cpu") and line[3] != " "]
+    return [int(fields[8]) / ticks for fields in lines]
+
+
+def report(name: str, simulation: Simulation, result, stolen: list[float]) -> None:
     h = result.telemetry["haptic"]
     print(f"[{name}] stop={result.stop_reason} wall={result.wall_seconds:.1f}s", flush=True)
+    print(
+        f"[{name}]   hypervisor steal during the run: "
+        + ", ".join(f"cpu{k} {1e3 * s:.0f} ms" for k, s in enumerate(stolen))
+        + " (a stolen slice of the haptic core stalls the loop however it is scheduled)",
+        flush=True,
+    )
     print(
         f"[{name}]   haptic: rate={h.rate_hz:.1f} Hz period p50={1e3 * h.period_p50:.3f} ms "
         f"p99={1e3 * h.period_p99:.3f} ms max={1e3 * h.period_max:.3f} ms >2ms={h.periods_over_2ms} "
@@ -119,7 +134,10 @@ def realtime_cube(cube, needle, seconds, size, render) -> None:
     simulation = Simulation(
         cube, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(cube, size, render)
     )
-    report(f"real time, test cube, {duration:.0f} s", simulation, simulation.run_realtime(duration))
+    before = stolen_seconds()
+    result = simulation.run_realtime(duration)
+    stolen = [b - a for a, b in zip(before, stolen_seconds(), strict=True)]
+    report(f"real time, test cube, {duration:.0f} s", simulation, result, stolen)
 
 
 def realtime_artery(needle, seconds, size, render, precomputed) -> None:
@@ -135,7 +153,10 @@ def realtime_artery(needle, seconds, size, render, precomputed) -> None:
     )
     mode = "precomputed" if precomputed else "on demand"
     name = f"real time, {case.mesh.n_nodes}-node artery {mode}, {duration:.0f} s"
-    report(name, simulation, simulation.run_realtime(duration))
+    before = stolen_seconds()
+    result = simulation.run_realtime(duration)
+    stolen = [b - a for a, b in zip(before, stolen_seconds(), strict=True)]
+    report(name, simulation, result, stolen)
     simulation.close()
 
 

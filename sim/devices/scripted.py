@@ -290,6 +290,10 @@ class SuturingPass:
     @property
     def phases(self) -> dict[str, tuple[float, float]]:
         """Start and end (s) of the approach, insertion, regrab and pull phases."""
+        return dict(self._phases)
+
+    @functools.cached_property
+    def _phases(self) -> dict[str, tuple[float, float]]:
         a = self.p.approach_time
         b = a + self._insert_time
         c = b + self.p.regrab_time
@@ -317,7 +321,7 @@ class SuturingPass:
         return self.p.tremor_amplitude * np.sin(2 * math.pi * frequencies * t + self._tremor_phase)
 
     def pose_and_grip(self, t: float) -> tuple[Pose, bool]:
-        phases = self.phases
+        phases = self._phases  # every haptic tick: not rebuilt
         if t < phases["insertion"][0]:
             pose = self.turned(0.0)
             lift = (1.0 - max(t, 0.0) / self.p.approach_time) * self.p.approach_distance
