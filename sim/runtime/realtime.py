@@ -17,6 +17,7 @@ device whose handle is opened lazily on first read).
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import sys
@@ -26,6 +27,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from sim.runtime.cpu import IdlePolling
 from sim.runtime.shared import (
     Arena,
     ControlBlock,
@@ -100,11 +102,14 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
             os._exit(status)
     os.close(errors_write)
     previous_affinity = _leave_last_core_to_haptics(pin_cpus)
+    # the haptic core idles by polling, not halting, between ticks (sim.runtime.cpu)
+    polling = IdlePolling(max(previous_affinity)) if previous_affinity else contextlib.nullcontext()
     try:
-        _wait_until_ready(pid, control)
-        # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
-        control.start = clock.perf_counter() + START_DELAY
-        _run_other_layers(simulation, duration, control)
+        with polling:
+            _wait_until_ready(pid, control)
+            # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
+            control.start = clock.perf_counter() + START_DELAY
+            _run_other_layers(simulation, duration, control)
     finally:
         control.request_stop()
         _wait_for(pid, timeout=5.0)

@@ -208,6 +208,25 @@ def test_record_block_wraps_around_the_ring(tmp_path):
     np.testing.assert_array_equal(times, data[:, COLUMN["time"]])
 
 
+def test_record_takes_any_row_numpy_can_convert_and_names_a_wrong_length(tmp_path):
+    """The fast path copies a contiguous float64 row; lists, other dtypes and strided rows take
+    numpy's conversion; all are stored exactly; a row of the wrong length is refused."""
+    writer = SessionWriter(tmp_path / "s", {}, flush_interval=10.0, capacity=16)
+    data = rows(4)
+    assert writer.record(data[0])  # contiguous float64
+    assert writer.record(data[1].tolist())  # a list
+    assert writer.record(data[2].astype(np.float32))  # another dtype: stored as its float64 value
+    data[2] = data[2].astype(np.float32)
+    strided = np.repeat(data[3][:, None], 2, axis=1)[:, 0]  # a non-contiguous view
+    assert not strided.flags.c_contiguous and writer.record(strided)
+    with pytest.raises(ValueError):
+        writer.record(np.zeros(len(SAMPLE_COLUMNS) + 1))
+    writer.close()
+    stored = open_session(tmp_path / "s").samples
+    np.testing.assert_array_equal(stored.column("time").to_numpy(), data[:, COLUMN["time"]])
+    np.testing.assert_array_equal(stored.column("tool_x").to_numpy(), data[:, COLUMN["tool_x"]])
+
+
 def test_every_event_kind_the_simulator_emits_has_a_place_in_the_schema():
     from recorder.schema import EVENT_KINDS
     from sim.interaction import EVENT_KINDS as NEEDLE_KINDS
