@@ -38,6 +38,13 @@ def stolen_seconds() -> list[float]:
     return [int(fields[8]) / ticks for fields in lines]
 
 
+def run_measuring_steal(simulation: Simulation, duration: float):
+    """A real-time run, and the CPU time (s) the hypervisor took from each core during it."""
+    before = stolen_seconds()
+    result = simulation.run_realtime(duration)
+    return result, [b - a for a, b in zip(before, stolen_seconds(), strict=True)]
+
+
 def report(name: str, simulation: Simulation, result, stolen: list[float]) -> None:
     h = result.telemetry["haptic"]
     print(f"[{name}] stop={result.stop_reason} wall={result.wall_seconds:.1f}s", flush=True)
@@ -134,10 +141,7 @@ def realtime_cube(cube, needle, seconds, size, render) -> None:
     simulation = Simulation(
         cube, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(cube, size, render)
     )
-    before = stolen_seconds()
-    result = simulation.run_realtime(duration)
-    stolen = [b - a for a, b in zip(before, stolen_seconds(), strict=True)]
-    report(f"real time, test cube, {duration:.0f} s", simulation, result, stolen)
+    report(f"real time, test cube, {duration:.0f} s", simulation, *run_measuring_steal(simulation, duration))
 
 
 def realtime_artery(needle, seconds, size, render, precomputed) -> None:
@@ -153,10 +157,7 @@ def realtime_artery(needle, seconds, size, render, precomputed) -> None:
     )
     mode = "precomputed" if precomputed else "on demand"
     name = f"real time, {case.mesh.n_nodes}-node artery {mode}, {duration:.0f} s"
-    before = stolen_seconds()
-    result = simulation.run_realtime(duration)
-    stolen = [b - a for a, b in zip(before, stolen_seconds(), strict=True)]
-    report(name, simulation, result, stolen)
+    report(name, simulation, *run_measuring_steal(simulation, duration))
     simulation.close()
 
 

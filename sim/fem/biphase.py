@@ -242,12 +242,8 @@ class BiphaseTissue:
         ids = np.asarray(nodes, dtype=np.int64).ravel()
         soft = self.soft.contact(ids)
         shared = self.stiff.inverse_source
-        if (
-            shared is not None
-            and shared[0] is self.soft
-            and self.stiff.penalty == shared[1] * self.soft.penalty
-        ):
-            stiff = soft.scaled(shared[1])  # K0 and C both s times the soft phase's: no second gather
+        if shared is not None and shared[0] is self.soft:
+            stiff = soft.scaled(shared[1])  # K0 and C are s times the soft phase's: no second gather
         else:
             stiff = self.stiff.contact(ids)
         return BiphaseContact(soft, stiff, self.parameters, self.depth_under(ids))

@@ -44,10 +44,10 @@ def arc_ahead(needle_vertices: NDArray[np.float64], reach: float, segments: int 
     centre, radius = circle
     radial = (tip - centre) / radius
     normal = np.cross(middle - centre, tip - centre)
-    forward = np.cross(normal, radial)  # in the needle's plane, perpendicular to the radius at the tip
+    # in the needle's plane, perpendicular to the radius at the tip, pointing away from the middle:
+    # ((m x t) x t) . (t - m) = |m|^2 |t|^2 - (m . t)^2 >= 0 for m, t the radii to middle and tip
+    forward = np.cross(normal, radial)
     forward /= np.linalg.norm(forward)
-    if forward @ (tip - middle) < 0:
-        forward = -forward
     angles = np.linspace(0.0, reach / radius, segments + 1)
     return centre + radius * (np.cos(angles)[:, None] * radial + np.sin(angles)[:, None] * forward)
 

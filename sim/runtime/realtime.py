@@ -375,8 +375,10 @@ def _layer_loop(
         deadline = start + k * period
         wait = deadline - clock.perf_counter()
         woken = False
-        if wait > 0:
-            woken = wake.wait(wait) if wake is not None else bool(clock.sleep(wait))
+        if wait > 0 and wake is not None:
+            woken = wake.wait(wait)  # True: something was posted before the deadline
+        elif wait > 0:
+            clock.sleep(wait)
         if wake is not None:
             wake.clear()  # this step takes whatever was posted until now
         now = clock.perf_counter() - start
