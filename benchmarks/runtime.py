@@ -17,10 +17,12 @@ For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
 from __future__ import annotations
 
 import argparse
+import mmap
 import os
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -57,9 +59,60 @@ def stolen_seconds() -> list[float]:
     return [int(fields[8]) / ticks for fields in lines]
 
 
+class StepClock:
+    """Wraps a simulation's haptic step to keep, per step, its start (perf_counter s), wall time and
+    the haptic thread's CPU time (s) in shared memory: the step runs in the forked haptic process.
+    The guest kernel leaves hypervisor steal out of a thread's CPU time (paravirtual steal
+    accounting), so a step whose wall time far exceeds its CPU time lost the vCPU to the host; a
+    long step with CPU time close to its wall time ran slowly on the vCPU. Costs two clock reads a
+    tick (about 1 us)."""
+
+    def __init__(self, simulation: Simulation, capacity: int) -> None:
+        self.rows = np.frombuffer(mmap.mmap(-1, 8 * 3 * capacity), dtype=np.float64).reshape(capacity, 3)
+        self._count = np.frombuffer(mmap.mmap(-1, 8), dtype=np.int64)
+        step, rows, count = simulation.haptic_step, self.rows, self._count
+
+        def timed(now: float) -> None:
+            wall, cpu = time.perf_counter(), time.thread_time()
+            step(now)
+            cpu, end = time.thread_time() - cpu, time.perf_counter()
+            n = int(count[0])
+            if n < capacity:
+                rows[n] = (wall, end - wall, cpu)
+                count[0] = n + 1
+
+        simulation.haptic_step = timed  # type: ignore[method-assign]
+
+    @property
+    def steps(self) -> np.ndarray:
+        return self.rows[: int(self._count[0])]
+
+
+def late_periods_by_cause(steps: np.ndarray, over: float = 3e-3) -> str:
+    """The haptic periods over ``over`` s, by where the time went: a step that ran long on the vCPU
+    (CPU time >= 70 % of its wall time), a step that lost the vCPU (less), or a late wake-up after
+    a step of normal length (the sleep before the next deadline overran)."""
+    walls, cpus = steps[:-1, 1], steps[:-1, 2]
+    late = np.flatnonzero(np.diff(steps[:, 0]) > over)
+    long_step = walls[late] > over - 1e-3
+    ran_long = late[long_step & (cpus[late] >= 0.7 * walls[late])]
+    stolen = late[long_step & (cpus[late] < 0.7 * walls[late])]
+    woke_late = late[~long_step]
+
+    def ms(indices: np.ndarray) -> str:
+        return f"{len(indices)} (longest {1e3 * walls[indices].max():.1f} ms)" if len(indices) else "0"
+
+    return (
+        f"{len(late)} periods > {1e3 * over:.0f} ms: step ran long on the vCPU {ms(ran_long)}, "
+        f"step lost the vCPU {ms(stolen)}, late wake-up after a normal step {len(woke_late)}"
+    )
+
+
 def run_measuring_steal(simulation: Simulation, duration: float):
-    """A real-time run; the CPU time (s) the hypervisor took from each core during it; and the
-    haptic core's steal sampled every 5 ms as (perf_counter s, stolen s) arrays."""
+    """A real-time run; the CPU time (s) the hypervisor took from each core during it; the haptic
+    core's steal sampled every 5 ms as (perf_counter s, stolen s) arrays; and the per-step clocks
+    of the haptic layer (:class:`StepClock`)."""
+    clock = StepClock(simulation, int(duration * 1200) + 2000)
     cores = sorted(os.sched_getaffinity(0))
     with tempfile.NamedTemporaryFile("r", suffix=".steal") as trace:
         sampler = subprocess.Popen(
@@ -73,7 +126,7 @@ def run_measuring_steal(simulation: Simulation, duration: float):
             sampler.terminate()
             sampler.wait()
         samples = np.loadtxt(trace.name, ndmin=2)
-    return result, stolen, (samples[:, 0], samples[:, 1] / os.sysconf("SC_CLK_TCK"))
+    return result, stolen, (samples[:, 0], samples[:, 1] / os.sysconf("SC_CLK_TCK")), clock.steps
 
 
 def stalls_against_steal(simulation: Simulation, result, trace, over: float = 3e-3, draws: int = 20) -> str:
@@ -117,7 +170,7 @@ def stalls_against_steal(simulation: Simulation, result, trace, over: float = 3e
     )
 
 
-def report(name: str, simulation: Simulation, result, stolen: list[float], trace) -> None:
+def report(name: str, simulation: Simulation, result, stolen: list[float], trace, steps) -> None:
     h = result.telemetry["haptic"]
     print(f"[{name}] stop={result.stop_reason} wall={result.wall_seconds:.1f}s", flush=True)
     print(
@@ -152,6 +205,8 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
                 f"p99={np.percentile(ms, 99):.2f} ms max={ms.max():.2f} ms",
                 flush=True,
             )
+    print(f"[{name}]   haptic {late_periods_by_cause(steps)}", flush=True)
+    print(f"[{name}]   haptic {late_periods_by_cause(steps, over=2e-3)}", flush=True)
     for over in (3e-3, 2e-3):
         print(
             f"[{name}]   haptic periods > {1e3 * over:.0f} ms against steal: "

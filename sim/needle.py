@@ -168,7 +168,7 @@ def _is_rotation(r: NDArray[np.float64]) -> bool:
 
 def rotation_about(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
     """Rotation matrix about an axis (need not be unit) by an angle (Rodrigues), in plain floats."""
-    x, y, z = (float(v) for v in axis)
+    x, y, z = map(float, axis)
     norm = math.sqrt(x * x + y * y + z * z)
     x, y, z = x / norm, y / norm, z / norm
     c, s = math.cos(angle_rad), math.sin(angle_rad)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import functools
 import math
 from collections.abc import Callable
@@ -273,6 +274,7 @@ class SuturingPass:
             ]
         )
         self.axis = -np.cross(to_centre, tangent)  # turning about it drives the tip along its curve
+        self._axis = tuple(self.axis.tolist())  # the same, as plain floats for every haptic tick
         world = np.column_stack([to_centre, tangent, self.axis])
         self._rest = world @ local.T
         self._centre_local = centre_local
@@ -280,6 +282,8 @@ class SuturingPass:
         self.centre = self.entry + self.radius * to_centre
         self.normal, self.tangent = n, tangent
         self._tremor_phase = np.random.default_rng(self.p.seed).uniform(0, 2 * math.pi, size=3)
+        # rad/s per axis; (2 pi) * f as the expression 2 * math.pi * f * t would group it
+        self._tremor_omega = 2 * math.pi * (self.p.tremor_frequency * np.array([1.0, 1.13, 0.87]))
         self._omega = self.p.insertion_speed / self.radius
         self._insert_time = (
             math.radians(self.p.insertion_arc_deg) / self._omega + self.p.hesitations * self.p.hesitation_time
@@ -301,7 +305,7 @@ class SuturingPass:
 
     def turned(self, angle: float) -> Pose:
         """Holder (= needle) pose with the needle turned by ``angle`` (rad) about its centre from entry."""
-        rotation = rotation_about(self.axis, angle) @ self._rest
+        rotation = rotation_about(self._axis, angle) @ self._rest
         return Pose.unchecked(self.centre - rotation @ self._centre_local, rotation)
 
     def _insertion_angle(self, t: float) -> float:
@@ -311,14 +315,13 @@ class SuturingPass:
             span = self._insert_time / (self.p.hesitations + 1)
             for k in range(1, self.p.hesitations + 1):
                 start = k * span - self.p.hesitation_time / 2
-                moving -= float(np.clip(t - start, 0.0, self.p.hesitation_time))
+                moving -= min(max(t - start, 0.0), self.p.hesitation_time)
         return min(self._omega * max(moving, 0.0), math.radians(self.p.insertion_arc_deg))
 
     def _tremor(self, t: float) -> NDArray[np.float64]:
         if self.p.tremor_amplitude == 0:
             return np.zeros(3)
-        frequencies = self.p.tremor_frequency * np.array([1.0, 1.13, 0.87])
-        return self.p.tremor_amplitude * np.sin(2 * math.pi * frequencies * t + self._tremor_phase)
+        return self.p.tremor_amplitude * np.sin(self._tremor_omega * t + self._tremor_phase)
 
     def pose_and_grip(self, t: float) -> tuple[Pose, bool]:
         phases = self._phases  # every haptic tick: not rebuilt
@@ -358,7 +361,7 @@ class SuturingPass:
         if t < stop:  # jaws open, travel from the grip point to the needle's tip, close on arrival
             w = (t - start) / (stop - start)
             return Pose.unchecked((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
-        turn = rotation_about(self.axis, self._omega * (t - stop))
+        turn = rotation_about(self._axis, self._omega * (t - stop))
         return Pose.unchecked(self.centre + turn @ (tip - self.centre), turn @ released.rotation), True
 
 
@@ -391,11 +394,12 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
     """
     if not passes:
         raise DeviceError("sequence_of_passes needs at least one pass")
-    starts = np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]])
+    starts = np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]]).tolist()
     total = float(starts[-1] + passes[-1].duration)
+    last = len(passes) - 1
 
     def trajectory(t: float) -> tuple[Pose, bool]:
-        k = int(np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(passes) - 1))
+        k = min(max(bisect.bisect_right(starts, t) - 1, 0), last)  # every haptic tick: plain floats
         local = t - starts[k]
         current = passes[k]
         if local <= current.duration:
