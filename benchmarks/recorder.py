@@ -48,7 +48,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 from recorder import COLUMN, SAMPLE_COLUMNS, SessionWriter  # noqa: E402
 from recorder.remote import encode_batch, pack_frame  # noqa: E402
 from recorder.writer import samples_batch  # noqa: E402
-from sim.runtime.cpu import IdlePolling  # noqa: E402
+from sim.runtime.cpu import IdlePolling, stolen_seconds  # noqa: E402
 from sim.runtime.realtime import _set_all_threads, _sleep_until  # noqa: E402
 
 
@@ -425,6 +425,7 @@ def ingest_load(stations: int, seconds: float, transport: str) -> dict:
             base = f"http://127.0.0.1:{port}"
             acks: list = []
             cpu_before, wall_before = _cpu_seconds(server.pid), time.perf_counter()
+            steal_before = stolen_seconds()
 
             async def run() -> list[int]:
                 line = StartLine(stations)
@@ -434,6 +435,7 @@ def ingest_load(stations: int, seconds: float, transport: str) -> dict:
 
             sent = asyncio.run(run())
             cpu = (_cpu_seconds(server.pid) - cpu_before) / (time.perf_counter() - wall_before)
+            steal_after = stolen_seconds()
             closed = asyncio.run(_close_all(base, stations, sent))
         finally:
             server.terminate()
@@ -456,6 +458,7 @@ def ingest_load(stations: int, seconds: float, transport: str) -> dict:
         "lag_ms": np.percentile(lags, [50, 99, 100]) * 1e3,
         "round_trip_ms": np.percentile(round_trips, [50, 99, 100]) * 1e3,
         "server_cpu_cores": cpu,
+        "stolen_s": {core: steal_after[core] - steal_before[core] for core in sorted(steal_after)},
     }
 
 
@@ -467,7 +470,8 @@ def print_ingest(result: dict) -> None:
         f"batch round trip p50={rt[0]:.1f} ms p99={rt[1]:.1f} ms max={rt[2]:.1f} ms; "
         f"server CPU {result['server_cpu_cores']:.2f} cores; "
         f"{result['samples_sent']:,} samples sent, {result['samples_lost_or_wrong']} lost or wrong, "
-        f"{result['closed']}/{result['stations']} sessions closed"
+        f"{result['closed']}/{result['stations']} sessions closed; hypervisor steal during the run: "
+        + ", ".join(f"cpu{core} {1e3 * seconds:.0f} ms" for core, seconds in result["stolen_s"].items())
     )
 
 

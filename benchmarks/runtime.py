@@ -32,6 +32,7 @@ from sim.experiments import paper_cube
 from sim.fem import BiphaseTissue
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings, Simulation
+from sim.runtime.cpu import stolen_seconds
 from sim.scenarios import practice_passes, scenario
 
 STEAL_SAMPLER = """
@@ -49,14 +50,6 @@ with open(sys.argv[3], "w") as out:
 """
 """Every 5 ms: (perf_counter s, the haptic core's hypervisor steal in clock ticks) from /proc/stat,
 sampled from another core."""
-
-
-def stolen_seconds() -> list[float]:
-    """CPU time each core has lost to the hypervisor since boot (s), from /proc/stat."""
-    ticks = os.sysconf("SC_CLK_TCK")
-    with open("/proc/stat") as stat:
-        lines = [line.split() for line in stat if line.startswith("cpu") and line[3] != " "]
-    return [int(fields[8]) / ticks for fields in lines]
 
 
 class StepClock:
@@ -121,7 +114,8 @@ def run_measuring_steal(simulation: Simulation, duration: float):
         try:
             before = stolen_seconds()
             result = simulation.run_realtime(duration)
-            stolen = [b - a for a, b in zip(before, stolen_seconds(), strict=True)]
+            after = stolen_seconds()
+            stolen = [after[core] - before[core] for core in sorted(after)]
         finally:
             sampler.terminate()
             sampler.wait()

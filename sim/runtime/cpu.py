@@ -1,4 +1,5 @@
-"""Keeping the haptic core awake: its idle state limited to polling for the length of a run.
+"""Keeping the haptic core awake: its idle state limited to polling for the length of a run;
+and how much CPU time the hypervisor has taken from each core (the real-time figures follow it).
 
 On these virtual machines an idle vCPU halts and the host takes the physical core; the
 haptic process, woken from its sleep before each 1 ms deadline, then runs with cold caches
@@ -12,10 +13,32 @@ interrupts are kernel-managed here and cannot be moved.)
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from types import TracebackType
 
 SYSFS_CPUS = Path("/sys/devices/system/cpu")
+PROC_STAT = Path("/proc/stat")
+
+
+def stolen_seconds(stat: Path = PROC_STAT) -> dict[int, float]:
+    """CPU time (s) the hypervisor has taken from each core since boot ("steal", the eighth value
+    of each ``cpuN`` line of /proc/stat, in clock ticks); empty where the file is missing.
+
+    A vCPU stalls whenever the host runs something else on its physical core, however the guest
+    schedules it: the benchmarks print this next to their real-time figures.
+    """
+    try:
+        lines = stat.read_text().splitlines()
+    except OSError:
+        return {}
+    ticks = os.sysconf("SC_CLK_TCK")
+    stolen = {}
+    for line in lines:
+        fields = line.split()
+        if len(fields) > 8 and fields[0].startswith("cpu") and fields[0][3:].isdigit():
+            stolen[int(fields[0][3:])] = int(fields[8]) / ticks
+    return stolen
 
 
 class IdlePolling:

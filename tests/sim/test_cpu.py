@@ -45,3 +45,20 @@ def test_the_real_run_leaves_the_machine_as_it_found_it():
         seen.append((polling.active, path.read_text().strip()))
     assert path.read_text() == before
     assert seen == [(True, "n/a")]
+
+
+def test_steal_is_read_per_core_in_seconds(tmp_path):
+    import os
+
+    from sim.runtime.cpu import stolen_seconds
+
+    ticks = os.sysconf("SC_CLK_TCK")
+    stat = tmp_path / "stat"
+    stat.write_text(
+        "cpu  10554 0 4196 22630 517 0 78 22 0 0\n"
+        "cpu0 2295 0 1198 15432 51 0 12 6 0 0\n"
+        f"cpu1 8259 0 2998 7197 465 0 65 {3 * ticks} 0 0\n"
+        "intr 1 2 3\n"
+    )
+    assert stolen_seconds(stat) == {0: 6 / ticks, 1: 3.0}
+    assert stolen_seconds(tmp_path / "missing") == {}
