@@ -127,7 +127,7 @@ class Pose:
     def __post_init__(self) -> None:
         position = np.asarray(self.position, dtype=np.float64)
         rotation = np.asarray(self.rotation, dtype=np.float64)
-        if position.shape != (3,) or not np.isfinite(position).all():
+        if position.shape != (3,) or not all(map(math.isfinite, position.tolist())):  # plain floats
             raise NeedleError(f"pose position must be 3 finite numbers (m); got {position}")
         if rotation.shape != (3, 3) or not _is_rotation(rotation):
             raise NeedleError("pose rotation must be a proper 3x3 rotation matrix")
