@@ -247,16 +247,29 @@ def main() -> None:
         realtime_artery(needle, args.seconds, size, not args.no_render, precomputed=False)
 
 
+def interpreter_speed(iterations: int = 1_000_000) -> float:
+    """Million iterations per second of a plain Python loop (sum of integers): how fast this vCPU
+    runs interpreter code at the moment, printed beside the simulated-time figure, which is
+    interpreter-bound (on these VMs the same loop varies by 40 % from one minute to the next)."""
+    started = time.perf_counter()
+    total = 0
+    for i in range(iterations):
+        total += i
+    return iterations / (time.perf_counter() - started) / 1e6
+
+
 def simulated_throughput(cube, needle) -> None:
     one = practice_passes(scenario("paper_cube"), needle, 1)[0]
-    ratios = []
+    ratios, speeds = [], []
     for _ in range(3):
+        speeds.append(interpreter_speed())
         simulation = Simulation(cube, needle, ScriptedDevice(one.pose_and_grip))
         result = simulation.run_simulated(one.duration)
         ratios.append(one.duration / result.wall_seconds)
     print(
         f"[simulated, test cube] one pass of {one.duration:.2f} s simulated: median "
-        f"{np.median(ratios):.1f}x real time (runs: {', '.join(f'{r:.1f}' for r in ratios)})",
+        f"{np.median(ratios):.1f}x real time (runs: {', '.join(f'{r:.1f}' for r in ratios)}); "
+        f"a plain Python loop just before each run: {', '.join(f'{v:.0f}' for v in speeds)} M iterations/s",
         flush=True,
     )
 
