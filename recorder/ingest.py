@@ -184,6 +184,13 @@ def _sync_error(journal: _Journal) -> OSError | None:
     return None
 
 
+def _outcome_unread(future) -> None:
+    """Done-callback of an answer its station left before reading: take its outcome (a refusal or
+    a durability error has nobody to go to; what was staged stays in the journal)."""
+    if not future.cancelled():
+        future.exception()
+
+
 def _resolve(results: list) -> None:
     for future, error in results:
         if future.done():
@@ -497,7 +504,10 @@ def create_app(store: IngestStore):
             )
             await websocket.close(code=1008, reason="missing or unknown station token")
             return
-        answers: asyncio.Queue = asyncio.Queue()
+        # Each answer is a task from the moment its frame is staged: a batch's wait for durability
+        # joins the next group-commit round at once (not after the answers before it), and an
+        # answer the station leaves before reading still runs to its end instead of being dropped.
+        answers: asyncio.Queue[asyncio.Future | None] = asyncio.Queue()
 
         async def send_answers() -> None:
             while (pending := await answers.get()) is not None:
@@ -507,8 +517,10 @@ def create_app(store: IngestStore):
                     result = refused(station, session_id, error)
                 await websocket.send_json(result)
 
-        async def ready(result: dict[str, Any]) -> dict[str, Any]:
-            return result
+        def ready(result: dict[str, Any]) -> asyncio.Future:
+            future = asyncio.get_running_loop().create_future()
+            future.set_result(result)
+            return future
 
         sender = asyncio.create_task(send_answers())
         try:
@@ -519,7 +531,8 @@ def create_app(store: IngestStore):
                 try:
                     if message.get("bytes") is not None:
                         stream, sequence, body = unpack_frame(message["bytes"])
-                        await answers.put(await store_batch(station, session_id, stream, sequence, body))
+                        acknowledged = await store_batch(station, session_id, stream, sequence, body)
+                        await answers.put(asyncio.ensure_future(acknowledged))
                     else:
                         await answers.put(ready(await text_frame(station, session_id, message.get("text"))))
                 except RemoteError as error:
@@ -532,6 +545,11 @@ def create_app(store: IngestStore):
                 await sender
             except (WebSocketDisconnect, RuntimeError):
                 pass  # the station left before its last answers
+            finally:
+                while not answers.empty():  # answers nobody will read: their outcome is not needed
+                    pending = answers.get_nowait()
+                    if pending is not None:
+                        pending.add_done_callback(_outcome_unread)
 
     return Starlette(
         routes=[

@@ -163,6 +163,28 @@ def test_websocket_frames_get_answers_in_order(tmp_path, stores):
     assert session.events.column("kind").to_pylist() == ["contact_start"]
 
 
+def test_a_station_that_leaves_before_its_answers_still_gets_everything_stored_once(tmp_path, stores):
+    """Twenty batches sent and the connection closed without reading an answer: nothing is
+    dropped half-way (every answer runs to its end, none is left unawaited), and sending all of
+    them again on a new connection, as a station does with what it saw no acknowledgement for,
+    stores each exactly once."""
+    store = stores(tmp_path)
+    client = TestClient(create_app(store))
+    frames = [pack_frame("samples", k, encode_batch(batch(100 * k), k)) for k in range(20)]
+    for attempt in range(3):
+        with client.websocket_connect("/api/sessions/gone/ws", headers=AUTH) as socket_:
+            for frame in frames:
+                socket_.send_bytes(frame)
+            if attempt == 2:
+                answers = [socket_.receive_json() for _ in frames]
+                socket_.send_text(json.dumps({"op": "close", "batches": {"samples": 20, "events": 0}}))
+                closed = socket_.receive_json()
+    assert [a["status"] for a in answers] == [200] * 20 and all(a["duplicate"] for a in answers)
+    assert closed["status"] == 200
+    xs = open_session(tmp_path / "station-a" / "gone").samples.column("tool_x").to_numpy()
+    np.testing.assert_array_equal(xs, np.arange(2000))
+
+
 def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
