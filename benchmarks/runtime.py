@@ -123,13 +123,13 @@ def run_measuring_steal(simulation: Simulation, duration: float):
     return result, stolen, (samples[:, 0], samples[:, 1] / os.sysconf("SC_CLK_TCK")), clock.steps
 
 
-def stalls_against_steal(simulation: Simulation, result, trace, over: float = 3e-3, draws: int = 20) -> str:
+def stalls_against_steal(steps: np.ndarray, trace, over: float = 3e-3, draws: int = 20) -> str:
     """Whether the haptic core's late periods (> ``over`` s) coincide with the hypervisor taking
     that core: steal in the sampling windows around each late period, against windows of the same
     length at random times holding no late period. /proc/stat counts steal in 10 ms ticks of an
     exact running total, so a 4 ms stall moves it by one tick only sometimes; the sums tell."""
     times, steal = trace
-    starts = simulation.telemetry["haptic"].starts + result.clock_origin
+    starts = steps[:, 0]  # perf_counter readings, the sampler's clock
     late = np.flatnonzero(np.diff(starts) > over)
     low = np.searchsorted(times, starts[late], side="right") - 1
     high = np.searchsorted(times, starts[late + 1], side="left")
@@ -199,12 +199,11 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
                 f"p99={np.percentile(ms, 99):.2f} ms max={ms.max():.2f} ms",
                 flush=True,
             )
-    print(f"[{name}]   haptic {late_periods_by_cause(steps)}", flush=True)
-    print(f"[{name}]   haptic {late_periods_by_cause(steps, over=2e-3)}", flush=True)
     for over in (3e-3, 2e-3):
+        print(f"[{name}]   haptic {late_periods_by_cause(steps, over)}", flush=True)
         print(
             f"[{name}]   haptic periods > {1e3 * over:.0f} ms against steal: "
-            f"{stalls_against_steal(simulation, result, trace, over=over)}",
+            f"{stalls_against_steal(steps, trace, over)}",
             flush=True,
         )
     kinds = [e.kind for e in result.events]

@@ -454,5 +454,4 @@ def _collect(
     simulation.events.append(RuntimeEvent("stopped", end, "runtime", simulation.stop_reason or "completed"))
     result = simulation._result(end, wall)
     result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in LAYERS}
-    result.clock_origin = control.start
     return result

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.needle import Pose
-from sim.runtime.logs import HapticColumns
+from sim.runtime.logs import HapticColumns, interpolate_force
 
 
 class Arena:
@@ -84,10 +84,11 @@ class SharedHolder:
 class SharedForceHistory:
     """The FEM layer's (time, force) outputs in a shared ring, interpolated by the haptic process.
 
-    ``at`` gives what :class:`sim.runtime.simulation.ForceHistory` gives for the same pushes (the
-    same arithmetic, bit for bit) over the last ``capacity - 1`` outputs, by bisection on the
-    ring's time column: a few scalar reads per haptic tick. On these VMs a step's compute time is
-    sometimes stretched 5-20x by the host; what the step costs is what that multiplies.
+    ``at`` gives what :class:`sim.runtime.simulation.ForceHistory` gives for the same pushes over
+    the last ``capacity - 1`` outputs, bit for bit: it bisects the ring's time column (a few scalar
+    reads per haptic tick) and hands the two outputs around the time to ``interpolate_force``. On
+    these VMs a step's compute time is sometimes stretched 5-20x by the host; what the step costs
+    is what that multiplies.
     """
 
     def __init__(self, arena: Arena, capacity: int = 512) -> None:
@@ -126,10 +127,9 @@ class SharedForceHistory:
                 low = middle
             else:
                 high = middle
-        t0, a0, a1, a2 = ring[low % capacity].tolist()
-        t1, b0, b1, b2 = ring[high % capacity].tolist()
-        w = (time - t0) / (t1 - t0)
-        return np.array([a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2)])
+        t0, *a = ring[low % capacity].tolist()
+        t1, *b = ring[high % capacity].tolist()
+        return interpolate_force([t0, t1], [tuple(a), tuple(b)], time)  # the in-process arithmetic
 
 
 class SharedHapticLog(HapticColumns):

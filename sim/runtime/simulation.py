@@ -203,9 +203,6 @@ class RunResult:
     error: str | None = None
     error_layer: str | None = None
     wall_seconds: float = 0.0
-    clock_origin: float | None = None
-    """Real time only: the ``time.perf_counter()`` reading (CLOCK_MONOTONIC, shared by every process
-    on the machine) at the run's time 0, to line its telemetry up with traces taken outside it."""
 
     @property
     def completed(self) -> bool:
