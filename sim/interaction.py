@@ -113,6 +113,21 @@ class FemStep:
     reaction_forces: NDArray[np.float64]
     events: list[NeedleEvent] = field(default_factory=list)
 
+    @classmethod
+    def untouched(cls, events: list[NeedleEvent] | None = None) -> FemStep:
+        """No contact: zero force, no nodes (shared read-only arrays; most FEM steps of a free needle)."""
+        return cls(_NO_FORCE, _NO_NODES, _NO_REACTIONS, [] if events is None else events)
+
+
+def _read_only(array: NDArray) -> NDArray:
+    array.flags.writeable = False
+    return array
+
+
+_NO_FORCE = _read_only(np.zeros(3))
+_NO_NODES = _read_only(np.zeros(0, dtype=np.int64))
+_NO_REACTIONS = _read_only(np.zeros((0, 3)))
+
 
 def entry_angle_deg(tangent: NDArray[np.float64], outward_normal: NDArray[np.float64]) -> float:
     """Angle (deg) between the needle's direction and the inward normal: 0 = perpendicular entry."""
@@ -150,6 +165,8 @@ class NeedleInteraction:
         self.tip_velocity = np.zeros(3)
         self._vertices_pose: Pose | None = None
         self._vertices = np.zeros((0, 3))
+        self._tangent_pose: Pose | None = None
+        self._tangent = np.zeros(3)
         self.tip_speed = 0.0
 
     # -- haptic rate ----------------------------------------------------------------
@@ -181,11 +198,20 @@ class NeedleInteraction:
             self._vertices_pose = self.needle_pose
         return self._vertices
 
+    def tip_tangent(self) -> NDArray[np.float64]:
+        """Unit direction the needle's tip points (world), computed once per pose."""
+        if self._tangent_pose is not self.needle_pose:
+            self._tangent = self.needle.tip_tangent(self.needle_pose)
+            self._tangent.flags.writeable = False
+            self._tangent_pose = self.needle_pose
+        return self._tangent
+
     def _track_tip(self, time: float) -> None:
         tip = self.needle_vertices()[0]
         if self._previous_tip is not None and time > self._previous_time:
-            self.tip_velocity = (tip - self._previous_tip) / (time - self._previous_time)
-            self.tip_speed = float(np.linalg.norm(self.tip_velocity))
+            velocity = (tip - self._previous_tip) / (time - self._previous_time)
+            self.tip_velocity = velocity
+            self.tip_speed = math.sqrt(velocity.dot(velocity))  # np.linalg.norm's own sum, bit for bit
         self._previous_tip, self._previous_time = tip, time
 
     # -- graphics rate ----------------------------------------------------------------
@@ -239,7 +265,7 @@ class NeedleInteraction:
         self.contacts = [TriangleContact.from_hit(self.collision, hits, 0, point)]
         self.state = "contact"
         self._handle = None
-        tangent = self.needle.tip_tangent(self.needle_pose)
+        tangent = self.tip_tangent()
         return [
             self._event("contact_start", time, hits, 0, "", entry_angle_deg(tangent, self.contacts[0].normal))
         ]
@@ -289,9 +315,7 @@ class NeedleInteraction:
                     hits,
                     k,
                     "",
-                    entry_angle_deg(
-                        -self.needle.tip_tangent(self.needle_pose), self.collision.normals[hits.triangle[k]]
-                    ),
+                    entry_angle_deg(-self.tip_tangent(), self.collision.normals[hits.triangle[k]]),
                 )
             )
         for k in walls:
@@ -319,6 +343,10 @@ class NeedleInteraction:
         crossing = np.flatnonzero(sign[:-1] != sign[1:])
         if crossing.size == 0:
             return None
+        if crossing.size == 1:  # the usual case: the same arithmetic on one pair of vertices
+            k = int(crossing[0])
+            a, b = side[k], side[k + 1]
+            return vertices[k] + (a / (a - b)) * (vertices[k + 1] - vertices[k])
         a, b = side[crossing], side[crossing + 1]
         t = a / (a - b)
         points = vertices[crossing] + t[:, None] * (vertices[crossing + 1] - vertices[crossing])
@@ -345,7 +373,7 @@ class NeedleInteraction:
         """Local CD against the nominated triangle(s), forces, and the piercing decision."""
         if self.state == "free" or not self.contacts:
             self.last_contact = None
-            return FemStep(np.zeros(3), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+            return FemStep.untouched()
         vertices = self.needle_vertices()
         tip = vertices[0]
         if self.state == "contact":
@@ -363,13 +391,13 @@ class NeedleInteraction:
         contact = self.contacts[0]
         if contact.penetration(tip) <= 0.0:
             event = self._let_go(time, "contact_end", contact, "tip withdrawn above the surface")
-            return FemStep(np.zeros(3), np.zeros(0, dtype=np.int64), np.zeros((0, 3)), [event])
+            return FemStep.untouched([event])
         displacement = tip - contact.point
-        intended = np.outer(contact.barycentric, displacement)
+        intended = contact.barycentric[:, None] * displacement
         reactions = self._reactions(contact.nodes, intended, displacement)
         force = -reactions.sum(axis=0)
         events = []
-        angle = entry_angle_deg(self.needle.tip_tangent(self.needle_pose), contact.normal)
+        angle = entry_angle_deg(self.tip_tangent(), contact.normal)
         normal_force = float(force @ contact.normal)  # the tissue pushes the needle back out
         tip_stress = normal_force / self.needle.wire_area
         if angle <= self.rules.max_entry_angle_deg and tip_stress >= self.rules.puncture_stress:
@@ -389,7 +417,7 @@ class NeedleInteraction:
         return FemStep(force, contact.nodes, reactions, events)
 
     def _pierced_step(self, vertices: NDArray) -> FemStep:
-        tangent = self.needle.tip_tangent(self.needle_pose)
+        tangent = self.tip_tangent()
         nodes, intended = [], []
         for contact in self.contacts:
             point = self._needle_point_at_plane(vertices, contact)
@@ -398,9 +426,9 @@ class NeedleInteraction:
             offset = point - contact.point
             sideways = offset - (offset @ tangent) * tangent  # the needle slides freely along itself
             nodes.append(contact.nodes)
-            intended.append(np.outer(contact.barycentric, sideways))
+            intended.append(contact.barycentric[:, None] * sideways)  # np.outer, without its wrapper
         if not nodes:
-            return FemStep(np.zeros(3), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+            return FemStep.untouched()
         if len(nodes) == 1:
             all_nodes, merged = nodes[0], intended[0]
         else:  # entry and exit triangles may share nodes: add their intended displacements
@@ -412,7 +440,7 @@ class NeedleInteraction:
 
     def _reactions(self, nodes: NDArray[np.int64], intended: NDArray, tool_displacement: NDArray) -> NDArray:
         self.last_contact = (nodes, intended)
-        key = tuple(int(n) for n in nodes)
+        key = tuple(nodes.tolist())
         if self._handle is None or key != self._handle_nodes:
             self._handle = self.tissue.contact(nodes)
             self._handle_nodes = key

@@ -21,15 +21,22 @@ ORIENT3D_BOUND = (7.0 + 56.0 * _EPSILON) * _EPSILON
 
 def orient3d_fast(a: NDArray, b: NDArray, c: NDArray, d: NDArray) -> tuple[NDArray, NDArray]:
     """Floating-point orient3d over broadcast (..., 3) inputs and its error bound."""
+    # Columns taken once and each 2x2 product computed once, for the determinant and its
+    # permanent alike: the same floating-point operations as the textbook form, a third fewer
+    # array operations (which is what a call costs for the few pairs the global CD tests).
     ad, bd, cd = a - d, b - d, c - d
-    bc = bd[..., 1] * cd[..., 2] - bd[..., 2] * cd[..., 1]
-    ca = cd[..., 1] * ad[..., 2] - cd[..., 2] * ad[..., 1]
-    ab = ad[..., 1] * bd[..., 2] - ad[..., 2] * bd[..., 1]
-    det = ad[..., 0] * bc + bd[..., 0] * ca + cd[..., 0] * ab
+    adx, ady, adz = ad[..., 0], ad[..., 1], ad[..., 2]
+    bdx, bdy, bdz = bd[..., 0], bd[..., 1], bd[..., 2]
+    cdx, cdy, cdz = cd[..., 0], cd[..., 1], cd[..., 2]
+    b_c, c_b = bdy * cdz, bdz * cdy
+    c_a, a_c = cdy * adz, cdz * ady
+    a_b, b_a = ady * bdz, adz * bdy
+    det = adx * (b_c - c_b) + bdx * (c_a - a_c) + cdx * (a_b - b_a)
+    abs_ = np.abs
     permanent = (
-        np.abs(ad[..., 0]) * (np.abs(bd[..., 1] * cd[..., 2]) + np.abs(bd[..., 2] * cd[..., 1]))
-        + np.abs(bd[..., 0]) * (np.abs(cd[..., 1] * ad[..., 2]) + np.abs(cd[..., 2] * ad[..., 1]))
-        + np.abs(cd[..., 0]) * (np.abs(ad[..., 1] * bd[..., 2]) + np.abs(ad[..., 2] * bd[..., 1]))
+        abs_(adx) * (abs_(b_c) + abs_(c_b))
+        + abs_(bdx) * (abs_(c_a) + abs_(a_c))
+        + abs_(cdx) * (abs_(a_b) + abs_(b_a))
     )
     return det, ORIENT3D_BOUND * permanent
 

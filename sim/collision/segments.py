@@ -109,20 +109,29 @@ def intersect_pairs(
     tris: NDArray[np.int64],
 ) -> SegmentHits:
     """Exact crossing test on given (segment, triangle) candidate pairs."""
+    if len(segments) == 0:  # most graphics frames of a needle away from the tissue
+        return _no_hits()
     p, q = seg_start[segments], seg_end[segments]
-    a, b, c = triangles[tris, 0], triangles[tris, 1], triangles[tris, 2]
-    side_p, sign_p = orient3d(a, b, c, p)
-    side_q, sign_q = orient3d(a, b, c, q)
+    corners = triangles[tris]
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    # The five determinants of every pair in one orient3d call (a needle has few candidate pairs,
+    # so a call costs its array operations, not its arithmetic): the two segment ends against
+    # the plane, then the three volumes around the line pq.
+    values, signs = orient3d(
+        np.concatenate((a, a, q, q, q)),
+        np.concatenate((b, b, c, a, b)),
+        np.concatenate((c, c, b, c, a)),
+        np.concatenate((p, q, p, p, p)),
+    )
+    values, signs = values.reshape(5, -1), signs.reshape(5, -1)
+    side_p, side_q, volumes = values[0], values[1], values[2:]
+    sign_p, sign_q, around = signs[0], signs[1], signs[2:]
     crossing = (sign_p.astype(np.int16) * sign_q <= 0) & ~((sign_p == 0) & (sign_q == 0))
-    keep = np.flatnonzero(crossing)
-    p, q, a, b, c = p[keep], q[keep], a[keep], b[keep], c[keep]
-    u, sign_u = orient3d(q, c, b, p)
-    v, sign_v = orient3d(q, a, c, p)
-    w, sign_w = orient3d(q, b, a, p)
-    signs = np.stack([sign_u, sign_v, sign_w], axis=1)
-    inside = np.all(signs >= 0, axis=1) | np.all(signs <= 0, axis=1)
-    chosen = keep[inside]
-    weights = np.abs(np.stack([u, v, w], axis=1)[inside])
+    inside = (around.min(axis=0) >= 0) | (around.max(axis=0) <= 0)  # the three share a sign
+    chosen = np.flatnonzero(crossing & inside)
+    if chosen.size == 0:
+        return _no_hits()
+    weights = np.abs(volumes[:, chosen].T)
     sp, sq = side_p[chosen], side_q[chosen]
     total = weights.sum(axis=1)
     usable = (total > 0) & np.isfinite(total) & (sp != sq)
@@ -138,6 +147,11 @@ def intersect_pairs(
     # orient3d(a, b, c, d) < 0 when d is on the front (normal) side of abc.
     entering = (sign_p[chosen] < 0) | ((sign_p[chosen] == 0) & (sign_q[chosen] > 0))
     return SegmentHits(segments[chosen], tris[chosen], t, barycentric, entering)
+
+
+def _no_hits() -> SegmentHits:
+    nothing = np.zeros(0, dtype=np.int64)
+    return SegmentHits(nothing, nothing, np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=bool))
 
 
 def _exact_crossing(p: NDArray, q: NDArray, triangle: NDArray) -> tuple[float, NDArray[np.float64]]:

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.errors import VascsimError
+from sim.needle import Pose
 
 
 class DeviceError(VascsimError):
@@ -50,13 +51,19 @@ class DeviceLimits:
 
 @dataclass(frozen=True)
 class DeviceSample:
-    """One reading: time (s), tool position (m) and rotation (world <- tool), velocity (m/s), buttons."""
+    """One reading: time (s), tool position (m) and rotation (world <- tool), velocity (m/s), buttons.
+
+    ``pose``: the same position and rotation as a :class:`~sim.needle.Pose` where the device
+    already holds one (scripted trajectories, whose poses are checked or composed from checked
+    ones); otherwise None, and the haptic layer checks the raw arrays itself.
+    """
 
     time: float
     position: NDArray[np.float64]
     rotation: NDArray[np.float64]
     velocity: NDArray[np.float64]
     buttons: int = 0
+    pose: Pose | None = None
 
     def pressed(self, button: int) -> bool:
         return bool(self.buttons >> button & 1)

@@ -69,7 +69,7 @@ class ScriptedDevice:
             before, _ = self.trajectory(time - VELOCITY_STEP)
             velocity = (pose.position - before.position) / VELOCITY_STEP
         self._previous = (time, pose.position)
-        return DeviceSample(time, pose.position, pose.rotation, velocity, int(grip))
+        return DeviceSample(time, pose.position, pose.rotation, velocity, int(grip), pose)
 
     def write_force(self, force: NDArray[np.float64]) -> None:
         self.forces.append(self._now, force)
@@ -324,19 +324,29 @@ class SuturingPass:
         return self.p.tremor_amplitude * np.sin(self._tremor_omega * t + self._tremor_phase)
 
     def pose_and_grip(self, t: float) -> tuple[Pose, bool]:
-        phases = self._phases  # every haptic tick: not rebuilt
+        # Every haptic tick: terms that are exactly zero (no push when the wrist does all the
+        # turning, no tremor) are not added, which leaves the same floats.
+        phases = self._phases
         if t < phases["insertion"][0]:
-            pose = self.turned(0.0)
+            pose = self._at_entry
             lift = (1.0 - max(t, 0.0) / self.p.approach_time) * self.p.approach_distance
             pose, grip = Pose.unchecked(pose.position + lift * self.normal, pose.rotation), True
         elif t < phases["regrab"][0]:
             angle = self._insertion_angle(t - phases["insertion"][0])
-            turned = self.turned(self.p.wrist_rotation * angle)
-            push = (1.0 - self.p.wrist_rotation) * self.radius * angle * self.tangent
-            pose, grip = Pose.unchecked(turned.position + push, turned.rotation), True
+            pose, grip = self.turned(self.p.wrist_rotation * angle), True
+            if self.p.wrist_rotation != 1.0:
+                push = (1.0 - self.p.wrist_rotation) * self.radius * angle * self.tangent
+                pose = Pose.unchecked(pose.position + push, pose.rotation)
         else:
             pose, grip = self._regrab_and_pull(t, *phases["regrab"])
+        if self.p.tremor_amplitude == 0:
+            return pose, grip
         return Pose.unchecked(pose.position + self._tremor(t), pose.rotation), grip
+
+    @functools.cached_property
+    def _at_entry(self) -> Pose:
+        """The holder pose that puts the tip on the entry point (the approach descends onto it)."""
+        return self.turned(0.0)
 
     @property
     def final_needle_pose(self) -> Pose:
@@ -362,7 +372,12 @@ class SuturingPass:
             w = (t - start) / (stop - start)
             return Pose.unchecked((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
         turn = rotation_about(self._axis, self._omega * (t - stop))
-        return Pose.unchecked(self.centre + turn @ (tip - self.centre), turn @ released.rotation), True
+        return Pose.unchecked(self.centre + turn @ self._tip_from_centre, turn @ released.rotation), True
+
+    @functools.cached_property
+    def _tip_from_centre(self) -> NDArray[np.float64]:
+        """Where the released needle's tip is, from the needle's centre (m)."""
+        return self._release[1] - self.centre
 
 
 def _unit(v: ArrayLike) -> NDArray[np.float64]:

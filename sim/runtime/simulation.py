@@ -278,9 +278,9 @@ class Simulation:
             self._emit(RuntimeEvent("device_lost", now, "haptic", str(error)))
             self.stop("device_lost", now)
             return
-        self.holder.put(
-            HolderSnapshot(now, Pose(sample.position, sample.rotation), sample.velocity, sample.pressed(0))
-        )
+        pose = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
+        grip = sample.pressed(0)
+        self.holder.put(HolderSnapshot(now, pose, sample.velocity, grip))
         target = self.forces.at(now - self.settings.force_delay)
         force = self.safety.filter(now, target, self.forces.latest_time)
         self._flush_safety_events()
@@ -290,7 +290,7 @@ class Simulation:
             self._emit(RuntimeEvent("device_lost", now, "haptic", str(error)))
             self.stop("device_lost", now)
             return
-        self.haptic_log.append(now, sample.position, sample.pressed(0), force)
+        self.haptic_log.append(now, sample.position, grip, force)
         if self.on_sample is not None:
             self.on_sample(now, sample, force, self.fem.get())
 
@@ -329,9 +329,9 @@ class Simulation:
                 step.reaction_forces,
                 contact,
                 interaction.tip_speed,
-                interaction.needle.tip_tangent(interaction.needle_pose),
+                interaction.tip_tangent(),
                 -1 if nominated is None else nominated.triangle,
-                (math.nan,) * 3 if nominated is None else tuple(float(w) for w in nominated.barycentric),
+                (math.nan,) * 3 if nominated is None else tuple(nominated.barycentric.tolist()),
             )
         )
 
