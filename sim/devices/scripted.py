@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.devices.base import SCRIPTED_LIMITS, DeviceError, DeviceIdentity, DeviceLimits, DeviceSample
 from sim.geometry import circle_through
-from sim.needle import Needle, Pose, rotation_about
+from sim.needle import Needle, Pose, TurnAbout, rotation_about
 
 Trajectory = Callable[[float], tuple[Pose, bool]]
 VELOCITY_STEP = 1e-3  # s, for the finite-difference velocity of a trajectory
@@ -274,12 +274,13 @@ class SuturingPass:
             ]
         )
         self.axis = -np.cross(to_centre, tangent)  # turning about it drives the tip along its curve
-        self._axis = tuple(self.axis.tolist())  # the same, as plain floats for every haptic tick
         world = np.column_stack([to_centre, tangent, self.axis])
         self._rest = world @ local.T
         self._centre_local = centre_local
         self.entry = np.asarray(entry, dtype=np.float64)
         self.centre = self.entry + self.radius * to_centre
+        at_entry = Pose.unchecked(self.centre - self._rest @ centre_local, self._rest)
+        self._turn = TurnAbout(self.axis, self.centre, at_entry)  # the holder, turned from entry
         self.normal, self.tangent = n, tangent
         self._tremor_phase = np.random.default_rng(self.p.seed).uniform(0, 2 * math.pi, size=3)
         # rad/s per axis; (2 pi) * f as the expression 2 * math.pi * f * t would group it
@@ -305,8 +306,7 @@ class SuturingPass:
 
     def turned(self, angle: float) -> Pose:
         """Holder (= needle) pose with the needle turned by ``angle`` (rad) about its centre from entry."""
-        rotation = rotation_about(self._axis, angle) @ self._rest
-        return Pose.unchecked(self.centre - rotation @ self._centre_local, rotation)
+        return self._turn.pose(angle)
 
     def _insertion_angle(self, t: float) -> float:
         """Angle turned after ``t`` s of insertion, with pauses spread evenly through it."""
@@ -371,13 +371,13 @@ class SuturingPass:
         if t < stop:  # jaws open, travel from the grip point to the needle's tip, close on arrival
             w = (t - start) / (stop - start)
             return Pose.unchecked((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
-        turn = rotation_about(self._axis, self._omega * (t - stop))
-        return Pose.unchecked(self.centre + turn @ self._tip_from_centre, turn @ released.rotation), True
+        return self._pull.pose(self._omega * (t - stop)), True
 
     @functools.cached_property
-    def _tip_from_centre(self) -> NDArray[np.float64]:
-        """Where the released needle's tip is, from the needle's centre (m)."""
-        return self._release[1] - self.centre
+    def _pull(self) -> TurnAbout:
+        """The holder, closed on the released needle's tip, turned on along the needle's curve."""
+        released, tip = self._release
+        return TurnAbout(self.axis, self.centre, Pose.unchecked(tip, released.rotation))
 
 
 def _unit(v: ArrayLike) -> NDArray[np.float64]:

@@ -7,6 +7,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sim.devices import DeviceError, DeviceLostError, ReplayDevice, ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters, matrix_quaternion, quaternion_matrix
@@ -15,7 +17,7 @@ from sim.devices.usb_discovery import identify, scan_usb
 from sim.fem import Material, TissueModel
 from sim.interaction import NeedleInteraction
 from sim.mesh import box_mesh
-from sim.needle import Needle, Pose, rotation_about
+from sim.needle import Needle, NeedleError, Pose, TurnAbout, rotation_about
 
 
 def old_reports(translation, rotation, buttons=0):
@@ -235,3 +237,27 @@ def test_suturing_pass_parameters_shape_the_motion():
     np.testing.assert_allclose(needle.world_vertices(at_entry)[0], [0, 0, 0], atol=1e-12)
     tangent = needle.tip_tangent(at_entry)
     assert math.degrees(math.acos(-tangent[2])) == pytest.approx(30.0, abs=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    axis=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: sum(x * x for x in v) > 1e-4),
+    centre=st.tuples(*[st.floats(-0.05, 0.05)] * 3),
+    start=st.tuples(*[st.floats(-0.05, 0.05)] * 3),
+    tilt=st.floats(-math.pi, math.pi),
+    angle=st.floats(-4 * math.pi, 4 * math.pi),
+)
+def test_a_turn_about_a_fixed_axis_is_the_composed_rotation(axis, centre, start, tilt, angle):
+    # Independent form: rotate the pose's offset from the centre and its frame by rotation_about.
+    pose = Pose(np.array(start), rotation_about([0.3, -0.2, 1.0], tilt))
+    turned = TurnAbout(axis, centre, pose).pose(angle)
+    expected_rotation = rotation_about(axis, angle) @ pose.rotation
+    expected_position = np.array(centre) + rotation_about(axis, angle) @ (pose.position - centre)
+    np.testing.assert_allclose(turned.rotation, expected_rotation, atol=1e-14)
+    np.testing.assert_allclose(turned.position, expected_position, atol=1e-15)
+    Pose(turned.position, turned.rotation)  # still a proper rotation: the checked constructor accepts it
+
+
+def test_a_turn_needs_an_axis():
+    with pytest.raises(NeedleError, match="non-zero axis"):
+        TurnAbout([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], Pose.identity())
