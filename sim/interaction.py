@@ -160,9 +160,9 @@ class NeedleInteraction:
         self._handle = None
         self._handle_nodes: tuple[int, ...] = ()
         self._implausible_active: set[tuple[str, int]] = set()
-        self._previous_tip: NDArray[np.float64] | None = None
+        self._previous_tip: tuple[float, float, float] | None = None
         self._previous_time = 0.0
-        self.tip_velocity = np.zeros(3)
+        self._tip_velocity = (0.0, 0.0, 0.0)
         self._vertices_pose: Pose | None = None
         self._vertices = np.zeros((0, 3))
         self._tangent_pose: Pose | None = None
@@ -207,12 +207,19 @@ class NeedleInteraction:
         return self._tangent
 
     def _track_tip(self, time: float) -> None:
-        tip = self.needle_vertices()[0]
+        x, y, z = tip = tuple(self.needle_vertices()[0].tolist())  # plain floats: every FEM step
         if self._previous_tip is not None and time > self._previous_time:
-            velocity = (tip - self._previous_tip) / (time - self._previous_time)
-            self.tip_velocity = velocity
-            self.tip_speed = math.sqrt(velocity.dot(velocity))  # np.linalg.norm's own sum, bit for bit
+            px, py, pz = self._previous_tip
+            dt = time - self._previous_time
+            vx, vy, vz = (x - px) / dt, (y - py) / dt, (z - pz) / dt
+            self._tip_velocity = (vx, vy, vz)
+            self.tip_speed = math.sqrt(vx * vx + vy * vy + vz * vz)
         self._previous_tip, self._previous_time = tip, time
+
+    @property
+    def tip_velocity(self) -> NDArray[np.float64]:
+        """The tip's velocity (m/s, world) between the last two FEM steps."""
+        return np.array(self._tip_velocity)
 
     # -- graphics rate ----------------------------------------------------------------
     def graphics_step(self, time: float) -> list[NeedleEvent]:
@@ -338,7 +345,7 @@ class NeedleInteraction:
     @staticmethod
     def _needle_point_at_plane(vertices: NDArray, contact: TriangleContact) -> NDArray | None:
         """Where the needle crosses the contact's plane, the crossing nearest the contact point."""
-        side = vertices @ contact.normal - float(contact.point @ contact.normal)
+        side = vertices.dot(contact.normal) - float(contact.point.dot(contact.normal))
         sign = np.sign(side)
         crossing = np.flatnonzero(sign[:-1] != sign[1:])
         if crossing.size == 0:
@@ -424,7 +431,7 @@ class NeedleInteraction:
             if point is None:
                 continue
             offset = point - contact.point
-            sideways = offset - (offset @ tangent) * tangent  # the needle slides freely along itself
+            sideways = offset - offset.dot(tangent) * tangent  # the needle slides freely along itself
             nodes.append(contact.nodes)
             intended.append(contact.barycentric[:, None] * sideways)  # np.outer, without its wrapper
         if not nodes:

@@ -104,11 +104,11 @@ class Needle:
 
     def world_vertices(self, pose: Pose) -> NDArray[np.float64]:
         """(S+1, 3) vertices in world coordinates, tip first."""
-        return pose.position + self.vertices @ pose.rotation.T
+        return pose.position + self.vertices.dot(pose.rotation.T)  # .dot: a third of @'s overhead
 
     def tip_tangent(self, pose: Pose) -> NDArray[np.float64]:
         """Unit direction the tip points (the curve's tangent at the tip), world frame."""
-        return pose.rotation @ self.tip_direction
+        return pose.rotation.dot(self.tip_direction)
 
     def arc_position(self, segment: NDArray[np.int64], t: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance from the tip (m) of points given as (segment, t along it)."""
@@ -148,7 +148,10 @@ class Pose:
 
     def compose(self, other: Pose) -> Pose:
         """self * other: apply ``other`` in this pose's frame."""
-        return Pose.unchecked(self.position + self.rotation @ other.position, self.rotation @ other.rotation)
+        # ndarray.dot rather than @ for these 3x3 products: the same BLAS call for a third of
+        # the generalised-ufunc overhead (the FEM layer composes a pose every step)
+        rotation = self.rotation
+        return Pose.unchecked(self.position + rotation.dot(other.position), rotation.dot(other.rotation))
 
     def inverse(self) -> Pose:
         return Pose.unchecked(-self.rotation.T @ self.position, self.rotation.T)

@@ -102,4 +102,4 @@ class TriangleContact:
 
     def penetration(self, tip: NDArray[np.float64]) -> float:
         """Depth (m) of the tip behind the triangle's plane at nomination (> 0: in contact)."""
-        return float((self.point - tip) @ self.normal)
+        return float((self.point - tip).dot(self.normal))

@@ -275,7 +275,7 @@ class BiphaseContact:
         strain = math.sqrt(dx * dx + dy * dy + dz * dz) / self.depth
         ratio = min(needle_speed / p.critical_speed, 1.0) ** p.speed_exponent if needle_speed > 0 else 0.0
         limit = p.strain_limit * (1.0 - self._floor_drop * ratio)
-        both = self._stacked @ intended.reshape(-1)
+        both = self._stacked.dot(intended.reshape(-1))
         n = self._three_k
         if strain <= limit:
             return both[:n].reshape(-1, 3)

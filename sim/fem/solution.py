@@ -104,7 +104,7 @@ class ContactHandle:
 
     def reaction_forces(self, intended: NDArray[np.float64]) -> NDArray[np.float64]:
         """(k, 3) reaction forces R = -C(u - a) for intended displacements a (k, 3), in N."""
-        return (self._stiffness @ intended.reshape(-1)).reshape(-1, 3)
+        return self._stiffness.dot(intended.reshape(-1)).reshape(-1, 3)
 
     def surface_displacement(self, reaction_forces: NDArray[np.float64]) -> NDArray[np.float64]:
         """(rows, 3) displacement of ``surface_nodes`` (m) under the given reaction forces."""

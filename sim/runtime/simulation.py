@@ -186,8 +186,9 @@ class HapticLog(HapticColumns):
     def append(self, time: float, position: NDArray, grip: bool, force: NDArray) -> None:
         if self.count == len(self._data):
             self._data = np.concatenate([self._data, np.empty_like(self._data)])
-        row = self._data[self.count]
-        row[0], row[1:4], row[4], row[5:8] = time, position, float(grip), force
+        x, y, z = position.tolist()
+        fx, fy, fz = force.tolist()
+        self._data[self.count] = (time, x, y, z, float(grip), fx, fy, fz)  # one assignment a tick
         self.count += 1
 
 
