@@ -347,7 +347,7 @@ class NeedleInteraction:
         """Where the needle crosses the contact's plane, the crossing nearest the contact point."""
         side = vertices.dot(contact.normal) - float(contact.point.dot(contact.normal))
         sign = np.sign(side)
-        crossing = np.flatnonzero(sign[:-1] != sign[1:])
+        (crossing,) = np.nonzero(sign[:-1] != sign[1:])  # flatnonzero's wrapper costs as much again
         if crossing.size == 0:
             return None
         if crossing.size == 1:  # the usual case: the same arithmetic on one pair of vertices

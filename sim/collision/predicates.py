@@ -66,7 +66,7 @@ def orient3d(
     """
     det, bound = orient3d_fast(a, b, c, d)
     sign = np.sign(det).astype(np.int8)
-    unsure = np.flatnonzero(~(np.abs(det) * relative_accuracy > bound))
+    (unsure,) = np.nonzero(~(np.abs(det) * relative_accuracy > bound))
     if unsure.size:
         a, b, c, d = np.broadcast_arrays(a, b, c, d)
         for k in unsure:

@@ -88,7 +88,7 @@ def candidate_pairs(
     """(segment, triangle) pairs whose bounding boxes overlap (closed boxes)."""
     seg_lower = np.minimum(seg_start, seg_end)
     seg_upper = np.maximum(seg_start, seg_end)
-    near = np.flatnonzero(np.all((upper >= seg_lower.min(axis=0)) & (lower <= seg_upper.max(axis=0)), axis=1))
+    (near,) = np.nonzero(((upper >= seg_lower.min(axis=0)) & (lower <= seg_upper.max(axis=0))).all(axis=1))
     if near.size == 0 or len(seg_start) == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty
@@ -128,7 +128,7 @@ def intersect_pairs(
     sign_p, sign_q, around = signs[0], signs[1], signs[2:]
     crossing = (sign_p.astype(np.int16) * sign_q <= 0) & ~((sign_p == 0) & (sign_q == 0))
     inside = (around.min(axis=0) >= 0) | (around.max(axis=0) <= 0)  # the three share a sign
-    chosen = np.flatnonzero(crossing & inside)
+    (chosen,) = np.nonzero(crossing & inside)
     if chosen.size == 0:
         return _no_hits()
     weights = np.abs(volumes[:, chosen].T)
@@ -139,7 +139,7 @@ def intersect_pairs(
     t = np.empty_like(sp)
     barycentric[usable] = weights[usable] / total[usable, None]
     t[usable] = np.clip(sp[usable] / (sp[usable] - sq[usable]), 0.0, 1.0)
-    for k in np.flatnonzero(~usable):  # volumes under/overflowed as floats: redo exactly
+    for k in np.nonzero(~usable)[0]:  # volumes under/overflowed as floats: redo exactly
         i = chosen[k]
         t[k], barycentric[k] = _exact_crossing(
             seg_start[segments[i]], seg_end[segments[i]], triangles[tris[i]]

@@ -271,7 +271,7 @@ class BiphaseContact:
     ) -> NDArray[np.float64]:
         """(k, 3) reaction forces (N) for intended nodal displacements (k, 3)."""
         p = self.parameters
-        dx, dy, dz = tool_displacement
+        dx, dy, dz = tool_displacement.tolist()
         strain = math.sqrt(dx * dx + dy * dy + dz * dz) / self.depth
         ratio = min(needle_speed / p.critical_speed, 1.0) ** p.speed_exponent if needle_speed > 0 else 0.0
         limit = p.strain_limit * (1.0 - self._floor_drop * ratio)
