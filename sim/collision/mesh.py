@@ -71,7 +71,7 @@ class CollisionMesh:
         window = slice(int(np.searchsorted(keys, low_x, "left")), int(np.searchsorted(keys, high_x, "right")))
         segments, local = candidate_pairs(start, end, self._sorted_lower[window], self._sorted_upper[window])
         hits = intersect_pairs(start, end, self.corners, segments, self._sorted_ids[window][local])
-        return hits.take(np.lexsort((-hits.t, hits.segment)))
+        return hits.take(np.lexsort((-hits.t, hits.segment))) if len(hits) > 1 else hits
 
 
 def segment_ends(vertices: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -92,11 +92,8 @@ def candidate_pairs(
     if near.size == 0 or len(seg_start) == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty
-    overlap = np.all(
-        (upper[near][None, :, :] >= seg_lower[:, None, :])
-        & (lower[near][None, :, :] <= seg_upper[:, None, :]),
-        axis=2,
-    )
+    below, above = lower[near][None, :, :], upper[near][None, :, :]
+    overlap = ((above >= seg_lower[:, None, :]) & (below <= seg_upper[:, None, :])).all(axis=2)
     segments, local = np.nonzero(overlap)
     return segments.astype(np.int64), near[local]
 
@@ -135,6 +132,10 @@ def intersect_pairs(
     sp, sq = side_p[chosen], side_q[chosen]
     total = weights.sum(axis=1)
     usable = (total > 0) & np.isfinite(total) & (sp != sq)
+    if usable.all():  # the usual case: no masks
+        barycentric = weights / total[:, None]
+        t = np.minimum(np.maximum(sp / (sp - sq), 0.0), 1.0)  # np.clip, without its wrapper
+        return SegmentHits(segments[chosen], tris[chosen], t, barycentric, _entering(sign_p, sign_q, chosen))
     barycentric = np.empty_like(weights)
     t = np.empty_like(sp)
     barycentric[usable] = weights[usable] / total[usable, None]
@@ -144,9 +145,14 @@ def intersect_pairs(
         t[k], barycentric[k] = _exact_crossing(
             seg_start[segments[i]], seg_end[segments[i]], triangles[tris[i]]
         )
-    # orient3d(a, b, c, d) < 0 when d is on the front (normal) side of abc.
-    entering = (sign_p[chosen] < 0) | ((sign_p[chosen] == 0) & (sign_q[chosen] > 0))
-    return SegmentHits(segments[chosen], tris[chosen], t, barycentric, entering)
+    return SegmentHits(segments[chosen], tris[chosen], t, barycentric, _entering(sign_p, sign_q, chosen))
+
+
+def _entering(sign_p: NDArray, sign_q: NDArray, chosen: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Whether each chosen segment goes from the triangle's front to its back: orient3d(a, b, c, d)
+    < 0 when d is on the front (normal) side of abc."""
+    sp, sq = sign_p[chosen], sign_q[chosen]
+    return (sp < 0) | ((sp == 0) & (sq > 0))
 
 
 def _no_hits() -> SegmentHits:
