@@ -164,7 +164,12 @@ class Prefetcher:
         self._collision = collision or CollisionMesh(mesh)
         self._pending: set[int] = set()  # queued, not served yet
         self._last_ahead: list[int] = []
-        self._queue: collections.deque = collections.deque()
+        # Two queues, newest request first in each: where the tip is heading (the next contact,
+        # the exit face) always before the sphere around it, however many frames the sphere
+        # keeps growing while the worker is busy.
+        self._ahead: collections.deque[list[int]] = collections.deque()
+        self._near: collections.deque[list[int]] = collections.deque()
+        self._queues_lock = threading.Lock()  # the graphics thread asks, the worker thread takes
         self._wake = threading.Event()
         self._closed = False
         self.error: BaseException | None = None
@@ -180,9 +185,7 @@ class Prefetcher:
         # not queued already, and not cached (a column evicted from the model's cache is asked again)
         fresh = [int(n) for n in close if int(n) not in self._pending and self._needs_columns(int(n))]
         if fresh:
-            self._pending.update(fresh)
-            self._queue.appendleft(fresh)  # the newest request is where the needle is now
-            self._wake.set()
+            self._request(self._near, fresh)  # the newest first: where the needle is now
 
     def ahead(self, path: NDArray[np.float64], crossings: int = 2) -> None:
         """Ask first for the nodes of the surface triangles a predicted tip path meets: ``path`` is
@@ -212,9 +215,32 @@ class Prefetcher:
         ]
         if waiting and waiting != self._last_ahead:
             self._last_ahead = waiting
-            self._pending.update(waiting)
-            self._queue.appendleft(waiting)  # before everything else: this is where the next contact is
-            self._wake.set()
+            self._request(self._ahead, waiting)  # before any sphere: this is where the next contact is
+
+    @property
+    def requests(self) -> list[list[int]]:
+        """The node requests not served yet, in the order the worker will take them."""
+        with self._queues_lock:
+            return [*self._ahead, *self._near]
+
+    def _request(self, queue: collections.deque[list[int]], nodes: list[int]) -> None:
+        with self._queues_lock:
+            self._pending.update(nodes)
+            queue.appendleft(nodes)
+        self._wake.set()
+
+    def _next_chunk(self) -> list[int] | None:
+        """The next nodes to solve: a triangle's worth from the front of the first queue that has any
+        (the rest of that request stays at its front, so a newer request overtakes it)."""
+        with self._queues_lock:
+            for queue in (self._ahead, self._near):
+                if queue:
+                    batch = queue.popleft()
+                    chunk, rest = batch[:SOLVE_CHUNK], batch[SOLVE_CHUNK:]
+                    if rest:
+                        queue.appendleft(rest)
+                    return chunk
+        return None
 
     def _needs_columns(self, node: int) -> bool:
         return any(model.needs_solve(node) for model in self.models)
@@ -237,17 +263,14 @@ class Prefetcher:
             while not self._closed:
                 self._wake.wait(0.1)
                 self._wake.clear()
-                while self._queue and not self._closed:
-                    batch = self._queue.popleft()
-                    # a triangle at a time: newer requests overtake, and one solve of three nodes
-                    # costs 29 ms where three of one cost 53 (10k nodes)
-                    chunk, rest = batch[:SOLVE_CHUNK], batch[SOLVE_CHUNK:]
-                    if rest:
-                        self._queue.appendleft(rest)
+                # a triangle at a time: newer requests overtake, and one solve of three nodes
+                # costs 29 ms where three of one cost 53 (10k nodes)
+                while not self._closed and (chunk := self._next_chunk()) is not None:
                     for model in self.models:
                         model.prefetch(np.array(chunk))
                     self._cast_depths(chunk)
-                    self._pending.difference_update(chunk)
+                    with self._queues_lock:
+                        self._pending.difference_update(chunk)
         except BaseException as error:  # raised in the graphics layer at its next request
             self.error = error
 
