@@ -30,8 +30,8 @@ class ForceLog:
     def append(self, time: float, force: NDArray[np.float64]) -> None:
         if self._count == len(self._data):
             self._data = np.concatenate([self._data, np.empty_like(self._data)])
-        self._data[self._count, 0] = time
-        self._data[self._count, 1:] = force
+        fx, fy, fz = force.tolist()
+        self._data[self._count] = (time, fx, fy, fz)  # one assignment: every haptic tick
         self._count += 1
 
     @property
