@@ -199,6 +199,16 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
                 f"p99={np.percentile(ms, 99):.2f} ms max={ms.max():.2f} ms",
                 flush=True,
             )
+    builds = simulation.interaction.contact_builds
+    if builds:
+        seconds = 1e3 * np.array([b[2] for b in builds])
+        waited = [b for b in builds if b[1]]
+        print(
+            f"[{name}]   contact handles built: n={len(builds)} p50={np.median(seconds):.2f} ms "
+            f"max={seconds.max():.2f} ms; with columns solved on the spot: {len(waited)}"
+            + "".join(f"; t={t:.2f} s, {k} nodes, {1e3 * s:.0f} ms" for t, k, s in waited),
+            flush=True,
+        )
     for over in (3e-3, 2e-3):
         print(f"[{name}]   haptic {late_periods_by_cause(steps, over)}", flush=True)
         print(

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from time import perf_counter
 
 import numpy as np
 from numpy.typing import NDArray
@@ -159,6 +160,11 @@ class NeedleInteraction:
         self.last_contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # nodes, intended
         self._handle = None
         self._handle_nodes: tuple[int, ...] = ()
+        self._fem_time = 0.0
+        self.contact_builds: list[tuple[float, int, float]] = []
+        """Each change of contact set: (FEM step time (s), nodes whose columns it had to solve there
+        and then, wall seconds the per-tick handle took to build). Prefetching keeps the middle
+        figure at zero; a non-zero one is a contact change the FEM layer waited on."""
         self._implausible_active: set[tuple[str, int]] = set()
         self._previous_tip: tuple[float, float, float] | None = None
         self._previous_time = 0.0
@@ -378,6 +384,7 @@ class NeedleInteraction:
     # -- FEM rate -------------------------------------------------------------------------
     def fem_step(self, time: float) -> FemStep:
         """Local CD against the nominated triangle(s), forces, and the piercing decision."""
+        self._fem_time = time
         if self.state == "free" or not self.contacts:
             self.last_contact = None
             return FemStep.untouched()
@@ -445,11 +452,20 @@ class NeedleInteraction:
         reactions = self._reactions(all_nodes, merged, merged.sum(axis=0))
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
 
+    def _needs_solve(self, node: int) -> bool:
+        """Whether a contact on ``node`` needs K0^-1 columns solved now (neither precomputed nor cached)."""
+        if isinstance(self.tissue, BiphaseTissue):
+            return self.tissue.soft.needs_solve(node) or self.tissue.stiff.needs_solve(node)
+        return self.tissue.needs_solve(node)
+
     def _reactions(self, nodes: NDArray[np.int64], intended: NDArray, tool_displacement: NDArray) -> NDArray:
         self.last_contact = (nodes, intended)
         key = tuple(nodes.tolist())
         if self._handle is None or key != self._handle_nodes:
+            unsolved = sum(self._needs_solve(n) for n in key)
+            began = perf_counter()
             self._handle = self.tissue.contact(nodes)
+            self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))
             self._handle_nodes = key
         if isinstance(self.tissue, BiphaseTissue):
             return self._handle.reaction_forces(intended, tool_displacement, self.tip_speed)

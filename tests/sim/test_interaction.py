@@ -249,3 +249,24 @@ def test_needle_geometry():
     world = needle.world_vertices(pose)
     hits = intersect_segments_triangles(world[:-1], world[1:], np.zeros((0, 3, 3)))
     assert len(hits) == 0
+
+
+def test_each_contact_change_records_the_columns_it_had_to_solve(wall):
+    """Precomputed columns: no contact change waits for a solve. On demand and not prefetched: the
+    entry triangle's three nodes at the first touch, the exit face's three when it is reached."""
+    needle = Needle.straight(0.01)
+    start = needle_tip_start([0.0051, 0.0047, 0.0025])
+    precomputed = NeedleInteraction(wall, needle)
+    run(precomputed, straight_down(start, 0.005), 3.0)
+    assert len(precomputed.contact_builds) >= 2
+    assert all(unsolved == 0 and seconds >= 0 for _, unsolved, seconds in precomputed.contact_builds)
+
+    fixed = np.union1d(wall.mesh.node_sets["x0"], wall.mesh.node_sets["x1"])
+    on_demand = NeedleInteraction(TissueModel(wall.mesh, Material(20e3, 0.45), fixed), needle)
+    events, _ = run(on_demand, straight_down(start, 0.005), 3.0)
+    builds = on_demand.contact_builds
+    # first touch (3 new nodes), pierce (the same triangle: cached), exit (entry + the exit face's
+    # 3 new nodes), then the needle leaving the entry behind (cached)
+    assert [unsolved for _, unsolved, _ in builds] == [3, 0, 3, 0]
+    times = [when for when, _, _ in builds]
+    assert times == sorted(times) and times[0] >= events[0].time
