@@ -12,6 +12,10 @@ Run:  .venv/bin/python benchmarks/runtime.py [--seconds 60] [--no-render] [--siz
 4. The same artery in on-demand mode (columns solved when needed, prefetched by
    the graphics layer near the needle tip).
 For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
+
+``--instructions``: instead, the instructions one simulated stitch on the test cube
+executes, counted by valgrind's callgrind (the same count whatever else the host is
+doing, unlike the wall-clock ratio; about six minutes).
 """
 
 from __future__ import annotations
@@ -200,13 +204,23 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
                 flush=True,
             )
     builds = simulation.interaction.contact_builds
+    models = [simulation.interaction.tissue] if hasattr(simulation.interaction.tissue, "needs_solve") else []
+    models = models or [simulation.interaction.tissue.soft, simulation.interaction.tissue.stiff]
+
+    def evicted(nodes) -> str:
+        again = [n for n in nodes if any(n in model.evicted_columns for model in models)]
+        return f"{len(again)} of them solved before and evicted" if again else "never solved before"
+
     if builds:
         seconds = 1e3 * np.array([b[2] for b in builds])
         waited = [b for b in builds if b[1]]
         print(
             f"[{name}]   contact handles built: n={len(builds)} p50={np.median(seconds):.2f} ms "
             f"max={seconds.max():.2f} ms; with columns solved on the spot: {len(waited)}"
-            + "".join(f"; t={t:.2f} s, {k} nodes, {1e3 * s:.0f} ms" for t, k, s in waited),
+            + "".join(
+                f"; t={t:.2f} s, nodes {list(nodes)} ({evicted(nodes)}), {1e3 * s:.0f} ms"
+                for t, nodes, s in waited
+            ),
             flush=True,
         )
     for over in (3e-3, 2e-3):
@@ -239,7 +253,19 @@ def main() -> None:
     parser.add_argument(
         "--only", choices=["simulated", "cube", "artery", "artery-on-demand"], help="run one part only"
     )
+    parser.add_argument(
+        "--instructions",
+        action="store_true",
+        help="count the instructions of one simulated stitch under valgrind instead (host-independent)",
+    )
+    parser.add_argument("--passes", type=int, default=None, help=argparse.SUPPRESS)  # under valgrind
     args = parser.parse_args()
+    if args.passes is not None:
+        simulated_passes(args.passes)
+        return
+    if args.instructions:
+        instructions_per_stitch()
+        return
     size = tuple(int(v) for v in args.size.split("x"))
     needle = Needle.curved()
 
@@ -279,6 +305,50 @@ def simulated_throughput(cube, needle) -> None:
         f"[simulated, test cube] one pass of {one.duration:.2f} s simulated: median "
         f"{np.median(ratios):.1f}x real time (runs: {', '.join(f'{r:.1f}' for r in ratios)}); "
         f"a plain Python loop just before each run: {', '.join(f'{v:.0f}' for v in speeds)} M iterations/s",
+        flush=True,
+    )
+
+
+def simulated_passes(count: int) -> None:
+    """Set up the test cube and run ``count`` simulated stitches (what valgrind counts)."""
+    needle = Needle.curved()
+    mesh, fixed = paper_cube()
+    cube = BiphaseTissue.build(mesh, fixed)
+    cube.precompute(use_cache=False)
+    one = practice_passes(scenario("paper_cube"), needle, 1)[0]
+    for _ in range(count):
+        Simulation(cube, needle, ScriptedDevice(one.pose_and_grip)).run_simulated(one.duration)
+
+
+def instructions_per_stitch() -> None:
+    """callgrind's instruction count of set-up plus one stitch, minus set-up alone (both cores used).
+    One BLAS thread and a fixed hash seed keep the count repeatable."""
+    import shutil
+
+    if shutil.which("valgrind") is None:
+        sys.exit("--instructions needs valgrind (apt-get install valgrind)")
+    environment = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONHASHSEED="0")
+    command = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, __file__]
+    runs = [
+        subprocess.Popen(
+            [*command, "--passes", str(count)], env=environment, stderr=subprocess.PIPE, text=True
+        )
+        for count in (0, 1)
+    ]
+    counts = []
+    for run in runs:
+        _, log = run.communicate()
+        found = [line for line in log.splitlines() if "refs:" in line]
+        if run.returncode or not found:
+            sys.exit(f"valgrind run failed (exit {run.returncode}):\n{log[-2000:]}")
+        counts.append(int(found[-1].split("refs:")[1].replace(",", "")))
+    one = practice_passes(scenario("paper_cube"), Needle.curved(), 1)[0]
+    stitch = counts[1] - counts[0]
+    print(
+        f"[instructions, test cube] one simulated stitch of {one.duration:.2f} s: {stitch / 1e9:.3f} G "
+        f"instructions ({stitch / one.duration / 1e6:.0f} M per simulated second; set-up "
+        f"{counts[0] / 1e9:.3f} G); 20x real time needs {20 * stitch / one.duration / 1e9:.1f} G "
+        "instructions per wall second",
         flush=True,
     )
 

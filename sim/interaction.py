@@ -161,10 +161,10 @@ class NeedleInteraction:
         self._handle = None
         self._handle_nodes: tuple[int, ...] = ()
         self._fem_time = 0.0
-        self.contact_builds: list[tuple[float, int, float]] = []
-        """Each change of contact set: (FEM step time (s), nodes whose columns it had to solve there
-        and then, wall seconds the per-tick handle took to build). Prefetching keeps the middle
-        figure at zero; a non-zero one is a contact change the FEM layer waited on."""
+        self.contact_builds: list[tuple[float, tuple[int, ...], float]] = []
+        """Each change of contact set: (FEM step time (s), the nodes whose columns it had to solve
+        there and then, wall seconds the per-tick handle took to build). Prefetching keeps the
+        middle one empty; a node there is a contact change the FEM layer waited on."""
         self._implausible_active: set[tuple[str, int]] = set()
         self._previous_tip: tuple[float, float, float] | None = None
         self._previous_time = 0.0
@@ -462,7 +462,7 @@ class NeedleInteraction:
         self.last_contact = (nodes, intended)
         key = tuple(nodes.tolist())
         if self._handle is None or key != self._handle_nodes:
-            unsolved = sum(self._needs_solve(n) for n in key)
+            unsolved = tuple(n for n in key if self._needs_solve(n))
             began = perf_counter()
             self._handle = self.tissue.contact(nodes)
             self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))

@@ -118,6 +118,9 @@ class TissueModel:
         self._requested_penalty = penalty
         self._precomputed: Precomputation | None = None
         self._columns: OrderedDict[int, _CachedColumns] = OrderedDict()
+        self.evicted_columns: set[int] = set()
+        """Nodes whose cached columns were dropped for the memory budget (telemetry: a contact
+        that must solve one of these again was prefetched, then evicted before it was used)."""
         self._column_budget = column_cache_bytes
         self._column_lock = threading.Lock()
         self._inverse_of: tuple[TissueModel, float] | None = None  # (base, s): K0 = s K0_base
@@ -352,8 +355,9 @@ class TissueModel:
         """Drop least recently used columns beyond the memory budget (lock held)."""
         used = sum(c.nbytes for c in self._columns.values())
         while len(self._columns) > 1 and used > self._column_budget:
-            _, dropped = self._columns.popitem(last=False)
+            node, dropped = self._columns.popitem(last=False)
             used -= dropped.nbytes
+            self.evicted_columns.add(node)
 
     def prefetch(self, nodes: ArrayLike) -> None:
         """Solve and cache the on-demand columns of ``nodes`` ahead of contact (in precomputed

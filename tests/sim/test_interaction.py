@@ -259,7 +259,7 @@ def test_each_contact_change_records_the_columns_it_had_to_solve(wall):
     precomputed = NeedleInteraction(wall, needle)
     run(precomputed, straight_down(start, 0.005), 3.0)
     assert len(precomputed.contact_builds) >= 2
-    assert all(unsolved == 0 and seconds >= 0 for _, unsolved, seconds in precomputed.contact_builds)
+    assert all(unsolved == () and seconds >= 0 for _, unsolved, seconds in precomputed.contact_builds)
 
     fixed = np.union1d(wall.mesh.node_sets["x0"], wall.mesh.node_sets["x1"])
     on_demand = NeedleInteraction(TissueModel(wall.mesh, Material(20e3, 0.45), fixed), needle)
@@ -267,6 +267,8 @@ def test_each_contact_change_records_the_columns_it_had_to_solve(wall):
     builds = on_demand.contact_builds
     # first touch (3 new nodes), pierce (the same triangle: cached), exit (entry + the exit face's
     # 3 new nodes), then the needle leaving the entry behind (cached)
-    assert [unsolved for _, unsolved, _ in builds] == [3, 0, 3, 0]
+    assert [len(unsolved) for _, unsolved, _ in builds] == [3, 0, 3, 0]
+    exit_ = next(e for e in events if e.kind == "exit")
+    assert set(builds[2][1]) == set(on_demand.collision.triangles[exit_.triangle].tolist())  # its nodes
     times = [when for when, _, _ in builds]
     assert times == sorted(times) and times[0] >= events[0].time

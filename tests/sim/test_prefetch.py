@@ -190,6 +190,7 @@ def test_a_column_evicted_from_the_cache_is_asked_for_again(small_box):
         assert not prefetcher.requests  # cached: nothing to ask
         tissue.prefetch([1])  # the budget holds one node's columns: node 0's are evicted
         assert 0 not in tissue._columns and column_bytes > 1
+        assert tissue.evicted_columns == {0}  # named for the telemetry
         prefetcher.near(small_box.points[0], radius=1e-9)
         assert prefetcher.requests == [[0]]
         prefetcher.near(small_box.points[0], radius=1e-9)
