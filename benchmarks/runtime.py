@@ -223,6 +223,9 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
             ),
             flush=True,
         )
+    dropped = set().union(*(model.evicted_columns for model in models))
+    if dropped:
+        print(f"[{name}]   column cache: {len(dropped)} nodes' columns evicted (memory budget)", flush=True)
     for over in (3e-3, 2e-3):
         print(f"[{name}]   haptic {late_periods_by_cause(steps, over)}", flush=True)
         print(
