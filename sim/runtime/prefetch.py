@@ -163,7 +163,7 @@ class Prefetcher:
         self._triangles = mesh.surface_triangles
         self._collision = collision or CollisionMesh(mesh)
         self._pending: set[int] = set()  # queued, not served yet
-        self._last_ahead: list[int] = []
+        self._last_ahead: dict[str, list[int]] = {}  # per kind of prediction: what it last asked
         # Two queues, newest request first in each: where the tip is heading (the next contact,
         # the exit face) always before the sphere around it, however many frames the sphere
         # keeps growing while the worker is busy.
@@ -187,11 +187,13 @@ class Prefetcher:
         if fresh:
             self._request(self._near, fresh)  # the newest first: where the needle is now
 
-    def ahead(self, path: NDArray[np.float64], crossings: int = 2) -> None:
+    def ahead(self, path: NDArray[np.float64], crossings: int = 2, kind: str = "path") -> None:
         """Ask first for the nodes of the surface triangles a predicted tip path meets: ``path`` is
         (P, 3) points (m) from the tip along the way it is going (:func:`arc_ahead`,
         :func:`line_ahead`). The first ``crossings`` count (the next contact, then the exit face on
-        the far side of the wall), each with the surface nodes nearest its crossing point."""
+        the far side of the wall), each with the surface nodes nearest its crossing point. A
+        prediction is asked again only when what it needs changes; ``kind`` names it, so that
+        several kinds of prediction made every frame do not keep re-asking each other's nodes."""
         self._raise_if_failed()
         if len(path) < 2:
             return
@@ -213,8 +215,8 @@ class Prefetcher:
             for n in dict.fromkeys(heading)
             if self._needs_columns(n) or not self._depth_model.knows_depth(n)
         ]
-        if waiting and waiting != self._last_ahead:
-            self._last_ahead = waiting
+        if waiting and waiting != self._last_ahead.get(kind):
+            self._last_ahead[kind] = waiting
             self._request(self._ahead, waiting)  # before any sphere: this is where the next contact is
 
     @property

@@ -363,11 +363,16 @@ class Simulation:
         prefetcher, reach = self._prefetcher, self.settings.prefetch_reach
         if prefetcher.on_demand or fem.state in ("pierced", "exited"):
             prefetcher.near(tip, self.settings.prefetch_radius)
-        if fem.state == "free":  # not yet touching: the needle goes where the hand moves it, and
-            if previous is not None:  # where it will come out depends on how it is then turned
-                prefetcher.ahead(line_ahead(tip, tip - previous, reach), crossings=1)
+        if fem.state == "free":  # not yet touching: the needle goes where the hand moves it; where it
+            # will come out depends on how it is then turned, and turning it along its own curve is
+            # the likely way: that path's exit face is asked for now (a thin wall can be crossed in
+            # a few hundred ms, too soon after the first touch for the worker to catch up), and
+            # the next contact on the line of motion ahead of it (the newest request goes first)
+            prefetcher.ahead(arc_ahead(fem.needle_vertices, reach), kind="arc")
+            if previous is not None:
+                prefetcher.ahead(line_ahead(tip, tip - previous, reach), crossings=1, kind="line")
         else:  # in contact or in the wall: the tip follows the needle's own curve
-            prefetcher.ahead(arc_ahead(fem.needle_vertices, reach))
+            prefetcher.ahead(arc_ahead(fem.needle_vertices, reach), kind="arc")
 
     def display_step(self, now: float) -> None:
         frame, self._previous_frame = self._previous_frame, self.graphics.get()

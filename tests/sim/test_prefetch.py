@@ -197,3 +197,34 @@ def test_a_column_evicted_from_the_cache_is_asked_for_again(small_box):
         assert prefetcher.requests == [[0]]  # queued once, not once per frame
     finally:
         prefetcher.close()
+
+
+def test_a_needle_still_in_the_air_already_asks_for_its_exit_face(small_box):
+    """Before the first touch the graphics layer asks for the entry on the line of motion and for
+    the far face the needle's own curve would come out of: a thin wall is crossed too soon after
+    the touch for the worker to solve the exit face only then."""
+    from sim.devices import ScriptedDevice, SuturingPass
+    from sim.needle import Needle
+    from sim.runtime import Simulation
+    from sim.runtime.simulation import FemSnapshot
+
+    tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["x0"])
+    needle = Needle.curved()
+    stitch = SuturingPass(needle, [0.002, 0.0025, 0.003], [0, 0, 1], [1, 0, 0])
+    simulation = Simulation(tissue, needle, ScriptedDevice(stitch.pose_and_grip))
+    vertices = needle.world_vertices(stitch.pose_and_grip(0.4)[0])  # approaching, 2 mm above the top
+    free = FemSnapshot(0.4, np.zeros(3), vertices, "free", np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    simulation._prefetcher = prefetcher = Prefetcher(tissue, simulation.interaction.collision)
+    try:
+        prefetcher._closed = True
+        prefetcher._thread.join()
+        simulation._previous_tip = vertices[0] + [0.0, 0.0, 1e-4]  # moving down
+        simulation._prefetch_ahead_of(free)
+        first, *rest = prefetcher.requests
+        heights = small_box.points[:, 2]
+        assert np.allclose(heights[first[:3]], heights.max())  # the entry, on the line of motion, first
+        asked = [n for request in rest for n in request]
+        assert np.any(heights[asked] < heights.max() - 1e-6)  # and the far face the curve comes out of
+    finally:
+        simulation._prefetcher = None
+        prefetcher.close()
