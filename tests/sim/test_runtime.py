@@ -191,13 +191,23 @@ def test_settings_validation():
     assert math.isclose(RuntimeSettings().period("graphics"), 1 / 30)
 
 
-def test_holder_snapshot_pose_is_validated(tissue):
+@pytest.mark.parametrize(
+    ("corrupt", "message"),
+    [
+        (lambda position, rotation: (position, rotation * 2), "rotation must be a proper"),
+        (lambda position, rotation: (position * np.nan, rotation), "position must be 3 finite numbers"),
+    ],
+)
+def test_holder_snapshot_pose_is_validated(tissue, corrupt, message):
+    """A raw sample, as hardware gives (no checked Pose attached), is checked by the haptic layer."""
+
     def bad_device(device):
         class Corrupt(UnpluggedAt):
             def read(self, time):
                 sample = self.device.read(time)
                 if time > 0.5:
-                    sample = type(sample)(time, sample.position, sample.rotation * 2, sample.velocity, 1)
+                    position, rotation = corrupt(sample.position, sample.rotation)
+                    sample = type(sample)(time, position, rotation, sample.velocity, 1)
                 return sample
 
         return Corrupt(device, when=1e9)
@@ -205,7 +215,7 @@ def test_holder_snapshot_pose_is_validated(tissue):
     simulation, suturing, _ = make(tissue, device_wrapper=bad_device)
     result = simulation.run_simulated(suturing.duration)
     assert result.stop_reason == "haptic_failed"
-    assert "rotation must be a proper" in result.error
+    assert message in result.error
     assert_forces_safe(result, LIMITS)
     assert isinstance(Pose.identity(), Pose)
 
