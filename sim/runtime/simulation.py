@@ -25,6 +25,7 @@ import time as wallclock
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,16 +87,16 @@ class RuntimeSettings:
         return 1.0 / getattr(self, f"{layer}_rate")
 
 
-@dataclass(frozen=True)
-class HolderSnapshot:
+# The snapshots are NamedTuples: as immutable as frozen dataclasses, and built in a third of the
+# time (a frozen dataclass sets each field through object.__setattr__; one is made every tick).
+class HolderSnapshot(NamedTuple):
     time: float
     pose: Pose
     velocity: NDArray[np.float64]
     grip: bool
 
 
-@dataclass(frozen=True)
-class FemSnapshot:
+class FemSnapshot(NamedTuple):
     time: float
     needle_force: NDArray[np.float64]
     needle_vertices: NDArray[np.float64]
@@ -112,8 +113,7 @@ class FemSnapshot:
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
 
 
-@dataclass(frozen=True)
-class GraphicsSnapshot:
+class GraphicsSnapshot(NamedTuple):
     time: float
     needle_vertices: NDArray[np.float64]
     state: str
