@@ -204,11 +204,10 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
                 flush=True,
             )
     builds = simulation.interaction.contact_builds
-    models = [simulation.interaction.tissue] if hasattr(simulation.interaction.tissue, "needs_solve") else []
-    models = models or [simulation.interaction.tissue.soft, simulation.interaction.tissue.stiff]
+    dropped = simulation.interaction.tissue.evicted_columns
 
     def evicted(nodes) -> str:
-        again = [n for n in nodes if any(n in model.evicted_columns for model in models)]
+        again = [n for n in nodes if n in dropped]
         return f"{len(again)} of them solved before and evicted" if again else "never solved before"
 
     if builds:
@@ -223,7 +222,6 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
             ),
             flush=True,
         )
-    dropped = set().union(*(model.evicted_columns for model in models))
     if dropped:
         print(f"[{name}]   column cache: {len(dropped)} nodes' columns evicted (memory budget)", flush=True)
     for over in (3e-3, 2e-3):

@@ -169,10 +169,8 @@ class NeedleInteraction:
         self._previous_tip: tuple[float, float, float] | None = None
         self._previous_time = 0.0
         self._tip_velocity = (0.0, 0.0, 0.0)
-        self._vertices_pose: Pose | None = None
-        self._vertices = np.zeros((0, 3))
-        self._tangent_pose: Pose | None = None
-        self._tangent = np.zeros(3)
+        self._pose_seen: Pose | None = None
+        self._pose_geometry = (np.zeros((0, 3)), np.zeros(3))
         self.tip_speed = 0.0
 
     # -- haptic rate ----------------------------------------------------------------
@@ -198,19 +196,21 @@ class NeedleInteraction:
 
     def needle_vertices(self) -> NDArray[np.float64]:
         """World vertices of the needle (tip first), computed once per pose."""
-        if self._vertices_pose is not self.needle_pose:
-            self._vertices = self.needle.world_vertices(self.needle_pose)
-            self._vertices.flags.writeable = False
-            self._vertices_pose = self.needle_pose
-        return self._vertices
+        return self._at_pose()[0]
 
     def tip_tangent(self) -> NDArray[np.float64]:
         """Unit direction the needle's tip points (world), computed once per pose."""
-        if self._tangent_pose is not self.needle_pose:
-            self._tangent = self.needle.tip_tangent(self.needle_pose)
-            self._tangent.flags.writeable = False
-            self._tangent_pose = self.needle_pose
-        return self._tangent
+        return self._at_pose()[1]
+
+    def _at_pose(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(vertices, tip tangent) of the current needle pose, read-only, recomputed when it changes
+        (every FEM step needs both: the tangent goes into its snapshot)."""
+        if self._pose_seen is not self.needle_pose:
+            vertices = self.needle.world_vertices(self.needle_pose)
+            tangent = self.needle.tip_tangent(self.needle_pose)
+            vertices.flags.writeable = tangent.flags.writeable = False
+            self._pose_seen, self._pose_geometry = self.needle_pose, (vertices, tangent)
+        return self._pose_geometry
 
     def _track_tip(self, time: float) -> None:
         x, y, z = tip = tuple(self.needle_vertices()[0].tolist())  # plain floats: every FEM step
@@ -452,17 +452,11 @@ class NeedleInteraction:
         reactions = self._reactions(all_nodes, merged, merged.sum(axis=0))
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
 
-    def _needs_solve(self, node: int) -> bool:
-        """Whether a contact on ``node`` needs K0^-1 columns solved now (neither precomputed nor cached)."""
-        if isinstance(self.tissue, BiphaseTissue):
-            return self.tissue.soft.needs_solve(node) or self.tissue.stiff.needs_solve(node)
-        return self.tissue.needs_solve(node)
-
     def _reactions(self, nodes: NDArray[np.int64], intended: NDArray, tool_displacement: NDArray) -> NDArray:
         self.last_contact = (nodes, intended)
         key = tuple(nodes.tolist())
         if self._handle is None or key != self._handle_nodes:
-            unsolved = tuple(n for n in key if self._needs_solve(n))
+            unsolved = tuple(n for n in key if self.tissue.needs_solve(n))
             began = perf_counter()
             self._handle = self.tissue.contact(nodes)
             self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))

@@ -162,6 +162,15 @@ class BiphaseTissue:
         """Precompute both phases (the paper's Phi1 and Phi2)."""
         return (self.soft.precompute(cache_dir, use_cache), self.stiff.precompute(cache_dir, use_cache))
 
+    def needs_solve(self, node: int) -> bool:
+        """Whether a contact on ``node`` would need columns solved in either phase."""
+        return self.soft.needs_solve(node) or self.stiff.needs_solve(node)
+
+    @property
+    def evicted_columns(self) -> set[int]:
+        """Nodes whose cached columns either phase dropped for its memory budget."""
+        return self.soft.evicted_columns | self.stiff.evicted_columns
+
     def warm_contact_caches(self) -> None:
         """See :meth:`TissueModel.warm_contact_caches` (depths are cast in the soft phase)."""
         self.soft.warm_contact_caches()

@@ -95,14 +95,20 @@ def test_the_triangle_the_tip_heads_for_is_solved_first(small_box):
         prefetcher.close()
 
 
+def straight_through(box):
+    """An on-demand model of ``box``, a tip 1 mm above its top face and a straight path down
+    through it and out of the bottom face: (tissue, tip, path)."""
+    tissue = TissueModel(box, Material(20e3, 0.45), box.node_sets["x0"])
+    low, high = box.points.min(axis=0), box.points.max(axis=0)
+    tip = np.array([0.41, 0.43, 0.0]) * (high - low) + low + [0, 0, (high - low)[2] + 1e-3]
+    return tissue, tip, line_ahead(tip, np.array([0.0, 0.0, -1.0]), reach=(high - low)[2] + 2e-3)
+
+
 def test_a_growing_sphere_never_overtakes_where_the_tip_is_heading(small_box):
     """Frames go by while the worker is busy: the sphere around the moving tip asks for new nodes
     every frame, the predicted exit face stays the same and is asked once. The exit face is still
     served first (a contact there would otherwise wait for its columns: 150 ms at 10k nodes)."""
-    tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["x0"])
-    low, high = small_box.points.min(axis=0), small_box.points.max(axis=0)
-    tip = np.array([0.41, 0.43, 0.0]) * (high - low) + low + [0, 0, (high - low)[2] + 1e-3]
-    path = line_ahead(tip, np.array([0.0, 0.0, -1.0]), reach=(high - low)[2] + 2e-3)
+    tissue, tip, path = straight_through(small_box)
     prefetcher = Prefetcher(tissue)
     try:
         prefetcher._closed = True  # the worker is busy: nothing is served while frames go by
@@ -122,10 +128,8 @@ def test_a_growing_sphere_never_overtakes_where_the_tip_is_heading(small_box):
 
 def test_a_path_through_the_wall_asks_for_the_exit_face_after_the_entry(small_box):
     """A path entering the top face and leaving through the bottom one: both faces' triangles, in order."""
-    tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["x0"])
+    tissue, _, path = straight_through(small_box)
     low, high = small_box.points.min(axis=0), small_box.points.max(axis=0)
-    tip = np.array([0.41, 0.43, 0.0]) * (high - low) + low + [0, 0, (high - low)[2] + 1e-3]
-    path = line_ahead(tip, np.array([0.0, 0.0, -1.0]), reach=(high - low)[2] + 2e-3)
     prefetcher = Prefetcher(tissue)
     try:
         prefetcher._closed = True
