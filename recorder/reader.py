@@ -82,12 +82,13 @@ def _read_checked(path: Path, name: str, record: Any, verify: bool, schema: pa.S
             raise RecorderError(f"{file} does not match its recorded SHA-256 (corrupted or altered)")
     try:
         table = pq.read_table(file)
-    except (pa.ArrowException, OSError) as error:
+        # a damaged footer can still parse with a column name that is not UTF-8 (unverified reads)
+        found = {field.name: field.type for field in table.schema}
+    except (pa.ArrowException, OSError, UnicodeDecodeError) as error:
         raise RecorderError(f"{file} cannot be read (truncated or not Parquet): {error}") from error
     if record.get("rows") is not None and table.num_rows != record["rows"]:
         raise RecorderError(f"{file} has {table.num_rows} rows; its header says {record['rows']}")
     expected = {field.name: field.type for field in schema}
-    found = {field.name: field.type for field in table.schema}
     if found != expected:
         differing = sorted(set(expected.items()) ^ set(found.items()), key=str)
         names = ", ".join(dict.fromkeys(name for name, _ in differing))

@@ -111,6 +111,19 @@ def test_mutated_websocket_frames_each_get_one_answer(server, data):
             assert ("error" in answer) == (answer["status"] != 200)
 
 
+def test_a_column_name_damaged_into_invalid_text_is_refused(pristine, tmp_path):
+    """Found by the fuzz test below: one bit flipped in a column name of the Parquet footer still
+    parses, and reading the name raised UnicodeDecodeError instead of a RecorderError."""
+    copy = tmp_path / "s"
+    shutil.copytree(pristine, copy)
+    path = copy / "samples.parquet"
+    data = path.read_bytes()
+    at = data.index(b"tool_x")  # its first appearance: a flip there still parses
+    path.write_bytes(data[:at] + bytes([data[at] ^ 0x80]) + data[at + 1 :])  # 't' -> 0xf4: not UTF-8
+    with pytest.raises(RecorderError, match=r"samples\.parquet cannot be read"):
+        open_session(copy, verify=False)
+
+
 def closed_session(directory, n=300):
     writer = SessionWriter(directory, {"participant": "P1"})
     for row in sample_rows(0, n):
