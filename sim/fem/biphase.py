@@ -20,6 +20,7 @@ with defaults limit_0 = 0.2, v_crit = 0.01 m/s, floor = 0.25, p = 2.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -174,6 +175,10 @@ class BiphaseTissue:
     def warm_contact_caches(self) -> None:
         """See :meth:`TissueModel.warm_contact_caches` (depths are cast in the soft phase)."""
         self.soft.warm_contact_caches()
+
+    def cast_depths(self, nodes: Iterable[int]) -> None:
+        """See :meth:`TissueModel.cast_depths` (depths are cast in the soft phase)."""
+        self.soft.cast_depths(nodes)
 
     def depth_under(self, nodes: NDArray[np.int64]) -> float:
         """Mean tissue depth (m) under contact nodes (cast in the soft phase, cached per node)."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -501,6 +501,16 @@ class TissueModel:
     def knows_depth(self, node: int) -> bool:
         """Whether :meth:`tissue_depth` of ``node`` is cached."""
         return node in self._depths
+
+    def cast_depths(self, nodes: Iterable[int]) -> None:
+        """Cast and cache :meth:`tissue_depth` under each node ahead of contact (0.1-0.3 ms a node).
+        A node with no depth (off the exterior surface, nothing opposite) is left uncached: a
+        contact there raises its error then, as it would have without this call."""
+        for node in nodes:
+            try:
+                self.tissue_depth(int(node))
+            except ModelError:
+                continue
 
     def _cast_depth(self, node: int) -> float:
         inward = -self._vertex_normals[node]

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.collision.mesh import CollisionMesh
-from sim.errors import ModelError, SolverError
+from sim.errors import SolverError
 from sim.fem import BiphaseTissue, TissueModel
 from sim.geometry import circle_through
 
@@ -247,14 +247,6 @@ class Prefetcher:
     def _needs_columns(self, node: int) -> bool:
         return any(model.needs_solve(node) for model in self.models)
 
-    def _cast_depths(self, nodes: list[int]) -> None:
-        """The tissue depth under the nodes too (a contact needs it; ~0.1 ms a node at 10k nodes)."""
-        for node in nodes:
-            try:
-                self._depth_model.tissue_depth(node)
-            except ModelError:  # no opposite surface (e.g. an edge node): the contact will say so
-                continue
-
     def _raise_if_failed(self) -> None:
         """The worker thread's failure, raised in the asking (graphics) layer."""
         if self.error is not None:
@@ -270,7 +262,8 @@ class Prefetcher:
                 while not self._closed and (chunk := self._next_chunk()) is not None:
                     for model in self.models:
                         model.prefetch(np.array(chunk))
-                    self._cast_depths(chunk)
+                    # a contact needs their depth too (~0.1 ms a node at 10k nodes)
+                    self._depth_model.cast_depths(chunk)
                     with self._queues_lock:
                         self._pending.difference_update(chunk)
         except BaseException as error:  # raised in the graphics layer at its next request

@@ -418,6 +418,15 @@ class Simulation:
             )
         self._emit(RuntimeEvent("stopped", now, "runtime", self.stop_reason or ""))
 
+    def _cast_candidate_depths(self) -> None:
+        """A first touch needs the tissue depth under its nodes, cast once per node (0.1-0.3 ms
+        each): in real time, cast it for every precomputed contact candidate before the clock
+        starts rather than on the FEM thread at the touch (the prefetcher casts the rest ahead
+        of the needle). Simulated time casts as it goes: the same results, less work in all."""
+        model = self._tissue.soft if isinstance(self._tissue, BiphaseTissue) else self._tissue
+        if model.precomputation is not None:
+            model.cast_depths(model.contact_nodes)
+
     def _start_prefetching(self) -> None:
         """Start solving on-demand columns ahead of contact, if some contact could need them; before
         any of the run's threads start (the worker is forked)."""
@@ -479,6 +488,7 @@ class Simulation:
         """Wall-clock time: the haptic layer in its own process, the others in threads."""
         from sim.runtime.realtime import run_realtime
 
+        self._cast_candidate_depths()
         self._start_prefetching()
         try:
             return run_realtime(self, duration, pin_cpus)

@@ -140,3 +140,35 @@ def test_bad_input_is_named():
         intersect_segments_triangles(np.zeros((1, 3)), np.ones((1, 3)), np.zeros((2, 3)))
     with pytest.raises(CollisionInputError, match="seg_start must have finite coordinates"):
         intersect_segments_triangles(np.full((1, 3), np.nan), np.ones((1, 3)), np.zeros((1, 3, 3)))
+
+
+def rational_orient3d(a, b, c, d):
+    """det[a - d, b - d, c - d] in rationals, written out independently of the kernel."""
+    a, b, c, d = ([Fraction(float(x)) for x in v] for v in (a, b, c, d))
+    m = [[a[i] - d[i] for i in range(3)], [b[i] - d[i] for i in range(3)], [c[i] - d[i] for i in range(3)]]
+    return (
+        m[0][0] * m[1][1] * m[2][2]
+        + m[0][1] * m[1][2] * m[2][0]
+        + m[0][2] * m[1][0] * m[2][1]
+        - m[0][2] * m[1][1] * m[2][0]
+        - m[0][0] * m[1][2] * m[2][1]
+        - m[0][1] * m[1][0] * m[2][2]
+    )
+
+
+# every exponent a double can have, subnormals included, so the common scale is tested at its extremes
+any_magnitude = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e100, max_value=1e100)
+wide_point = st.tuples(any_magnitude, any_magnitude, any_magnitude).map(np.array)
+
+
+@given(st.one_of(grid_point, wide_point), wide_point, st.one_of(grid_point, real_point), wide_point)
+@settings(max_examples=1500, deadline=None)
+def test_integer_orient3d_is_the_exact_determinant(a, b, c, d):
+    from sim.collision.predicates import orient3d, orient3d_integer
+
+    expected = rational_orient3d(a, b, c, d)
+    numerator, denominator = orient3d_integer(a, b, c, d)
+    assert denominator > 0
+    assert Fraction(numerator, denominator) == expected
+    _, sign = orient3d(a[None], b[None], c[None], d[None], relative_accuracy=1.0)
+    assert int(sign[0]) == (expected > 0) - (expected < 0)

@@ -1,6 +1,7 @@
 """Ray prefiltering by bounding spheres: never loses the nearest hit."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -41,8 +42,8 @@ def test_bounding_spheres_hold_their_corners():
     assert radii[0] == np.linalg.norm(triangles[0] - centres[0], axis=1).max()
 
 
-def test_tissue_depth_matches_a_cast_against_every_triangle():
-    """The slab is 3 mm thick: every top-face node has exactly that depth below it."""
+def slab_and_its_inner_top_nodes():
+    """A 3 mm slab held at its base, its tissue model, and its top-face nodes off the edges."""
     from sim.fem import Material, TissueModel
     from sim.mesh import box_mesh
 
@@ -50,5 +51,23 @@ def test_tissue_depth_matches_a_cast_against_every_triangle():
     model = TissueModel(mesh, Material(20e3, 0.45), mesh.node_sets["z0"])
     top = mesh.node_sets["z1"]
     inner = [int(n) for n in top if 0 < mesh.points[n, 0] < 0.004 and 0 < mesh.points[n, 1] < 0.004]
+    return mesh, model, inner
+
+
+def test_tissue_depth_matches_a_cast_against_every_triangle():
+    """The slab is 3 mm thick: every top-face node has exactly that depth below it."""
+    _, model, inner = slab_and_its_inner_top_nodes()
     for node in inner:
         assert abs(model.tissue_depth(node) - 0.003) < 1e-12
+
+
+def test_cast_depths_caches_surface_nodes_and_leaves_the_rest_to_raise_at_contact():
+    from sim.errors import ModelError
+
+    mesh, model, top = slab_and_its_inner_top_nodes()
+    interior = int(np.flatnonzero(np.all((mesh.points > 1e-6) & (mesh.points < 0.003 - 1e-6), axis=1))[0])
+    model.cast_depths([*top, interior])
+    assert all(model.knows_depth(n) for n in top) and not model.knows_depth(interior)
+    assert all(abs(model.tissue_depth(n) - 0.003) < 1e-12 for n in top)
+    with pytest.raises(ModelError, match=f"node {interior} is not on the exterior surface"):
+        model.tissue_depth(interior)

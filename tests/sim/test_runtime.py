@@ -1,5 +1,6 @@
 """The layered runtime in simulated time, with faults injected into real components."""
 
+import gc
 import math
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 
 from sim.devices import DeviceLostError, ScriptedDevice, SuturingPass
 from sim.devices.base import DeviceLimits
+from sim.errors import ModelError
 from sim.needle import Needle, Pose
 from sim.runtime import RunResult, RuntimeSettings, SafetySettings, Simulation
 from sim.runtime.safety import ForceSafety
@@ -223,8 +225,17 @@ def test_holder_snapshot_pose_is_validated(tissue, corrupt, message):
 def test_realtime_run_shares_state_across_processes(tissue):
     """The haptic layer in its own process: the run completes, the stitch happens, forces stay safe."""
     simulation, suturing, _ = make(tissue)
+    frozen = []  # objects the collector leaves alone during the run, seen once from the graphics layer
+    # (counting walks the frozen list: once, or the count itself would starve the FEM thread)
+    simulation.on_graphics = lambda now, fem: frozen or frozen.append(gc.get_freeze_count())
     result = simulation.run_realtime(2.4)
     assert result.completed, result.error
+    assert min(frozen) > 10_000 and gc.get_freeze_count() == 0  # the set-up heap, thawed after the run
+    soft = tissue.soft  # every precomputed candidate's depth was cast before the clock started
+    for node in soft.contact_nodes:
+        if not soft.knows_depth(int(node)):
+            with pytest.raises(ModelError):
+                soft.tissue_depth(int(node))
     assert "contact_start" in kinds(result) and "pierce" in kinds(result)
     times = result.haptic.time
     assert np.all(np.diff(times) > 0) and times[0] < 0.01 and times[-1] > 2.3
