@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import os
+import signal
 import sys
 import threading
 import time as clock
@@ -48,6 +49,7 @@ LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
 """SCHED_FIFO priorities of the FEM and graphics threads (the haptic process has 50). They sleep
 most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
 the column worker's or the display's CPU time, which showed as contact-change latency."""
+PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
 GIL_SWITCH_INTERVAL = 2e-4
 """s a thread may keep the interpreter lock while another waits for it (Python's default is 5 ms):
 the FEM thread waking for its step must not wait out a graphics frame's collision query."""
@@ -103,11 +105,13 @@ def _run(simulation: Simulation, duration: float, pin_cpus: bool) -> RunResult:
     display_pid = _start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()
     started = clock.perf_counter()
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:  # the haptic process
         os.close(errors_read)
         status = 0
         try:
+            _stop_with_parent(parent, control)
             _haptic_process(simulation, duration, control, telemetry, events, errors_write, pin_cpus)
         except BaseException:
             status = 1
@@ -116,7 +120,7 @@ def _run(simulation: Simulation, duration: float, pin_cpus: bool) -> RunResult:
     os.close(errors_write)
     previous_affinity = _leave_last_core_to_haptics(pin_cpus)
     # the haptic core idles by polling, not halting, between ticks (sim.runtime.cpu)
-    polling = IdlePolling(max(previous_affinity)) if previous_affinity else contextlib.nullcontext()
+    polling = IdlePolling() if previous_affinity else contextlib.nullcontext()
     try:
         with polling:
             _wait_until_ready(pid, control)
@@ -178,11 +182,13 @@ def _start_display_process(
     """The display layer in its own low-priority process, so rendering never takes the FEM thread's GIL."""
     if simulation.renderer is None:
         return None
+    parent = os.getpid()
     pid = os.fork()
     if pid != 0:
         return pid
     status = 0
     try:
+        _stop_with_parent(parent, control)
         from threadpoolctl import threadpool_limits
 
         os.nice(10)
@@ -208,6 +214,21 @@ def _start_display_process(
         status = 1
     finally:
         os._exit(status)
+
+
+def _stop_with_parent(parent: int, control: ControlBlock) -> None:
+    """In a forked child: stop the run (the loop winds down, force to zero first) when the process
+    that forked it dies, killed included. An orphaned haptic loop would go on commanding the
+    device. Linux sends the child SIGTERM then (PR_SET_PDEATHSIG); elsewhere nothing changes."""
+    import ctypes
+
+    signal.signal(signal.SIGTERM, lambda signum, frame: control.request_stop())
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # it died before the request was in place
+        control.request_stop()
 
 
 def _as_layer_telemetry(layer: str, simulation: Simulation, shared: SharedTelemetry) -> LoopTelemetry:

@@ -1,55 +1,65 @@
-"""The haptic core's idle limit is set for a run and restored after it, and never required."""
+"""The cores' idle limit is held for a run and released after it, even by a killed run; never required."""
 
-from sim.runtime.cpu import IdlePolling
+import os
+import signal
+import subprocess
+import sys
 
-
-def test_the_limit_is_set_inside_and_restored_after(tmp_path):
-    power = tmp_path / "cpu3" / "power"
-    power.mkdir(parents=True)
-    limit = power / "pm_qos_resume_latency_us"
-    limit.write_text("0\n")
-    with IdlePolling(3, root=tmp_path) as polling:
-        assert polling.active and limit.read_text() == "n/a"
-    assert limit.read_text() == "0" and not polling.active
+from sim.runtime.cpu import CPU_LATENCY, IdlePolling, cpu_latency_limit
 
 
-def test_the_limit_is_restored_when_the_run_fails(tmp_path):
-    power = tmp_path / "cpu0" / "power"
-    power.mkdir(parents=True)
-    (power / "pm_qos_resume_latency_us").write_text("25")
+def test_the_request_is_written_and_released_with_the_file(tmp_path):
+    device = tmp_path / "cpu_dma_latency"
+    device.write_bytes(b"\xff" * 4)
+    with IdlePolling(device) as polling:
+        assert polling.active and device.read_bytes() == bytes(4)  # 0 us: nothing deeper than polling
+    assert not polling.active and polling._request is None
+
+
+def test_the_request_is_released_when_the_run_fails():
+    before = cpu_latency_limit()
     try:
-        with IdlePolling(0, root=tmp_path):
+        with IdlePolling():
+            assert cpu_latency_limit() == 0
             raise RuntimeError("a layer failed")
     except RuntimeError:
         pass
-    assert (power / "pm_qos_resume_latency_us").read_text() == "25"
+    assert cpu_latency_limit() == before
 
 
-def test_without_the_file_nothing_happens(tmp_path):
-    with IdlePolling(7, root=tmp_path) as polling:
+def test_without_the_device_nothing_happens(tmp_path):
+    with IdlePolling(tmp_path / "missing") as polling:
         assert not polling.active
-    assert not (tmp_path / "cpu7").exists()
+    assert not (tmp_path / "missing").exists()
 
 
 def test_the_real_run_leaves_the_machine_as_it_found_it():
-    """A real-time run sets the haptic core's limit (root here) and puts the old value back."""
-    import os
-
-    from sim.runtime.cpu import SYSFS_CPUS
-
-    last = max(os.sched_getaffinity(0))
-    path = SYSFS_CPUS / f"cpu{last}" / "power" / "pm_qos_resume_latency_us"
-    before = path.read_text()
+    """Root here: the request holds while active, and the previous limit is back after."""
+    before = cpu_latency_limit()
     seen = []
-    with IdlePolling(last) as polling:
-        seen.append((polling.active, path.read_text().strip()))
-    assert path.read_text() == before
-    assert seen == [(True, "n/a")]
+    with IdlePolling() as polling:
+        seen.append((polling.active, cpu_latency_limit()))
+    assert seen == [(True, 0)] and cpu_latency_limit() == before
+    assert CPU_LATENCY.exists()
+
+
+def test_a_killed_run_cannot_leave_the_request_behind():
+    """SIGKILL runs no clean-up code: the kernel drops the request with the dead process's file."""
+    before = cpu_latency_limit()
+    script = (
+        "import os, signal, sys\n"
+        "from sim.runtime.cpu import IdlePolling, cpu_latency_limit\n"
+        "with IdlePolling() as polling:\n"
+        "    print(polling.active, cpu_latency_limit(), flush=True)\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+    )
+    child = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert child.returncode == -signal.SIGKILL
+    assert child.stdout.split() == ["True", "0"]
+    assert cpu_latency_limit() == before and before != 0
 
 
 def test_steal_is_read_per_core_in_seconds(tmp_path):
-    import os
-
     from sim.runtime.cpu import stolen_seconds
 
     ticks = os.sysconf("SC_CLK_TCK")

@@ -251,3 +251,94 @@ def test_realtime_device_unplug_ends_the_session(tissue):
     assert "device_lost" in kinds(result) and "contact_start" in kinds(result)
     assert result.haptic.time[-1] < 1.0
     assert_forces_safe(result, LIMITS)
+
+
+ORPHAN_RUN = """
+import os, sys
+import numpy as np
+from sim.devices import ScriptedDevice, SuturingPass
+from sim.devices.base import DeviceLimits
+from sim.fem import BiphaseTissue
+from sim.mesh import box_mesh
+from sim.needle import Needle
+from sim.runtime import Simulation
+
+class ForcesToFile:  # the device as the haptic process drives it; each force sent appended to a file
+    def __init__(self, device, path):
+        self.device, self.identity, self.limits = device, device.identity, device.limits
+        self.out = open(path, "ab", buffering=0)
+    def read(self, time):
+        return self.device.read(time)
+    def write_force(self, force):
+        self.device.write_force(force)
+        self.out.write(np.asarray(force, dtype=np.float64).tobytes())
+    def close(self):
+        self.device.close()
+
+mesh = box_mesh((0.012, 0.01, 0.0015), (6, 5, 2))
+tissue = BiphaseTissue.build(mesh, np.concatenate([mesh.node_sets[k] for k in ("x0", "y0", "y1")]))
+tissue.precompute(use_cache=False)
+needle = Needle.curved()
+suturing = SuturingPass(needle, [0.0105, 0.0051, 0.0015], [0, 0, 1], [1, 0, 0])
+limits = DeviceLimits(max_force=0.02, max_force_rate=2.0)
+device = ForcesToFile(ScriptedDevice(suturing.pose_and_grip, limits=limits), sys.argv[1] + ".forces")
+simulation = Simulation(tissue, needle, device)
+def started():
+    with open(sys.argv[1] + ".pid", "w") as out:
+        out.write(str(os.getpid()))
+simulation.on_haptic_start = started
+simulation.run_realtime(60.0)
+"""
+
+
+def _ended(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            return any(line.startswith("State:") and "Z" in line.split()[1] for line in status)
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.slow
+def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
+    """SIGKILL the process running the session: its haptic process, which would go on commanding
+    the device, brings the force to zero within the rate limit and exits; the idle limit is gone."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from sim.runtime.cpu import cpu_latency_limit
+
+    before = cpu_latency_limit()
+    base = tmp_path / "run"
+    child = subprocess.Popen([sys.executable, "-c", ORPHAN_RUN, str(base)])
+    pid_file, forces_file = base.with_suffix(".pid"), base.with_suffix(".forces")
+    deadline = time.monotonic() + 120
+
+    def pushing() -> bool:  # the last force sent is not zero: the needle is in the tissue
+        size = forces_file.stat().st_size if forces_file.exists() else 0
+        if size < 24:
+            return False
+        with open(forces_file, "rb") as sent:
+            sent.seek(24 * (size // 24 - 1))
+            return bool(np.any(np.frombuffer(sent.read(24), dtype=np.float64)))
+
+    while not pushing():
+        assert child.poll() is None and time.monotonic() < deadline, "the run never pushed back"
+        time.sleep(0.01)
+    haptic = int(pid_file.read_text())
+    assert cpu_latency_limit() == 0  # the run holds it
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait()
+    deadline = time.monotonic() + 10
+    while not _ended(haptic):
+        assert time.monotonic() < deadline, "the haptic process outlived its session"
+        time.sleep(0.05)
+    forces = np.fromfile(forces_file, dtype=np.float64).reshape(-1, 3)
+    assert len(forces) < 20_000  # it stopped, it did not run out its 60 s
+    assert np.all(forces[-1] == 0)  # brought to zero, not dropped from where it was
+    steps = np.linalg.norm(np.diff(np.vstack([np.zeros(3), forces]), axis=0), axis=1)
+    assert steps.max() <= LIMITS.max_force_rate * 1e-3 * (1 + 1e-9)
+    assert cpu_latency_limit() == before
