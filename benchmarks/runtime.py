@@ -13,6 +13,11 @@ Run:  .venv/bin/python benchmarks/runtime.py [--seconds 60] [--no-render] [--siz
    the graphics layer near the needle tip).
 For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
 
+``--trace`` (root): the haptic core is also traced with ftrace during each real-time run, and
+every haptic period over 3 ms is put down to what the kernel saw (``benchmarks/kernel_trace.py``):
+a timer interrupt handled late (the vCPU was not running), the haptic process woken on time but
+run late (the tasks and interrupts that ran instead are named), or a long step.
+
 ``--instructions``: instead, the instructions one simulated stitch on the test cube
 executes, counted by valgrind's callgrind (the same count whatever else the host is
 doing, unlike the wall-clock ratio; about six minutes).
@@ -21,6 +26,7 @@ doing, unlike the wall-clock ratio; about six minutes).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import mmap
 import os
 import subprocess
@@ -29,6 +35,7 @@ import tempfile
 import time
 
 import numpy as np
+from kernel_trace import HapticCoreTrace, late_periods_explained
 
 from sim.devices import ScriptedDevice
 from sim.devices.scripted import sequence_of_passes
@@ -66,8 +73,16 @@ class StepClock:
 
     def __init__(self, simulation: Simulation, capacity: int) -> None:
         self.rows = np.frombuffer(mmap.mmap(-1, 8 * 3 * capacity), dtype=np.float64).reshape(capacity, 3)
-        self._count = np.frombuffer(mmap.mmap(-1, 8), dtype=np.int64)
+        self._count = np.frombuffer(mmap.mmap(-1, 8 * 2), dtype=np.int64)  # steps kept, haptic pid
         step, rows, count = simulation.haptic_step, self.rows, self._count
+        started = simulation.on_haptic_start
+
+        def note_pid() -> None:
+            count[1] = os.getpid()
+            if started is not None:
+                started()
+
+        simulation.on_haptic_start = note_pid
 
         def timed(now: float) -> None:
             wall, cpu = time.perf_counter(), time.thread_time()
@@ -83,6 +98,10 @@ class StepClock:
     @property
     def steps(self) -> np.ndarray:
         return self.rows[: int(self._count[0])]
+
+    @property
+    def haptic_pid(self) -> int:
+        return int(self._count[1])
 
 
 def late_periods_by_cause(steps: np.ndarray, over: float = 3e-3) -> str:
@@ -105,26 +124,32 @@ def late_periods_by_cause(steps: np.ndarray, over: float = 3e-3) -> str:
     )
 
 
-def run_measuring_steal(simulation: Simulation, duration: float):
+def run_measuring_steal(simulation: Simulation, duration: float, kernel_trace: bool = False):
     """A real-time run; the CPU time (s) the hypervisor took from each core during it; the haptic
-    core's steal sampled every 5 ms as (perf_counter s, stolen s) arrays; and the per-step clocks
-    of the haptic layer (:class:`StepClock`)."""
+    core's steal sampled every 5 ms as (perf_counter s, stolen s) arrays; the per-step clocks
+    of the haptic layer (:class:`StepClock`); and, with ``kernel_trace``, the haptic core's
+    ftrace (:class:`kernel_trace.CoreTrace`, else None)."""
     clock = StepClock(simulation, int(duration * 1200) + 2000)
     cores = sorted(os.sched_getaffinity(0))
-    with tempfile.NamedTemporaryFile("r", suffix=".steal") as trace:
+    tracing = HapticCoreTrace(cores[-1]) if kernel_trace else contextlib.nullcontext()
+    # in shared memory, not on disk: writing back a file raises disk interrupts on the haptic core
+    with tempfile.NamedTemporaryFile("r", suffix=".steal", dir="/dev/shm") as trace:
         sampler = subprocess.Popen(
             [sys.executable, "-c", STEAL_SAMPLER, str(cores[-1]), str(cores[0]), trace.name]
         )
         try:
             before = stolen_seconds()
-            result = simulation.run_realtime(duration)
+            with tracing:
+                result = simulation.run_realtime(duration)
             after = stolen_seconds()
             stolen = [after[core] - before[core] for core in sorted(after)]
         finally:
             sampler.terminate()
             sampler.wait()
         samples = np.loadtxt(trace.name, ndmin=2)
-    return result, stolen, (samples[:, 0], samples[:, 1] / os.sysconf("SC_CLK_TCK")), clock.steps
+    core_trace = tracing.parse(clock.haptic_pid) if kernel_trace else None
+    steal = (samples[:, 0], samples[:, 1] / os.sysconf("SC_CLK_TCK"))
+    return result, stolen, steal, clock.steps, core_trace
 
 
 def stalls_against_steal(steps: np.ndarray, trace, over: float = 3e-3, draws: int = 20) -> str:
@@ -168,7 +193,7 @@ def stalls_against_steal(steps: np.ndarray, trace, over: float = 3e-3, draws: in
     )
 
 
-def report(name: str, simulation: Simulation, result, stolen: list[float], trace, steps) -> None:
+def report(name: str, simulation: Simulation, result, stolen: list[float], trace, steps, core_trace) -> None:
     h = result.telemetry["haptic"]
     print(f"[{name}] stop={result.stop_reason} wall={result.wall_seconds:.1f}s", flush=True)
     print(
@@ -231,6 +256,8 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
             f"{stalls_against_steal(steps, trace, over)}",
             flush=True,
         )
+    if core_trace is not None:
+        print(f"[{name}]   haptic {late_periods_explained(steps, core_trace)}", flush=True)
     kinds = [e.kind for e in result.events]
     print(f"[{name}]   events: " + ", ".join(f"{k}={kinds.count(k)}" for k in sorted(set(kinds))), flush=True)
 
@@ -259,6 +286,11 @@ def main() -> None:
         action="store_true",
         help="count the instructions of one simulated stitch under valgrind instead (host-independent)",
     )
+    parser.add_argument(
+        "--trace",
+        action="store_true",
+        help="trace the haptic core with ftrace (root) and say, from it, why each period over 3 ms was late",
+    )
     parser.add_argument("--passes", type=int, default=None, help=argparse.SUPPRESS)  # under valgrind
     args = parser.parse_args()
     if args.passes is not None:
@@ -276,11 +308,11 @@ def main() -> None:
     if args.only in (None, "simulated"):
         simulated_throughput(cube, needle)
     if args.only in (None, "cube"):
-        realtime_cube(cube, needle, args.seconds, size, not args.no_render)
+        realtime_cube(cube, needle, args.seconds, size, not args.no_render, args.trace)
     if args.only in (None, "artery"):
-        realtime_artery(needle, args.seconds, size, not args.no_render, precomputed=True)
+        realtime_artery(needle, args.seconds, size, not args.no_render, True, args.trace)
     if args.only in (None, "artery-on-demand"):
-        realtime_artery(needle, args.seconds, size, not args.no_render, precomputed=False)
+        realtime_artery(needle, args.seconds, size, not args.no_render, False, args.trace)
 
 
 def interpreter_speed(iterations: int = 1_000_000) -> float:
@@ -354,17 +386,18 @@ def instructions_per_stitch() -> None:
     )
 
 
-def realtime_cube(cube, needle, seconds, size, render) -> None:
+def realtime_cube(cube, needle, seconds, size, render, kernel_trace) -> None:
     trajectory, total = sequence_of_passes(practice_passes(scenario("paper_cube"), needle, 20))
     duration = min(seconds, total)
     settings = RuntimeSettings(fem_rate=500.0)
     simulation = Simulation(
         cube, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(cube, size, render)
     )
-    report(f"real time, test cube, {duration:.0f} s", simulation, *run_measuring_steal(simulation, duration))
+    name = f"real time, test cube, {duration:.0f} s"
+    report(name, simulation, *run_measuring_steal(simulation, duration, kernel_trace))
 
 
-def realtime_artery(needle, seconds, size, render, precomputed) -> None:
+def realtime_artery(needle, seconds, size, render, precomputed, kernel_trace) -> None:
     case = scenario("vessel_10k")
     artery = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
     if precomputed:
@@ -377,7 +410,7 @@ def realtime_artery(needle, seconds, size, render, precomputed) -> None:
     )
     mode = "precomputed" if precomputed else "on demand"
     name = f"real time, {case.mesh.n_nodes}-node artery {mode}, {duration:.0f} s"
-    report(name, simulation, *run_measuring_steal(simulation, duration))
+    report(name, simulation, *run_measuring_steal(simulation, duration, kernel_trace))
     simulation.close()
 
 

@@ -24,7 +24,7 @@ import signal
 import sys
 import threading
 import time as clock
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -50,6 +50,7 @@ LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
 most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
 the column worker's or the display's CPU time, which showed as contact-change latency."""
 PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
+PR_SET_THP_DISABLE, PR_GET_THP_DISABLE = 41, 42  # prctl options: no transparent huge pages
 GIL_SWITCH_INTERVAL = 2e-4
 """s a thread may keep the interpreter lock while another waits for it (Python's default is 5 ms):
 the FEM thread waking for its step must not wait out a graphics frame's collision query."""
@@ -317,6 +318,35 @@ def _try_realtime_priority(priority: int = 50) -> bool:
     return True
 
 
+@contextlib.contextmanager
+def huge_pages_left_alone() -> Iterator[None]:
+    """For the length of a run, this process and what it forks get no new transparent huge pages,
+    and khugepaged leaves their memory alone (``PR_SET_THP_DISABLE``; the previous setting is put
+    back after, and the flag belongs to the process, so a killed run leaves nothing behind).
+
+    NumPy asks for huge pages on its large arrays, and khugepaged collapses them a 2 MB page at a
+    time. Traced on the haptic core (``benchmarks/runtime.py --trace``): a collapse ran 6.3 ms
+    there without giving way to the woken haptic process, since this guest kernel preempts only
+    at its voluntary points; all 16 guest-side periods over 3 ms of a 60 s artery run were such
+    kernel threads. Huge pages already mapped stay.
+    """
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+        previous = prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0)
+    except (OSError, AttributeError):
+        previous = -1
+    if previous < 0:  # not Linux, or a kernel without the option: nothing changes
+        yield
+        return
+    prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
+    try:
+        yield
+    finally:
+        prctl(PR_SET_THP_DISABLE, previous, 0, 0, 0)
+
+
 def _lock_memory() -> bool:
     """Keep the haptic process's pages resident and off transparent huge pages.
 
@@ -327,7 +357,7 @@ def _lock_memory() -> bool:
 
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(41, 1, 0, 0, 0)  # PR_SET_THP_DISABLE
+        libc.prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
         # MCL_FUTURE only: locking the inherited heap (MCL_CURRENT) would copy every
         # copy-on-write page of the parent, seconds of work for a large precomputation.
         return libc.mlockall(2) == 0

@@ -486,11 +486,12 @@ class Simulation:
 
     def run_realtime(self, duration: float, pin_cpus: bool = True) -> RunResult:
         """Wall-clock time: the haptic layer in its own process, the others in threads."""
-        from sim.runtime.realtime import run_realtime
+        from sim.runtime.realtime import huge_pages_left_alone, run_realtime
 
-        self._cast_candidate_depths()
-        self._start_prefetching()
-        try:
-            return run_realtime(self, duration, pin_cpus)
-        finally:
-            self.close()
+        with huge_pages_left_alone():  # before the column worker is forked: it inherits the setting
+            self._cast_candidate_depths()
+            self._start_prefetching()
+            try:
+                return run_realtime(self, duration, pin_cpus)
+            finally:
+                self.close()

@@ -1,5 +1,6 @@
 """The layered runtime in simulated time, with faults injected into real components."""
 
+import ctypes
 import gc
 import math
 
@@ -227,10 +228,19 @@ def test_realtime_run_shares_state_across_processes(tissue):
     simulation, suturing, _ = make(tissue)
     frozen = []  # objects the collector leaves alone during the run, seen once from the graphics layer
     # (counting walks the frozen list: once, or the count itself would starve the FEM thread)
-    simulation.on_graphics = lambda now, fem: frozen or frozen.append(gc.get_freeze_count())
+    prctl = ctypes.CDLL(None).prctl
+    huge_pages_off = []  # PR_GET_THP_DISABLE during the run: khugepaged leaves this process alone
+
+    def seen(now, fem):
+        if not frozen:
+            frozen.append(gc.get_freeze_count())
+            huge_pages_off.append(prctl(42, 0, 0, 0, 0))
+
+    simulation.on_graphics = seen
     result = simulation.run_realtime(2.4)
     assert result.completed, result.error
     assert min(frozen) > 10_000 and gc.get_freeze_count() == 0  # the set-up heap, thawed after the run
+    assert huge_pages_off == [1] and prctl(42, 0, 0, 0, 0) == 0  # and put back
     soft = tissue.soft  # every precomputed candidate's depth was cast before the clock started
     for node in soft.contact_nodes:
         if not soft.knows_depth(int(node)):
