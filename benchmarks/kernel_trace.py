@@ -8,8 +8,8 @@ executing at all (a vCPU the host did not run, or interrupts held off, which a w
 kernel does for microseconds, not milliseconds). With context switches, interrupts and page
 faults also traced, each late period falls in one of:
 
-- ``the core's timer came late``: the largest lateness of a timer expiry inside the period
-  explains it (the vCPU did not run);
+- ``a timer came late``: a timer fired late enough to explain the period, with no event at
+  all on the core between its expiry and its interrupt (the vCPU did not run);
 - ``woken on time, then nothing else ran``: the haptic process's timer fired on time and the
   core ran no other task and no interrupt (beyond the scheduler tick) until the step began, late:
   the process held the core, spinning to its deadline, and a gap with no event on a core that
@@ -61,7 +61,9 @@ class CoreTrace:
     """The parsed trace of one core: timer expiries with their lateness, and what ran when."""
 
     expiry_times: np.ndarray  # s, monotonic (perf_counter's clock)
-    expiry_lateness: np.ndarray  # s the interrupt was handled after the timer's expiry
+    expiry_lateness: (
+        np.ndarray
+    )  # s the interrupt was handled after the timer's expiry, while the core was silent
     expiry_is_haptic: np.ndarray  # bool: the haptic process's own sleep timer
     switches: list[tuple[float, str]] = field(default_factory=list)  # (s, other task switched to)
     interrupts: list[tuple[float, str]] = field(default_factory=list)  # (s, handler or softirq)
@@ -129,6 +131,7 @@ class HapticCoreTrace:
     def parse(self, haptic_pid: int) -> CoreTrace:
         armed: dict[str, tuple[int, bool]] = {}  # timer -> (expires ns, armed by the haptic process)
         times, lateness, haptic = [], [], []
+        previous = -np.inf  # s of the core's last traced event
         switches, interrupts, faults = [], [], []
         for line in self.text.splitlines():
             match = LINE.match(line)
@@ -136,13 +139,20 @@ class HapticCoreTrace:
                 continue
             event, when, pid = match["event"], float(match["ts"]), int(match["pid"])
             fields = dict(FIELD.findall(match["rest"]))
+            silent_since, previous = previous, when
             if event == "hrtimer_start":
-                armed[fields["hrtimer"]] = (int(fields["expires"]), pid == haptic_pid)
+                own = pid == haptic_pid and fields["function"] == "hrtimer_wakeup"  # its sleep
+                armed[fields["hrtimer"]] = (int(fields["expires"]), own)
             elif event == "hrtimer_expire_entry":
                 expiry = armed.pop(fields["hrtimer"], None)
                 if expiry is not None:
                     times.append(when)
-                    lateness.append(max(0, int(fields["now"]) - expiry[0]) * 1e-9)
+                    # late only if nothing at all happened on the core from the timer's expiry
+                    # to its interrupt: an idle core's tick can be handled on its way out of idle
+                    # with no expiry traced, and the next expiry of that timer would otherwise
+                    # read as late by a whole tick, although the core ran in between
+                    late = max(0, int(fields["now"]) - expiry[0]) * 1e-9
+                    lateness.append(late if silent_since <= when - late + 2e-5 else 0.0)
                     haptic.append(expiry[1])
             elif event == "sched_switch" and int(fields["next_pid"]) not in (0, haptic_pid):
                 switches.append((when, fields["next_comm"]))
