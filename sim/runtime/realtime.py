@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from sim.runtime.cpu import IdlePolling
+from sim.runtime.prefetch import WORKER_NICENESS
 from sim.runtime.shared import (
     Arena,
     ControlBlock,
@@ -180,7 +181,9 @@ def _wait_until_ready(pid: int, control: ControlBlock, timeout: float = 60.0) ->
 def _start_display_process(
     simulation: Simulation, duration: float, control: ControlBlock, telemetry: SharedTelemetry
 ) -> int | None:
-    """The display layer in its own low-priority process, so rendering never takes the FEM thread's GIL."""
+    """The display layer in its own process, so rendering never takes the FEM thread's GIL; at the
+    column worker's niceness (:data:`sim.runtime.prefetch.WORKER_NICENESS`), below the real-time
+    FEM and graphics threads."""
     if simulation.renderer is None:
         return None
     parent = os.getpid()
@@ -192,7 +195,7 @@ def _start_display_process(
         _stop_with_parent(parent, control)
         from threadpoolctl import threadpool_limits
 
-        os.nice(10)
+        os.nice(WORKER_NICENESS)
         threadpool_limits(1)
         if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
             os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:-1]))  # off the haptic core

@@ -339,6 +339,22 @@ def test_contact_handle_matches_solve(cube, cube_model):
     )
 
 
+def test_whole_field_handle_matches_the_full_field_solve(cube, cube_model):
+    """The display's handle: the same reactions and the same displacement at every node as a sparse
+    solve of the full field, for two different pushes through the one handle."""
+    contacts = contact_sets(cube)["triangle"]
+    handle = cube_model.field_contact(list(contacts))
+    assert handle.surface_nodes.tolist() == list(range(cube.n_nodes))
+    for scale in (1.0, -0.37):
+        pushed = {node: scale * np.asarray(a) for node, a in contacts.items()}
+        solution = cube_model.solve(pushed, full_field=True)
+        reactions = handle.reaction_forces(np.array(list(pushed.values())))
+        np.testing.assert_allclose(reactions, solution.reaction_forces, rtol=1e-10)
+        field = handle.surface_displacement(reactions)
+        scale_of_field = np.abs(solution.displacement).max()
+        np.testing.assert_allclose(field, solution.displacement, rtol=0, atol=1e-10 * scale_of_field)
+
+
 def test_displacement_fields_of_known_motions(cube_model, cube):
     translation = np.tile([1e-4, -2e-4, 3e-4], (cube.n_nodes, 1))
     fields = cube_model.element_fields(translation)

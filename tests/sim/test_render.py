@@ -72,3 +72,33 @@ def test_exr_and_compare(tmp_path):
     np.testing.assert_allclose(back[:, :, 0], stress)
     with pytest.raises(Exception, match="cannot"):
         write_image(tmp_path / "no_such_dir" / "x.png", np.zeros((2, 2, 3), np.uint8))
+
+
+def test_the_display_scene_shows_the_solved_field_and_keeps_its_handle_per_contact_set():
+    """The display layer's scene: a contact renders the tissue deformed as a full-field solve
+    deforms it, from one whole-field handle per contact set (rebuilt when the set changes)."""
+    from sim.runtime.display import DisplayScene
+    from sim.runtime.simulation import GraphicsSnapshot
+
+    mesh, fixed = paper_cube()
+    model = TissueModel(mesh, Material(20e3, 0.45), fixed)
+    scene = DisplayScene(model, TissueRenderer(mesh, size=(160, 120), offscreen=True))
+    needle = Needle.curved().world_vertices(Pose.identity())
+    triangle = np.asarray(top_contact_triangle(mesh), dtype=np.int64)
+    rendered = []
+    real_render = scene.renderer.render
+    scene.renderer.render = lambda frame: rendered.append(frame) or real_render(frame)
+    scene(GraphicsSnapshot(0.0, needle, "free", None, None))
+    at_rest = scene.last_image
+    push = np.array([[0.0, 0.0, -0.002]] * 3)
+    scene(GraphicsSnapshot(0.1, needle, "contact", None, (triangle, push)))
+    handle = scene._field
+    scene(GraphicsSnapshot(0.2, needle, "contact", None, (triangle, 0.5 * push)))
+    assert scene._field is handle  # the same contact set: no new solve
+    solved = model.solve({int(n): a for n, a in zip(triangle, 0.5 * push, strict=True)}, full_field=True)
+    np.testing.assert_allclose(rendered[-1].points, mesh.points + solved.displacement, atol=1e-12)
+    upward = mesh.surface_triangles[mesh.surface_normals[:, 2] > 0.99]
+    other = next(t for t in upward if not set(t.tolist()) & set(triangle.tolist())).astype(np.int64)
+    scene(GraphicsSnapshot(0.3, needle, "contact", None, (other, push)))
+    assert scene._field is not handle and scene._field.nodes.tolist() == other.tolist()
+    assert scene.frames == 4 and np.abs(scene.last_image.astype(int) - at_rest).max() > 0
