@@ -234,9 +234,25 @@ class TissueModel:
     def surface_von_mises(self, displacement: NDArray[np.float64]) -> NDArray[np.float64]:
         """(F,) von Mises stress (Pa) of the element under each exterior triangle, from a full field."""
         elements = self.mesh.surface_elements
-        lam, mu = self._lame
         grad = displacement_gradients(self._gradients[elements], self.mesh.tets[elements], displacement)
-        return von_mises_stress(small_strain(grad), lam[elements], mu[elements])
+        return self.surface_von_mises_of_gradients(grad)
+
+    def surface_von_mises_of_gradients(self, gradients: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(F,) von Mises stress (Pa) of the elements under the exterior triangles, from their (F, 3, 3)
+        displacement gradients."""
+        elements = self.mesh.surface_elements
+        lam, mu = self._lame
+        return von_mises_stress(small_strain(gradients), lam[elements], mu[elements])
+
+    def surface_gradient_map(self, columns: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(F * 9, c) map from weights of the columns of a (3N, c) displacement basis to the
+        displacement gradients of the elements under the exterior triangles (row-major (F, 3, 3)):
+        gradients are linear in the displacement, so a whole-field handle's gradients for any
+        reactions are this map times them (one product instead of a gather and an einsum)."""
+        elements = self.mesh.surface_elements
+        basis = columns.reshape(self.mesh.n_nodes, 3, columns.shape[1])[self.mesh.tets[elements]]
+        gradients = np.einsum("maic,maj->mijc", basis, self._gradients[elements])
+        return np.ascontiguousarray(gradients.reshape(-1, columns.shape[1]))
 
     # -- precomputation ----------------------------------------------------------
     def cache_key(self) -> str:

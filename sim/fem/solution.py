@@ -98,6 +98,12 @@ class ContactHandle:
         return handle
 
     @property
+    def columns(self) -> NDArray[np.float64]:
+        """(3 * rows, 3k) displacement of ``surface_nodes`` (m) per unit reaction force (N) at each
+        driven dof."""
+        return self._columns
+
+    @property
     def stiffness(self) -> NDArray[np.float64]:
         """(3k, 3k) matrix mapping intended displacements (m) to reaction forces (N)."""
         return self._stiffness

@@ -28,6 +28,7 @@ class DisplayScene:
         self.mesh = self.model.mesh
         self._rest_stress = np.zeros(len(self.mesh.surface_triangles))
         self._field: ContactHandle | None = None  # the whole-field handle of the contact shown
+        self._gradient_map = np.zeros((0, 0))  # its surface elements' gradients per unit reaction
         self.frames = 0
         self.last_image: np.ndarray | None = None
 
@@ -37,9 +38,11 @@ class DisplayScene:
             nodes, intended = snapshot.contact
             if self._field is None or not np.array_equal(self._field.nodes, nodes):
                 self._field = self.model.field_contact(nodes)  # solved once per contact set
-            displacement = self._field.surface_displacement(self._field.reaction_forces(intended))
-            points = self.mesh.points + displacement
-            stress = self.model.surface_von_mises(displacement)  # surface elements only
+                self._gradient_map = self.model.surface_gradient_map(self._field.columns)
+            reactions = self._field.reaction_forces(intended).reshape(-1)
+            points = self.mesh.points + self._field.surface_displacement(reactions)
+            gradients = self._gradient_map.dot(reactions).reshape(-1, 3, 3)
+            stress = self.model.surface_von_mises_of_gradients(gradients)  # surface elements only
             marker = points[nodes].mean(axis=0)
         self.last_image = self.renderer.render(RenderFrame(points, stress, snapshot.needle_vertices, marker))
         self.frames += 1

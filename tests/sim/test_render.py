@@ -97,6 +97,9 @@ def test_the_display_scene_shows_the_solved_field_and_keeps_its_handle_per_conta
     assert scene._field is handle  # the same contact set: no new solve
     solved = model.solve({int(n): a for n, a in zip(triangle, 0.5 * push, strict=True)}, full_field=True)
     np.testing.assert_allclose(rendered[-1].points, mesh.points + solved.displacement, atol=1e-12)
+    expected_stress = model.surface_von_mises(solved.displacement)
+    np.testing.assert_allclose(rendered[-1].triangle_stress, expected_stress, rtol=1e-9, atol=1e-9)
+    assert expected_stress.max() > 10.0  # Pa: the push loads the surface
     upward = mesh.surface_triangles[mesh.surface_normals[:, 2] > 0.99]
     other = next(t for t in upward if not set(t.tolist()) & set(triangle.tolist())).astype(np.int64)
     scene(GraphicsSnapshot(0.3, needle, "contact", None, (other, push)))
