@@ -61,9 +61,8 @@ class CoreTrace:
     """The parsed trace of one core: timer expiries with their lateness, and what ran when."""
 
     expiry_times: np.ndarray  # s, monotonic (perf_counter's clock)
-    expiry_lateness: (
-        np.ndarray
-    )  # s the interrupt was handled after the timer's expiry, while the core was silent
+    # s the interrupt was handled after the timer's expiry, counted only while the core was silent
+    expiry_lateness: np.ndarray
     expiry_is_haptic: np.ndarray  # bool: the haptic process's own sleep timer
     switches: list[tuple[float, str]] = field(default_factory=list)  # (s, other task switched to)
     interrupts: list[tuple[float, str]] = field(default_factory=list)  # (s, handler or softirq)
@@ -120,13 +119,8 @@ class HapticCoreTrace:
         self._write("tracing_on", "0")
         self.text = (TRACEFS / "per_cpu" / f"cpu{self.cpu}" / "trace").read_text()
         self._write("trace", "")
-        self._write("set_event", "")
-        for name in ("trace_clock", "tracing_cpumask", "buffer_size_kb"):
-            self._write(name, self._saved[name].strip())
-        for event in self._saved["set_event"].split():
-            with open(TRACEFS / "set_event", "a") as events:
-                events.write(event + "\n")
-        self._write("tracing_on", self._saved["tracing_on"].strip())
+        for name in ("set_event", "trace_clock", "tracing_cpumask", "buffer_size_kb", "tracing_on"):
+            self._write(name, self._saved[name].strip() + "\n")
 
     def parse(self, haptic_pid: int) -> CoreTrace:
         armed: dict[str, tuple[int, bool]] = {}  # timer -> (expires ns, armed by the haptic process)

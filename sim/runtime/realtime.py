@@ -18,6 +18,7 @@ device whose handle is opened lazily on first read).
 from __future__ import annotations
 
 import contextlib
+import functools
 import gc
 import os
 import signal
@@ -58,20 +59,8 @@ the FEM thread waking for its step must not wait out a graphics frame's collisio
 
 
 def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True) -> RunResult:
-    """Run ``simulation`` for ``duration`` seconds of wall time (see the module docstring)."""
-    # A full collection walks every object of this process (the meshes, the scene, the libraries):
-    # 20-45 ms that would stall the FEM and graphics threads mid-run. Collect once now and freeze
-    # what is left, so that the run's collections scan only what the run itself allocates (the
-    # forked processes inherit the frozen heap).
-    gc.collect()
-    gc.freeze()
-    try:
-        return _run(simulation, duration, pin_cpus)
-    finally:
-        gc.unfreeze()
-
-
-def _run(simulation: Simulation, duration: float, pin_cpus: bool) -> RunResult:
+    """Run ``simulation`` for ``duration`` seconds of wall time (see the module docstring), inside
+    :func:`process_prepared`."""
     settings = simulation.settings
     capacity = int(duration * settings.haptic_rate * 1.2) + 2000
     display_capacity = int(duration * settings.display_rate * 1.5) + 100  # plus 15 for the FEM slot
@@ -224,13 +213,11 @@ def _stop_with_parent(parent: int, control: ControlBlock) -> None:
     """In a forked child: stop the run (the loop winds down, force to zero first) when the process
     that forked it dies, killed included. An orphaned haptic loop would go on commanding the
     device. Linux sends the child SIGTERM then (PR_SET_PDEATHSIG); elsewhere nothing changes."""
-    import ctypes
-
     signal.signal(signal.SIGTERM, lambda signum, frame: control.request_stop())
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    except (OSError, AttributeError):
+    libc = _libc()
+    if libc is None:
         return
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
     if os.getppid() != parent:  # it died before the request was in place
         control.request_stop()
 
@@ -322,50 +309,59 @@ def _try_realtime_priority(priority: int = 50) -> bool:
 
 
 @contextlib.contextmanager
-def huge_pages_left_alone() -> Iterator[None]:
-    """For the length of a run, this process and what it forks get no new transparent huge pages,
-    and khugepaged leaves their memory alone (``PR_SET_THP_DISABLE``; the previous setting is put
-    back after, and the flag belongs to the process, so a killed run leaves nothing behind).
+def process_prepared() -> Iterator[None]:
+    """This process's settings for the length of a run, put back after; enter it before anything
+    of the run is forked, so that the forked processes inherit both.
 
-    NumPy asks for huge pages on its large arrays, and khugepaged collapses them a 2 MB page at a
-    time. Traced on the haptic core (``benchmarks/runtime.py --trace``): a collapse ran 6.3 ms
-    there without giving way to the woken haptic process, since this guest kernel preempts only
-    at its voluntary points; all 16 guest-side periods over 3 ms of a 60 s artery run were such
-    kernel threads. Huge pages already mapped stay.
+    - The heap is collected once and frozen: a full collection walks every object of this process
+      (the meshes, the scene, the libraries), 20-45 ms that would stall the FEM and graphics
+      threads mid-run; frozen, the run's collections scan only what the run allocates.
+    - No new transparent huge pages, and khugepaged leaves the memory alone
+      (``PR_SET_THP_DISABLE``; the flag belongs to the process, so a killed run leaves nothing
+      behind). NumPy asks for huge pages on its large arrays, and khugepaged collapses them 2 MB
+      at a time. Traced on the haptic core (``benchmarks/runtime.py --trace``): a collapse ran
+      6.3 ms there without giving way to the woken haptic process, since this guest kernel
+      preempts only at its voluntary points; all 16 guest-side periods over 3 ms of a 60 s
+      artery run were such kernel threads. Huge pages already mapped stay.
     """
-    import ctypes
-
-    try:
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-        previous = prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0)
-    except (OSError, AttributeError):
-        previous = -1
-    if previous < 0:  # not Linux, or a kernel without the option: nothing changes
-        yield
-        return
-    prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
+    libc = _libc()
+    previous = -1 if libc is None else libc.prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0)
+    if previous >= 0:  # else not Linux, or a kernel without the option: left as it is
+        libc.prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
+    gc.collect()
+    gc.freeze()
     try:
         yield
     finally:
-        prctl(PR_SET_THP_DISABLE, previous, 0, 0, 0)
+        gc.unfreeze()
+        if previous >= 0:
+            libc.prctl(PR_SET_THP_DISABLE, previous, 0, 0, 0)
 
 
-def _lock_memory() -> bool:
-    """Keep the haptic process's pages resident and off transparent huge pages.
-
-    Large allocations elsewhere on the machine can make a page fault wait for
-    memory compaction for milliseconds; locked, pre-faulted memory never does.
-    """
+@functools.cache
+def _libc():
+    """The C library through ctypes (prctl, mlockall), or None where it cannot be loaded."""
     import ctypes
 
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
-        # MCL_FUTURE only: locking the inherited heap (MCL_CURRENT) would copy every
-        # copy-on-write page of the parent, seconds of work for a large precomputation.
-        return libc.mlockall(2) == 0
+        libc.prctl  # noqa: B018 - not every C library has it
     except (OSError, AttributeError):
-        return False
+        return None
+    return libc
+
+
+def _lock_memory() -> bool:
+    """Keep the haptic process's pages resident (it is off transparent huge pages already: the
+    setting of :func:`process_prepared` is inherited).
+
+    Large allocations elsewhere on the machine can make a page fault wait for
+    memory compaction for milliseconds; locked, pre-faulted memory never does.
+    """
+    libc = _libc()
+    # MCL_FUTURE only: locking the inherited heap (MCL_CURRENT) would copy every
+    # copy-on-write page of the parent, seconds of work for a large precomputation.
+    return libc is not None and libc.mlockall(2) == 0
 
 
 def _paced_wind_down(simulation: Simulation, now: float, period: float) -> None:

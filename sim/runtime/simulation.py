@@ -486,9 +486,9 @@ class Simulation:
 
     def run_realtime(self, duration: float, pin_cpus: bool = True) -> RunResult:
         """Wall-clock time: the haptic layer in its own process, the others in threads."""
-        from sim.runtime.realtime import huge_pages_left_alone, run_realtime
+        from sim.runtime.realtime import process_prepared, run_realtime
 
-        with huge_pages_left_alone():  # before the column worker is forked: it inherits the setting
+        with process_prepared():  # before the column worker is forked: it inherits the settings
             self._cast_candidate_depths()
             self._start_prefetching()
             try:
