@@ -15,10 +15,11 @@ from dashboard.access import owned_participant, owned_session, owned_study, sess
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
 from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.report import participant_medians, summary_table
+from metrics.report import composite_summary, participant_medians, summary_table
 from metrics.study import practice_mask
 from sessions.catalog import Catalog
-from sessions.models import Annotation, MetricResult, Participant, Session, Study, User
+from sessions.models import Annotation, Participant, Session, Study, User
+from sessions.review import against_band, expert_band
 
 ATTENTION_AFTER_TRIALS = 5
 """A trainee not yet proficient after this many practice sessions needs a supervisor's look."""
@@ -217,13 +218,11 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
             "study": {"id": participant.study.id, "name": participant.study.name},
             "files": [{"name": f.name, "bytes": f.bytes, "sha256": f.sha256} for f in row.files],
         }
-        values = dict(
-            orm.execute(
-                select(MetricResult.metric, MetricResult.value).where(
-                    MetricResult.session_id == row.id, MetricResult.registry_version == REGISTRY_VERSION
-                )
-            ).all()
-        )
+        values = {
+            m.metric: m.value
+            for m in sorted(row.metrics, key=lambda m: m.id)
+            if m.registry_version == REGISTRY_VERSION
+        }
         detail["annotations"] = [
             {
                 "time_s": a.time_s,
@@ -233,46 +232,11 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
             for a in orm.scalars(select(Annotation).where(Annotation.session_id == row.id))
         ]
         study_id, task_id = participant.study_id, row.task_id
-    band_rows = analyses.derived(
-        study_id, f"expert-band-{task_id}", lambda: _expert_band(catalog, study_id, task_id)
+    band = analyses.derived(
+        study_id, f"expert-band-{task_id}", lambda: expert_band(catalog, study_id, task_id)
     )
-    detail["metrics"] = [
-        {
-            "metric": name,
-            "unit": REGISTRY[name].unit if name in REGISTRY else "",
-            "better": REGISTRY[name].better if name in REGISTRY else "",
-            "value": value,
-            **band_rows.get(name, {"expert_q1": None, "expert_median": None, "expert_q3": None}),
-        }
-        for name, value in values.items()
-    ]
+    detail["metrics"] = against_band(values, band)
     return detail
-
-
-def _expert_band(catalog: Catalog, study_id: int, task_id: int) -> dict[str, dict]:
-    """Per metric, the quartiles of the study's expert sessions on the same task."""
-    with catalog.session() as orm:
-        rows = orm.execute(
-            select(MetricResult.metric, MetricResult.value)
-            .join(Session, MetricResult.session_id == Session.id)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(
-                Participant.study_id == study_id,
-                Participant.group_label == "expert",
-                Session.task_id == task_id,
-                Session.status.in_(("complete", "recovered")),
-                MetricResult.registry_version == REGISTRY_VERSION,
-                MetricResult.value.is_not(None),
-            )
-        ).all()
-    if not rows:
-        return {}
-    frame = pd.DataFrame(rows, columns=["metric", "value"])
-    quartiles = frame.groupby("metric")["value"].quantile([0.25, 0.5, 0.75]).unstack()
-    return {
-        name: {"expert_q1": float(q[0.25]), "expert_median": float(q[0.5]), "expert_q3": float(q[0.75])}
-        for name, q in quartiles.iterrows()
-    }
 
 
 def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
@@ -303,6 +267,8 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         "practice_sessions": len(practice),
         "table": records(table),
         "notes": list(analysis.validity.notes) + list(analysis.notes),
+        "composite": composite_summary(analysis.validity.composite),
+        "skilled_group": settings.skilled_group,
         "synthetic": analysis.synthetic,
         "boxes": boxes,
         "roc": [c for c in (roc_points(medians, m, skilled) for m in metrics) if c is not None],

@@ -89,6 +89,22 @@ def assess_proficiency(table: pd.DataFrame, benchmarks: pd.DataFrame) -> pd.Data
     return result
 
 
+def band_position(value: float, low: float, high: float, better: str) -> str:
+    """Where ``value`` lies against a reference band [low, high] (e.g. the experts' quartiles), by direction.
+
+    "within" inside the band (ends included); outside it, "better" on the side the metric's
+    direction favours (``better`` is "lower" or "higher") and "worse" on the other.
+    """
+    if better not in ("lower", "higher"):
+        raise MetricsError(f"better must be 'lower' or 'higher'; got {better!r}")
+    if low > high:
+        raise MetricsError(f"band runs from {low} to {high}: its low end is above its high end")
+    if low <= value <= high:
+        return "within"
+    above = value > high
+    return "better" if above == (better == "higher") else "worse"
+
+
 def trials_to_proficiency(passed: Sequence[bool], consecutive: int = 2) -> int | None:
     """1-based trial at which the ``consecutive``-th pass in a row happened, or None."""
     if consecutive < 1:

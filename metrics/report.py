@@ -181,14 +181,74 @@ def summary_table(analysis: StudyAnalysis) -> pd.DataFrame:
     columns = [
         "metric",
         "unit",
+        "better",
         f"median_{groups[0]}",
         f"median_{groups[1]}",
         "auc",
         "auc_ci_low",
         "auc_ci_high",
+        "cliffs_delta",
+        "p_value",
     ]
-    columns += ["cliffs_delta", "p_value", "p_holm", "discriminates", "direction", "as_expected"]
+    if analysis.validity.level == "trial":
+        columns += ["p_cluster"]
+    columns += ["p_holm", "discriminates", "direction", "as_expected"]
     return table[columns]
+
+
+def auc_with_interval(auc: float, low: float, high: float) -> str:
+    """ "0.83 (0.61-0.95)", or the AUC with the reason it has no interval."""
+    if math.isnan(auc):
+        return ""
+    if math.isnan(low):
+        return f"{auc:.2f} (too few participants for an interval)"
+    return f"{auc:.2f} ({low:.2f}-{high:.2f})"
+
+
+def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
+    """The headline table for a terminal: direction, medians, oriented AUC with its interval, Holm p, flag."""
+    groups = analysis.settings.groups
+    table = summary_table(analysis)
+    return pd.DataFrame(
+        {
+            "metric": table["metric"],
+            "unit": table["unit"],
+            "better": table["better"],
+            f"median {groups[0]}": table[f"median_{groups[0]}"],
+            f"median {groups[1]}": table[f"median_{groups[1]}"],
+            f"AUC, {analysis.settings.skilled_group} better (95 % CI)": [
+                auc_with_interval(*v) for v in table[["auc", "auc_ci_low", "auc_ci_high"]].to_numpy()
+            ],
+            "Holm p": table["p_holm"],
+            "discriminates": table["discriminates"],
+        }
+    )
+
+
+def composite_summary(composite) -> str:
+    """The composite's out-of-fold AUC, its interval (or why there is none) and what chance alone gives.
+
+    One sentence, the same in the report, the CLI and the dashboard.
+    """
+    if composite is None:
+        return "Too few participants for leave-one-participant-out validation of the composite score."
+    if math.isnan(composite.auc):
+        return "The composite score could not be validated: a fold lacked one of the groups."
+    low, high = composite.auc_ci
+    interval = (
+        "too few participants for an interval" if math.isnan(low) else f"95 % CI {low:.2f} to {high:.2f}"
+    )
+    text = (
+        f"Out-of-fold AUC {composite.auc:.2f} ({interval}) over {composite.folds} participants, each scored "
+        "by a model fitted without them"
+    )
+    if composite.permutations:
+        text += (
+            f"; with the group labels permuted across participants the same procedure reaches "
+            f"{composite.null_p95:.2f} (95th percentile of {composite.permutations} relabellings), "
+            f"p = {composite.null_p:.3g}"
+        )
+    return text + "."
 
 
 TEMPLATE = """<!doctype html>
@@ -243,12 +303,18 @@ def _method_lines(analysis: StudyAnalysis) -> list[str]:
         + (
             " (one value per participant: the median of their practice sessions)."
             if validity.level == "participant"
-            else "."
+            else " (every session a row): a metric discriminates only when the test with group labels "
+            "permuted across participants (p_cluster, Holm-corrected) agrees."
         ),
-        "Tests: two-sided Mann-Whitney U (exact permutation p up to 60 values, else normal approximation), "
-        f"Holm correction across {len(validity.table)} metrics at alpha = {s.alpha}; "
-        "effect size Cliff's delta; "
-        f"AUC = P({s.groups[0]} > {s.groups[1]}) with a {s.n_boot}-resample bootstrap 95 % interval.",
+        "Tests: two-sided Mann-Whitney U (exact permutation p up to 60 values, else normal approximation); "
+        "with ties, the exact p is P(|W - E W| >= |w - E W|) over the permutation distribution of the "
+        f"midrank sum; Holm correction across {len(validity.table)} metrics at alpha = {s.alpha}; "
+        "effect size Cliff's delta (first group minus second).",
+        f"AUC = P(a {s.skilled_group} participant does better than the other group's), by each metric's "
+        "direction (1 = perfect separation the expected way, 0.5 = none); the raw P(first > second) is "
+        "'auc_raw' in construct_validity.csv. 95 % interval: Newcombe's score method (2006, method 5) "
+        "with a continuity correction, counted in participants; none is printed where the design cannot "
+        "reach p < alpha.",
         "Composite: weighted mean of z-scores, weights = rank-biserial correlation with the skilled group, "
         "all fitted without the left-out participant (leave-one-participant-out).",
         f"Benchmarks: rule '{s.benchmark_rule}' over {s.skilled_group} participants' medians; a session "
@@ -287,15 +353,10 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     roc = _roc(analysis, figures)
     learning = _learning_curves(analysis, figures)
     composite = analysis.validity.composite
+    composite_text = composite_summary(composite)
     if composite is None:
-        composite_text = "Too few participants for leave-one-participant-out validation."
         weights = pd.DataFrame(columns=["metric", "weight"])
     else:
-        low, high = composite.auc_ci
-        composite_text = (
-            f"Out-of-fold AUC {composite.auc:.3f} (95 % CI {low:.3f} to {high:.3f}) over {composite.folds} "
-            "participants, each scored by a model fitted without them."
-        )
         weights = composite.weights.rename_axis("metric").reset_index()
         weights = weights[weights["weight"].abs() > 0].sort_values("weight", key=np.abs, ascending=False)
     notes = [*analysis.validity.notes[1:], *analysis.notes]

@@ -3,9 +3,12 @@
 Trials cluster within participants: by default each participant contributes one
 value per metric (the median of their sessions) and every test, effect size and
 interval is at the participant level. ``level="trial"`` uses every session as a
-row, with the AUC's interval from a participant-level (cluster) bootstrap; the p
-value then treats sessions as independent, which overstates the evidence, and the
-result says so.
+row; its row-level p treats sessions as independent and overstates the evidence,
+so a metric is flagged only when a test that permutes the group labels across
+participants (``p_cluster``) agrees, and AUC intervals count participants.
+
+``auc`` is oriented: P(a skilled participant does better than an unskilled one),
+by the metric's registry direction; ``auc_raw`` is P(first group > second).
 """
 
 from __future__ import annotations
@@ -19,7 +22,15 @@ import pandas as pd
 
 from metrics.composite import CompositeValidation, validate_composite
 from metrics.registry import REGISTRY
-from metrics.statistics import bootstrap_auc, holm, mann_whitney, minimum_exact_p
+from metrics.statistics import (
+    auc_interval,
+    cluster_permutation_test,
+    holm,
+    interval_is_informative,
+    mann_whitney,
+    minimum_exact_p,
+    oriented_auc,
+)
 from metrics.streams import MetricsError
 
 LEVELS = ("participant", "trial")
@@ -41,9 +52,10 @@ class ConstructValidityResult:
     notes: list[str] = field(default_factory=list)
 
     def discriminating(self) -> list[str]:
-        """Metrics whose Holm-corrected p is below alpha, in the expected direction where one is known."""
+        """Metrics flagged as discriminating (Holm p below alpha, and at trial level the participant-level
+        permutation test agreeing), in the expected direction where one is known."""
         table = self.table
-        chosen = table[(table["p_holm"] < self.alpha) & table["as_expected"].fillna(True).astype(bool)]
+        chosen = table[table["discriminates"] & table["as_expected"].fillna(True).astype(bool)]
         return chosen["metric"].tolist()
 
 
@@ -122,60 +134,56 @@ def construct_validity(
     n_participants = {g: int(rows_in.loc[rows_in[group_col] == g, cluster_col].nunique()) for g in groups}
     n_sessions = {g: int((rows_in[group_col] == g).sum()) for g in groups}
 
+    participants_of = {
+        g: data.loc[data[group_col] == g].groupby(cluster_col)[list(names)].count() for g in groups
+    }
     records = []
     for name in names:
         values = data[name].to_numpy(dtype=np.float64)
         x, y = values[first], values[~first]
         x, y = x[~np.isnan(x)], y[~np.isnan(y)]
-        record = {"metric": name, "unit": REGISTRY[name].unit if name in REGISTRY else ""}
+        better = REGISTRY[name].better if name in REGISTRY else ""
+        record = {"metric": name, "unit": REGISTRY[name].unit if name in REGISTRY else "", "better": better}
         for label, part in ((groups[0], x), (groups[1], y)):
             record[f"n_{label}"] = int(part.size)
             quartiles = np.quantile(part, [0.25, 0.5, 0.75]) if part.size else [math.nan] * 3
             record[f"median_{label}"] = float(quartiles[1])
             record[f"q1_{label}"] = float(quartiles[0])
             record[f"q3_{label}"] = float(quartiles[2])
-        if x.size and y.size:
-            test = mann_whitney(x, y)
-            low, high = bootstrap_auc(
-                values, first, clusters if level == "trial" else None, n_boot, seed=seed
-            )
-            record.update(
-                u=test.u,
-                p_value=test.p_value,
-                p_method=test.method,
-                cliffs_delta=test.cliffs_delta,
-                auc=test.auc,
-                auc_ci_low=low,
-                auc_ci_high=high,
-            )
-            if test.auc == 0.5:
-                direction = "no difference"
-            else:
-                direction = f"{'higher' if test.auc > 0.5 else 'lower'} in {groups[0]}"
-            record["direction"] = direction
-            if name in REGISTRY and test.auc != 0.5:
-                skilled_higher = (test.auc > 0.5) == (skilled_group == groups[0])
-                record["as_expected"] = skilled_higher == (REGISTRY[name].better == "higher")
-            else:
-                record["as_expected"] = None
+        # participants with a value of this metric, per group: the independent units
+        units = [int((participants_of[g][name] > 0).sum()) for g in groups]
+        skilled_first = skilled_group == groups[0]
+        record.update(_comparison(values, first, clusters, x, y, units, level, better, skilled_first))
+        if record["auc"] == record["auc"] and record["auc_raw"] != 0.5:
+            record["direction"] = f"{'higher' if record['auc_raw'] > 0.5 else 'lower'} in {groups[0]}"
+        elif record["auc"] == record["auc"]:
+            record["direction"] = "no difference"
         else:
-            record.update(u=math.nan, p_value=math.nan, p_method="", cliffs_delta=math.nan, auc=math.nan)
-            record.update(
-                auc_ci_low=math.nan, auc_ci_high=math.nan, direction="not computed", as_expected=None
-            )
+            record["direction"] = "not computed"
+        undecided = not better or record["auc"] != record["auc"] or record["auc"] == 0.5
+        record["as_expected"] = None if undecided else record["auc"] > 0.5
         records.append(record)
     result_table = pd.DataFrame(records)
     if result_table.empty:
         raise MetricsError("no metric column has values for both groups")
     result_table["p_holm"] = holm(result_table["p_value"].to_numpy())
-    result_table["discriminates"] = result_table["p_holm"] < alpha
-    order = [c for c in result_table.columns if c not in ("p_holm", "discriminates")]
-    position = order.index("p_method") + 1
-    order[position:position] = ["p_holm", "discriminates"]
+    result_table["p_cluster_holm"] = holm(result_table["p_cluster"].to_numpy())
+    # a flag needs the participant-aware test to agree: never pseudo-replicated rows alone
+    flagged = (result_table["p_holm"] < alpha) & (result_table["p_cluster_holm"] < alpha)
+    result_table["discriminates"] = flagged
+    order = [c for c in result_table.columns if c not in ("p_holm", "p_cluster_holm", "discriminates")]
+    position = order.index("p_cluster") + 1
+    order[position:position] = ["p_holm", "p_cluster_holm", "discriminates"]
     result_table = result_table[order]
 
     notes = [_level_note(level, n_participants, n_sessions)]
-    notes += _power_notes(data, first, names, alpha, level)
+    notes += _power_notes(n_participants[groups[0]], n_participants[groups[1]], len(names), alpha)
+    n_x, n_y = n_participants[groups[0]], n_participants[groups[1]]
+    if not interval_is_informative(n_x, n_y, alpha):
+        notes.append(
+            f"No AUC intervals: with {n_x} and {n_y} participants no result could reach p < {alpha}, "
+            "so an interval would only restate that the design is too small."
+        )
     composite = None
     if data[cluster_col].nunique() >= 3:
         composite = validate_composite(data, names, group_col, skilled_group, cluster_col, n_boot, seed)
@@ -205,22 +213,58 @@ def _level_note(level: str, n_participants: dict[str, int], n_sessions: dict[str
     )
 
 
-def _power_notes(
-    data: pd.DataFrame, first: np.ndarray, names: list[str], alpha: float, level: str
-) -> list[str]:
-    n_x, n_y = int(first.sum()), int((~first).sum())
-    notes = []
+def _comparison(values, first, clusters, x, y, units, level, better, skilled_first) -> dict:
+    """Test, effect sizes, oriented AUC and its interval for one metric."""
+    if not (x.size and y.size):
+        nan = math.nan
+        return dict(
+            u=nan,
+            p_value=nan,
+            p_method="",
+            p_cluster=nan,
+            cliffs_delta=nan,
+            auc=nan,
+            auc_raw=nan,
+            auc_ci_low=nan,
+            auc_ci_high=nan,
+        )
+    test = mann_whitney(x, y)
+    auc = oriented_auc(test.auc, skilled_first, better != "lower")
+    if interval_is_informative(*units):
+        # the independent units are participants, also when rows are trials
+        low, high = auc_interval(auc, *units)
+    else:
+        low, high = math.nan, math.nan
+    if level == "trial":
+        p_cluster = cluster_permutation_test(values, first, clusters).p_value
+    else:
+        p_cluster = test.p_value  # one row per participant: the rank test is the permutation test
+    return dict(
+        u=test.u,
+        p_value=test.p_value,
+        p_method=test.method,
+        p_cluster=p_cluster,
+        cliffs_delta=test.cliffs_delta,
+        auc=auc,
+        auc_raw=test.auc,
+        auc_ci_low=low,
+        auc_ci_high=high,
+    )
+
+
+def _power_notes(n_x: int, n_y: int, m: int, alpha: float) -> list[str]:
+    """Power as the design allows it: counted in participants, whatever the level of the rows."""
     floor = minimum_exact_p(n_x, n_y)
-    m = len(names)
+    effects = "Only large effects can be detected; read effect sizes and intervals."
+    smallest = (
+        f"With {n_x} and {n_y} participants the smallest two-sided p any metric can reach is {floor:.3g} "
+        f"(before Holm correction over {m} metrics)."
+    )
     if floor * m > alpha:
-        notes.append(
-            f"Little power: with {n_x} and {n_y} {'participants' if level == 'participant' else 'rows'} the "
-            f"smallest attainable p is {floor:.3g}, so after Holm correction over {m} metrics no metric can "
-            f"reach p < {alpha}; absence of significance here does not show the metrics fail to discriminate."
-        )
-    elif min(n_x, n_y) < 8:
-        notes.append(
-            f"Small groups ({n_x} vs {n_y}): only large effects can be detected; read effect sizes and AUC "
-            "intervals, not just p-values."
-        )
-    return notes
+        return [
+            f"Little power. {smallest} No metric can reach p < {alpha} after correction; absence of "
+            "significance here does not show the metrics fail to discriminate."
+        ]
+    if min(n_x, n_y) < 8:
+        return [f"Small groups. {smallest} {effects}"]
+    return [smallest]

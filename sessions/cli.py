@@ -264,6 +264,7 @@ def demo(small: bool, as_json: bool) -> None:
     report (HTML, Markdown, CSV, figures). Re-running replaces the previous demo
     study; participants are labelled synthetic everywhere.
     """
+    from metrics.report import compact_summary, composite_summary, summary_table
     from sessions.demo import DEMO_STUDY, DemoSize, run_demo
 
     catalog, home = _catalog()
@@ -276,18 +277,7 @@ def demo(small: bool, as_json: bool) -> None:
     analysis = result.analysis
     validity = analysis.validity
     groups = analysis.settings.groups
-    summary = validity.table[
-        [
-            "metric",
-            "unit",
-            f"median_{groups[0]}",
-            f"median_{groups[1]}",
-            "auc",
-            "cliffs_delta",
-            "p_holm",
-            "discriminates",
-        ]
-    ]
+    summary = compact_summary(analysis)
     trainees = analysis.trainees[["participant_id", "passes", "proficient", "trials_to_proficiency"]].copy()
     if "retention_passed" in analysis.trainees:
         trainees["retention_passed"] = analysis.trainees["retention_passed"]
@@ -297,10 +287,11 @@ def demo(small: bool, as_json: bool) -> None:
                 "sessions": result.sessions,
                 "seconds": result.seconds,
                 "report": str(result.report),
-                "metrics": summary.to_dict(orient="records"),
+                "metrics": summary_table(analysis).to_dict(orient="records"),
                 "trainees": trainees.to_dict(orient="records"),
                 "notes": validity.notes + analysis.notes,
                 "composite_auc": None if validity.composite is None else validity.composite.auc,
+                "composite": composite_summary(validity.composite),
                 "synthetic": True,
             }
         )
@@ -311,12 +302,7 @@ def demo(small: bool, as_json: bool) -> None:
     _print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)")
     for note in validity.notes + analysis.notes:
         click.echo(f"note: {note}")
-    if validity.composite is not None:
-        low, high = validity.composite.auc_ci
-        click.echo(
-            f"composite score, leave-one-participant-out AUC {validity.composite.auc:.2f} "
-            f"({low:.2f}-{high:.2f})"
-        )
+    click.echo(f"composite score: {composite_summary(validity.composite)}")
     click.echo(f"{result.sessions} sessions in {result.seconds:.0f} s; full report: {result.report}")
     first_trainee = analysis.sessions.loc[analysis.sessions["label"] == "trainee", "session_id"]
     if len(first_trainee):
@@ -594,7 +580,11 @@ def sessions_show(uid: str, as_json: bool) -> None:
             "error": row.error,
             "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
         }
-    data["metrics"] = _session_metrics(catalog, uid)
+    from sessions.review import session_against_experts
+
+    rows = session_against_experts(catalog, uid)
+    data["metrics"] = {r["metric"]: r["value"] for r in rows}
+    data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
     if as_json:
         _json(data)
         return
@@ -603,8 +593,14 @@ def sessions_show(uid: str, as_json: bool) -> None:
             for f in value:
                 click.echo(f"  file {f['name']:18s} {f['bytes']:>10d} B  sha256 {f['sha256']}")
         elif key == "metrics":
-            for name, metric in value.items():
-                click.echo(f"  {name:28s} {_cell(metric)}")
+            click.echo(
+                "metrics      (against the experts' quartiles of this task, by each metric's direction)"
+            )
+            for r in rows:
+                versus = r["versus_experts"] or ""
+                click.echo(f"  {r['metric']:28s} {_cell(r['value']):>12s} {r['unit']:8s} {versus}")
+        elif key == "versus_experts":
+            continue
         else:
             click.echo(f"{key:12s} {value}")
 

@@ -12,7 +12,7 @@ from metrics.replay.export import ReplaySettings, export_replay
 from sessions.accounts import create_user, link_participant
 from sessions.catalog import Catalog
 from sessions.demo import DEMO_STUDY, DemoSize, run_demo
-from sessions.models import Participant, Session, Study
+from sessions.models import MetricResult, Participant, Session, Study
 from sessions.replaying import replay_inputs
 from tests.dashboard.conftest import running_server
 from tests.e2e.browser import chromium
@@ -39,7 +39,7 @@ def demo_site(tmp_path_factory):
             select(Session.uid).where(Session.participant_id == people["T01"].id).order_by(Session.trial)
         )
         other = orm.scalar(select(Session.uid).where(Session.participant_id == people["T02"].id))
-        ids = {"study": study.id, "T01": people["T01"].id}
+        ids = {"study": study.id, "T01": people["T01"].id, "url": catalog.url}
     recorded, tissue, experts = replay_inputs(catalog, home, own, versus_group="experts")
     export_replay(
         recorded, tissue, home / "replays" / f"{own}-vs.mp4", experts, ReplaySettings(size=(640, 360))
@@ -120,6 +120,41 @@ def test_supervisor_reviews_a_session(demo_site):
         page.goto(f"{base}/")
         assert page.url.startswith(f"{base}/login")
         assert failures == []
+
+
+@pytest.mark.slow
+def test_beating_the_experts_on_a_lower_is_better_metric_reads_better(demo_site):
+    """Seen: a trainee with a shorter task time than every expert was shown as a red "outside"."""
+    base, ids, own, _ = demo_site
+    catalog = Catalog(ids["url"])
+    with catalog.session() as orm:
+        expert_times = orm.scalars(
+            select(MetricResult.value)
+            .join(Session, MetricResult.session_id == Session.id)
+            .join(Participant, Session.participant_id == Participant.id)
+            .where(Participant.group_label == "expert", MetricResult.metric == "task_time")
+        ).all()
+        mine = orm.scalar(
+            select(MetricResult)
+            .join(Session, MetricResult.session_id == Session.id)
+            .where(Session.uid == own, MetricResult.metric == "task_time")
+        )
+        mine.value = 0.5 * min(expert_times)
+    catalog.close()
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
+        _sign_in(page, base, "supervisor")
+        page.goto(f"{base}/sessions/{own}")
+        row = page.locator("#metrics tbody tr", has_text="task_time").first
+        verdict = row.locator("td").last.locator("span")
+        assert verdict.inner_text() == "better"
+        colour = verdict.evaluate("(e) => getComputedStyle(e).color")
+        failure = page.evaluate(
+            "() => { const s = document.createElement('span'); s.className = 'worse';"
+            " document.body.append(s); const c = getComputedStyle(s).color; s.remove(); return c; }"
+        )
+        assert colour != failure and colour == "rgb(26, 127, 55)"
+        assert page.locator("#metrics .fail").count() == 0  # nothing reads as a bare "outside" any more
 
 
 @pytest.mark.slow

@@ -46,7 +46,8 @@ def test_participant_level_is_the_default_and_uses_participant_medians():
     assert row["median_expert"] == pytest.approx(np.median(x))
     assert row["p_value"] == pytest.approx(stats.mannwhitneyu(x, y, method="exact").pvalue)
     assert row["p_method"] == "exact"
-    assert row["auc"] == pytest.approx(0.0)  # every expert faster
+    assert row["auc"] == pytest.approx(1.0)  # every expert faster: oriented, P(expert does better)
+    assert row["auc_raw"] == pytest.approx(0.0)  # P(expert time > trainee time)
     assert row["direction"] == "lower in expert" and row["as_expected"]
     assert set(result.discriminating()) == {"task_time", "spectral_arc_length"}
     assert "participant level" in result.notes[0]
