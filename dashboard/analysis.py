@@ -1,9 +1,11 @@
 """Study analyses for the dashboard, computed once per catalog state and kept in memory.
 
 A study's analysis (construct validity, benchmarks, proficiency, learning curves) is
-the same computation as `vascsim report`. It depends only on the study's scored
-sessions, so it is cached under a fingerprint of the catalog's sessions, metric
-results and participants: any new score, session or relabelling recomputes it.
+the same computation as `vascsim report`: :func:`sessions.analysis.analyse_catalog_study`
+from the study's declared analysis. It depends only on the study's scored
+sessions and its declaration, so it is cached under a fingerprint of the catalog's sessions,
+metric results, participants and declarations: any new score, session, relabelling or
+declared version recomputes it.
 """
 
 from __future__ import annotations
@@ -19,11 +21,10 @@ import pandas as pd
 from sqlalchemy import func, select
 
 from metrics.registry import REGISTRY_VERSION
-from metrics.study import StudyAnalysis, StudySettings, analyse_study, oriented
+from metrics.study import StudyAnalysis, oriented
+from sessions.analysis import analyse_catalog_study
 from sessions.catalog import Catalog, CatalogError
-from sessions.demo import BENCHMARK_RULE, PRIMARY_METRICS
-from sessions.models import MetricResult, Participant, Session, Study
-from sessions.runner import study_table
+from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
 
 CACHED_STUDIES = 16
 
@@ -32,20 +33,6 @@ CACHED_STUDIES = 16
 class CachedAnalysis:
     analysis: StudyAnalysis
     uid_of: dict[str, int]  # session uid -> row of analysis.sessions
-
-
-def study_settings(table: pd.DataFrame) -> StudySettings:
-    """The dashboard's analysis: experts against the other group, the demo's declared primary metrics
-    when the study has them, benchmarks at the level three in four experts reach."""
-    labels = [label for label in pd.unique(table["label"]) if label != "expert"]
-    other = "trainee" if "trainee" in labels or not labels else sorted(labels)[0]
-    primary = tuple(m for m in PRIMARY_METRICS if m in table.columns and table[m].notna().any())
-    return StudySettings(
-        groups=("expert", other),
-        skilled_group="expert",
-        metrics=primary if len(primary) == len(PRIMARY_METRICS) else None,
-        benchmark_rule=BENCHMARK_RULE,
-    )
 
 
 class AnalysisCache:
@@ -71,7 +58,10 @@ class AnalysisCache:
                     Participant.study_id == study_id
                 )
             ).one()
-        return (*sessions, *results, *participants, REGISTRY_VERSION)
+            declared = orm.scalar(
+                select(func.max(AnalysisDeclaration.id)).where(AnalysisDeclaration.study_id == study_id)
+            )
+        return (*sessions, *results, *participants, declared, REGISTRY_VERSION)
 
     def get(self, study_id: int) -> CachedAnalysis:
         with self._lock:
@@ -109,8 +99,7 @@ class AnalysisCache:
             if study is None:
                 raise CatalogError(f"no study {study_id}")
             name = study.name
-        table = study_table(self.catalog, name)
-        analysis = analyse_study(table, study_settings(table))
+        analysis, _ = analyse_catalog_study(self.catalog, name)
         uid_of = {uid: k for k, uid in enumerate(analysis.sessions["session_id"])}
         return CachedAnalysis(analysis, uid_of)
 

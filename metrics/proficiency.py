@@ -51,7 +51,8 @@ def proficiency_benchmarks(
     cluster_col: str = "participant_id",
     rule: str = "mean",
 ) -> pd.DataFrame:
-    """One row per metric: ``metric``, ``benchmark``, ``better``, ``rule``, ``experts`` (count)."""
+    """One row per metric: ``metric``, ``benchmark``, ``better``, ``pass_if`` (e.g. "<= 3.04 deg"),
+    ``rule``, ``experts`` (count)."""
     experts = table[table[group_col] == expert_group]
     if experts.empty:
         raise MetricsError(f"no sessions with {group_col} == {expert_group!r} to set benchmarks from")
@@ -64,9 +65,25 @@ def proficiency_benchmarks(
         values = per_expert[name].dropna().to_numpy()
         benchmark = _rule_value(values, rule, better) if values.size else math.nan
         rows.append(
-            {"metric": name, "benchmark": benchmark, "better": better, "rule": rule, "experts": values.size}
+            {
+                "metric": name,
+                "benchmark": benchmark,
+                "better": better,
+                "pass_if": pass_condition(benchmark, better, REGISTRY[name].unit),
+                "rule": rule,
+                "experts": values.size,
+            }
         )
     return pd.DataFrame(rows)
+
+
+def pass_condition(benchmark: float, better: str, unit: str) -> str:
+    """What passing means, by direction: "<= 3.04 deg" for lower-is-better, ">= 0.8" for higher."""
+    if math.isnan(benchmark):
+        return "no benchmark (no expert values)"
+    sign = "<=" if better == "lower" else ">="
+    shown = "" if unit in ("", "1") else f" {unit}"
+    return f"{sign} {benchmark:.3g}{shown}"
 
 
 def assess_proficiency(table: pd.DataFrame, benchmarks: pd.DataFrame) -> pd.DataFrame:

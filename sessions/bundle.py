@@ -28,6 +28,7 @@ from sqlalchemy import select
 
 from sessions.catalog import Catalog, CatalogError
 from sessions.models import (
+    AnalysisDeclaration,
     Annotation,
     MetricResult,
     Participant,
@@ -107,6 +108,17 @@ def export_study(catalog: Catalog, study_name: str, out: str | Path, progress=No
                 "created_at": _when(study.created_at),
             },
             "participants": [_row(p, _PARTICIPANT_FIELDS) for p in participants],
+            # the study's declared analysis, every version, so an import analyses it the same way
+            "analyses": [
+                {
+                    "version": d.version,
+                    "settings": d.settings,
+                    "author": d.author,
+                    "note": d.note,
+                    "created_at": _when(d.created_at),
+                }
+                for d in study.analyses
+            ],
             "tasks": {},
             "sessions": [],
         }
@@ -256,6 +268,7 @@ def import_bundle(catalog: Catalog, home: Path, bundle: str | Path, progress=Non
     Refused, with nothing changed, when the bundle is corrupted, when a study of that name
     exists, or when any of its session ids is already catalogued."""
     manifest = verify_bundle(bundle, progress)
+    _check_analyses(manifest.get("analyses", []), bundle)
     name = manifest["study"]["name"]
     uids = [entry["uid"] for entry in manifest["sessions"]]
     with catalog.session() as orm:
@@ -285,6 +298,41 @@ def import_bundle(catalog: Catalog, home: Path, bundle: str | Path, progress=Non
     return {"study": name, "sessions": len(uids), "participants": len(manifest["participants"])}
 
 
+def _check_analyses(entries: Any, bundle: str | Path) -> None:
+    """Every declared analysis version of a bundle, checked as a declaration made here would be."""
+    from sessions.analysis import settings_from_json
+
+    if not isinstance(entries, list):
+        raise CatalogError(f"bundle {bundle}: 'analyses' must be a list of declared versions")
+    versions = []
+    for k, entry in enumerate(entries):
+        what = f"bundle {bundle}: analyses[{k}]"
+        if not isinstance(entry, dict) or set(entry) != {
+            "version",
+            "settings",
+            "author",
+            "note",
+            "created_at",
+        }:
+            raise CatalogError(f"{what} must hold exactly version, settings, author, note and created_at")
+        if (
+            not isinstance(entry["version"], int)
+            or isinstance(entry["version"], bool)
+            or entry["version"] < 1
+        ):
+            raise CatalogError(f"{what}: version must be a whole number >= 1; got {entry['version']!r}")
+        if not isinstance(entry["author"], str) or not isinstance(entry["note"], str):
+            raise CatalogError(f"{what}: author and note must be texts")
+        try:
+            datetime.fromisoformat(entry["created_at"])
+        except (TypeError, ValueError):
+            raise CatalogError(f"{what}: created_at {entry['created_at']!r} is not an ISO time") from None
+        settings_from_json(entry["settings"], what)
+        versions.append(entry["version"])
+    if versions != list(range(1, len(versions) + 1)):
+        raise CatalogError(f"bundle {bundle}: analysis versions must run 1, 2, ...; got {versions}")
+
+
 def _extract(bundle: str | Path, manifest: dict[str, Any], staging: Path) -> None:
     with zipfile.ZipFile(bundle) as archive:
         for entry in manifest["sessions"]:
@@ -305,6 +353,10 @@ def _add_rows(catalog: Catalog, orm, manifest: dict[str, Any], home: Path) -> No
     )
     orm.add(study)
     orm.flush()
+    for entry in manifest.get("analyses", []):
+        orm.add(
+            AnalysisDeclaration(study_id=study.id, **dict(entry, created_at=_parse_when(entry["created_at"])))
+        )
     tasks: dict[str, Task] = {}
     for task_name, task_info in manifest["tasks"].items():
         task = catalog.task(orm, task_name, task_info["scenario"], task_info["parameters"])

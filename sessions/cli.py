@@ -375,6 +375,62 @@ def studies_add(name: str, description: str) -> None:
     click.echo(f"study {name} created")
 
 
+@studies.command("analysis")
+@click.argument("study")
+@click.option("--groups", default=None, help="The two groups compared, skilled first (a,b).")
+@click.option("--level", type=click.Choice(["participant", "trial"]), default=None, help="Analysis level.")
+@click.option("--metrics", "metric_names", default=None, help="Comma-separated primary metrics.")
+@click.option("--rule", default=None, help="Benchmark rule: mean, median or percentile:Q.")
+@click.option(
+    "--consecutive", type=int, default=None, help="Consecutive passes that make a trainee proficient."
+)
+@click.option("--by", "author", default=None, help="Who declares this version (default: the login name).")
+@click.option("--note", default="", help="Why this version.")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def studies_analysis(study, groups, level, metric_names, rule, consecutive, author, note, as_json) -> None:
+    """Show a study's declared analysis and its versions, or declare a new version.
+
+    With no option it prints what every report, the dashboard and exports use. Any option
+    declares a new version from the current one with that choice changed (recorded with who,
+    when and --note); earlier versions are kept.
+    """
+    import dataclasses
+    import getpass
+
+    from sessions.analysis import analysis_history, declare_analysis, declared_settings, settings_to_json
+
+    catalog, _ = _catalog()
+    changes = _analysis_options(groups, level, metric_names, rule, consecutive)
+    if changes:
+        current, _, _ = declared_settings(catalog, study)
+        version = declare_analysis(
+            catalog, study, dataclasses.replace(current, **changes), author or getpass.getuser(), note
+        )
+        click.echo(f"study {study!r}: analysis version {version} declared")
+    settings, version, who = declared_settings(catalog, study)
+    history = analysis_history(catalog, study)
+    if as_json:
+        _json(
+            {"study": study, "version": version, "settings": settings_to_json(settings), "history": history}
+        )
+        return
+    click.echo(
+        f"study {study!r}: "
+        + (f"declared analysis version {version} (by {who})" if version else "no analysis declared; defaults")
+    )
+    for name, value in settings_to_json(settings).items():
+        if value is None:
+            value = (
+                "the discriminating metrics" if name == "benchmark_metrics" else "every metric with values"
+            )
+        elif isinstance(value, list):
+            value = ", ".join(value)
+        click.echo(f"  {name:20s} {value}")
+    for entry in history:
+        click.echo(f"  v{entry['version']} {entry['created_at']} {entry['author']}: {entry['note']}")
+
+
 @main.group()
 def participants() -> None:
     """Pseudonymous participants of a study."""
@@ -683,51 +739,60 @@ def score(uids, study, as_json) -> None:
     default=None,
     help="Folder (default VASCSIM_HOME/reports/STUDY).",
 )
+@click.option("--groups", default=None, help="Override: the two groups compared, skilled first (a,b).")
 @click.option(
-    "--groups", default="expert,trainee", show_default=True, help="The two groups compared, skilled first."
+    "--level", type=click.Choice(["participant", "trial"]), default=None, help="Override: analysis level."
 )
-@click.option(
-    "--level", type=click.Choice(["participant", "trial"]), default="participant", show_default=True
-)
-@click.option(
-    "--metrics",
-    "metric_names",
-    default=None,
-    help="Comma-separated primary metrics (default: all with values).",
-)
-@click.option(
-    "--rule", default="mean", show_default=True, help="Benchmark rule: mean, median or percentile:Q."
-)
+@click.option("--metrics", "metric_names", default=None, help="Override: comma-separated primary metrics.")
+@click.option("--rule", default=None, help="Override: benchmark rule, mean, median or percentile:Q.")
 @click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
 @user_errors
 def report(study, out, groups, level, metric_names, rule, as_json) -> None:
-    """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures)."""
+    """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures).
+
+    The analysis is the one the study declared (`vascsim studies analysis STUDY` shows it), the
+    same the dashboard and the demo use. Options override it for this report only; the report
+    says which.
+    """
     from pathlib import Path
 
     from metrics.report import write_report
-    from metrics.study import StudySettings, analyse_study
-    from sessions.catalog import CatalogError
-    from sessions.runner import study_table
+    from sessions.analysis import analyse_catalog_study
 
-    names = tuple(groups.split(","))
-    if len(names) != 2:
-        raise CatalogError(f"--groups needs two comma-separated groups, skilled first; got {groups!r}")
     catalog, home = _catalog()
-    table = study_table(catalog, study)
-    settings = StudySettings(
-        groups=names,
-        skilled_group=names[0],
-        level=level,
-        metrics=tuple(metric_names.split(",")) if metric_names else None,
-        benchmark_rule=rule,
-    )
+    overrides = _analysis_options(groups, level, metric_names, rule)
     with _stderr_console().status("analysing and writing the report..."):
-        analysis = analyse_study(table, settings)
+        analysis, source = analyse_catalog_study(catalog, study, overrides)
         page = write_report(analysis, Path(out) if out else home / "reports" / study, title=f"Study {study}")
     if as_json:
-        _json({"report": str(page), "validity": analysis.validity.table.to_dict(orient="records")})
+        _json(
+            {
+                "report": str(page),
+                "analysis_version": source.version,
+                "overridden": {k: {"declared": a, "used": b} for k, (a, b) in source.overridden.items()},
+                "validity": analysis.validity.table.to_dict(orient="records"),
+                "benchmarks": analysis.benchmarks.to_dict(orient="records"),
+                "proficiency": analysis.proficiency.to_dict(orient="records"),
+            }
+        )
         return
+    for note in analysis.notes[:2]:
+        click.echo(note)
     click.echo(f"report: {page}")
+
+
+def _analysis_options(groups, level, metric_names, rule, consecutive=None) -> dict:
+    from sessions.catalog import CatalogError
+
+    options: dict = {"level": level, "benchmark_rule": rule, "consecutive_passes": consecutive}
+    if groups is not None:
+        names = tuple(part.strip() for part in groups.split(","))
+        if len(names) != 2:
+            raise CatalogError(f"--groups needs two comma-separated groups, skilled first; got {groups!r}")
+        options["groups"], options["skilled_group"] = names, names[0]
+    if metric_names is not None:
+        options["metrics"] = tuple(part.strip() for part in metric_names.split(",") if part.strip())
+    return {k: v for k, v in options.items() if v is not None}
 
 
 def _video_size(_ctx, _param, value: str) -> tuple[int, int]:

@@ -18,10 +18,11 @@ from pathlib import Path
 from sqlalchemy import select
 
 from metrics.report import write_report
-from metrics.study import StudyAnalysis, StudySettings, analyse_study
+from metrics.study import StudyAnalysis, StudySettings
+from sessions.analysis import analyse_catalog_study, declare_analysis
 from sessions.catalog import Catalog, CatalogError
 from sessions.models import Study
-from sessions.runner import SessionPlan, run_session, study_table
+from sessions.runner import SessionPlan, run_session
 from sessions.synthetic import pass_parameters, profile_for
 
 DEMO_STUDY = "synthetic-demo"
@@ -37,6 +38,14 @@ perpendicular-entry criterion, and smoothness of the hand (the wrist should turn
 
 BENCHMARK_RULE = "percentile:75"
 """A trainee passes a metric at the level three in four experts reach (documented in docs/metrics.md)."""
+
+DEMO_ANALYSIS = StudySettings(
+    groups=("expert", "trainee"),
+    skilled_group="expert",
+    metrics=PRIMARY_METRICS,
+    benchmark_rule=BENCHMARK_RULE,
+)
+"""The demo study's analysis, stored in the catalog with the study: every front-end computes from it."""
 
 
 @dataclass(frozen=True)
@@ -108,15 +117,9 @@ def run_demo(
         run_session(catalog, home, plan, pass_parameters(skill, seed * 100_000 + index))
         if advance is not None:
             advance(f"{code} trial {trial} ({phase})")
-    table = study_table(catalog, DEMO_STUDY)
-    analysis = analyse_study(
-        table,
-        StudySettings(
-            groups=("expert", "trainee"),
-            skilled_group="expert",
-            metrics=PRIMARY_METRICS,
-            benchmark_rule=BENCHMARK_RULE,
-        ),
+    declare_analysis(
+        catalog, DEMO_STUDY, DEMO_ANALYSIS, author="vascsim demo", note="declared before the data"
     )
+    analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
     report = write_report(analysis, home / "reports" / DEMO_STUDY, title="vascsim demo study (synthetic)")
     return DemoResult(analysis, report, time.perf_counter() - start, len(plans))

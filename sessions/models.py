@@ -36,6 +36,26 @@ class Study(Base):
     participants: Mapped[list[Participant]] = relationship(
         back_populates="study", cascade="all, delete-orphan"
     )
+    analyses: Mapped[list[AnalysisDeclaration]] = relationship(
+        cascade="all, delete-orphan", passive_deletes=True, order_by="AnalysisDeclaration.version"
+    )
+
+
+class AnalysisDeclaration(Base):
+    """One version of a study's declared analysis (:class:`metrics.study.StudySettings` as JSON).
+
+    Versions are never edited: a change is a new row, so who changed what, and when, stays readable.
+    """
+
+    __tablename__ = "analysis_declarations"
+    __table_args__ = (UniqueConstraint("study_id", "version", name="uq_analysis_version"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    settings: Mapped[dict] = mapped_column(JSON)
+    author: Mapped[str] = mapped_column(String(100))
+    note: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
 class Participant(Base):

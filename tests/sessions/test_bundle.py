@@ -131,3 +131,58 @@ def test_corrupted_or_hostile_bundles_are_one_line_errors_and_change_nothing(sma
     result = CliRunner().invoke(main, ["export", "--study", "course", "-o", str(tmp_path / "again.zip")])
     assert result.exit_code == 1 and "no longer matches its catalogued SHA-256" in result.output
     assert not (tmp_path / "again.zip").exists() and not (tmp_path / "again.zip.partial").exists()
+
+
+def _rehashed(bundle: Path, out: Path, edit) -> None:
+    """A bundle whose manifest someone edited and re-checksummed: the checksum proves nothing."""
+    import hashlib
+
+    with zipfile.ZipFile(bundle) as archive:
+        manifest = json.loads(archive.read("manifest.json"))
+    edit(manifest)
+    raw = json.dumps(manifest).encode()
+
+    def change(name, data):
+        if name == "manifest.json":
+            return raw
+        return hashlib.sha256(raw).hexdigest().encode() if name == "manifest.sha256" else data
+
+    _rewrite(bundle, out, change)
+
+
+@pytest.mark.slow
+def test_the_declared_analysis_travels_with_the_bundle_and_is_checked(small_study, tmp_path, open_catalog):
+    from sessions.analysis import analysis_history, declared_settings
+    from sessions.config import database_url
+
+    declared = invoke("studies", "analysis", "course", "--rule", "median", "--by", "alice", "--note", "v1")
+    assert declared.exit_code == 0, declared.output
+    source = open_catalog(database_url(small_study))
+    bundle = tmp_path / "course.zip"
+    export_study(source, "course", bundle)
+    target = open_catalog(f"sqlite:///{tmp_path / 'other.sqlite'}")
+    for edit, message in (
+        (
+            lambda m: m["analyses"][0]["settings"].update(benchmark_rule="best"),
+            r"analyses\[0\].*benchmark rule",
+        ),
+        (lambda m: m["analyses"][0]["settings"].update(metrics=["rm -rf"]), r"unknown metric 'rm -rf'"),
+        (lambda m: m["analyses"][0].update(version=True), "version must be a whole number"),
+        (lambda m: m["analyses"][0].update(created_at=None), "is not an ISO time"),
+        (
+            lambda m: m["analyses"].append(dict(m["analyses"][0])),
+            r"versions must run 1, 2, \.\.\.; got \[1, 1\]",
+        ),
+        (lambda m: m.update(analyses={"version": 1}), "must be a list"),
+    ):
+        hostile = tmp_path / "hostile.zip"
+        _rehashed(bundle, hostile, edit)
+        with pytest.raises(CatalogError, match=message):
+            import_bundle(target, tmp_path / "other", hostile)
+        with target.session() as orm:
+            from sessions.models import Study
+
+            assert orm.query(Study).count() == 0  # refused before anything was stored
+    import_bundle(target, tmp_path / "other", bundle)
+    assert declared_settings(target, "course")[:2] == declared_settings(source, "course")[:2]
+    assert analysis_history(target, "course") == analysis_history(source, "course")

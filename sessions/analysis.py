@@ -1,0 +1,219 @@
+"""A study's analysis, declared once in the catalog and computed by one function for every front-end.
+
+``vascsim demo``, ``vascsim report``, the dashboard and exported reports all call
+:func:`analyse_catalog_study`: the study's latest declared :class:`StudySettings`
+(or, for a study that declared none, :func:`default_settings`), with any one-run
+overrides applied and named in the analysis' notes. Declarations are versioned:
+:func:`declare_analysis` adds a version (who, when, what changed) and never edits one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+from sqlalchemy import select
+from sqlalchemy.orm import Session as OrmSession
+
+from metrics.streams import MetricsError
+from metrics.study import StudyAnalysis, StudySettings, analyse_study
+from sessions.catalog import Catalog, CatalogError, now
+from sessions.models import AnalysisDeclaration, Study
+from sessions.runner import study_table
+
+DECLARABLE = (
+    "group_col",
+    "groups",
+    "skilled_group",
+    "level",
+    "metrics",
+    "benchmark_rule",
+    "benchmark_metrics",
+    "consecutive_passes",
+    "learning_model",
+    "alpha",
+)
+"""The choices a study declares; the rest of StudySettings (seeds, resample counts) are the code's."""
+
+_TUPLES = ("groups", "metrics", "benchmark_metrics")
+
+
+@dataclass(frozen=True)
+class AnalysisSource:
+    """Where a computed analysis' settings came from: the declared version and what one run overrode."""
+
+    version: int | None  # None: the study declared nothing and the defaults were used
+    author: str
+    overridden: dict[str, tuple[Any, Any]]  # name -> (declared, used)
+
+
+def settings_from_json(data: dict, what: str) -> StudySettings:
+    """StudySettings from a stored or submitted dictionary, every field checked; errors name the field."""
+    if not isinstance(data, dict):
+        raise CatalogError(f"{what}: an analysis declaration must be an object; got {type(data).__name__}")
+    unknown = sorted(set(data) - set(DECLARABLE))
+    if unknown:
+        raise CatalogError(
+            f"{what}: unknown analysis setting(s) {', '.join(unknown)}; known: {', '.join(DECLARABLE)}"
+        )
+    values: dict[str, Any] = {}
+    for name, value in data.items():
+        if name in _TUPLES:
+            if value is None and name != "groups":
+                values[name] = None
+                continue
+            if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
+                raise CatalogError(f"{what}: {name} must be a list of names; got {value!r}")
+            values[name] = tuple(value)
+        elif name in ("consecutive_passes",):
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise CatalogError(f"{what}: consecutive_passes must be a whole number >= 1; got {value!r}")
+            values[name] = value
+        elif name == "alpha":
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0 < value < 1:
+                raise CatalogError(f"{what}: alpha must be a number between 0 and 1; got {value!r}")
+            values[name] = float(value)
+        else:
+            if not isinstance(value, str) or not value:
+                raise CatalogError(f"{what}: {name} must be a non-empty text; got {value!r}")
+            values[name] = value
+    settings = StudySettings(**values)
+    _check(settings, what)
+    return settings
+
+
+def _check(settings: StudySettings, what: str) -> None:
+    from metrics.proficiency import _rule_value
+    from metrics.registry import REGISTRY
+
+    if len(settings.groups) != 2 or settings.groups[0] == settings.groups[1]:
+        raise CatalogError(f"{what}: groups must name two different groups; got {list(settings.groups)!r}")
+    if settings.skilled_group not in settings.groups:
+        raise CatalogError(f"{what}: skilled_group {settings.skilled_group!r} is not one of the groups")
+    if settings.level not in ("participant", "trial"):
+        raise CatalogError(f"{what}: level must be 'participant' or 'trial'; got {settings.level!r}")
+    try:
+        for names in (settings.metrics or (), settings.benchmark_metrics or ()):
+            for name in names:
+                REGISTRY[name]  # the error lists every known metric
+        _rule_value(pd.Series([1.0, 2.0]).to_numpy(), settings.benchmark_rule, "lower")
+    except MetricsError as error:
+        raise CatalogError(f"{what}: {error}") from None
+
+
+def settings_to_json(settings: StudySettings) -> dict:
+    return {
+        name: list(value) if isinstance(value, tuple) else value
+        for name, value in ((n, getattr(settings, n)) for n in DECLARABLE)
+    }
+
+
+def default_settings(table: pd.DataFrame) -> StudySettings:
+    """For a study that declared nothing: experts against the other group, every metric, the expert mean."""
+    labels = [label for label in pd.unique(table["label"]) if label != "expert"] if "label" in table else []
+    other = "trainee" if "trainee" in labels or not labels else sorted(map(str, labels))[0]
+    return StudySettings(groups=("expert", other), skilled_group="expert")
+
+
+def latest_declaration(orm: OrmSession, study: Study) -> AnalysisDeclaration | None:
+    return orm.scalar(
+        select(AnalysisDeclaration)
+        .where(AnalysisDeclaration.study_id == study.id)
+        .order_by(AnalysisDeclaration.version.desc())
+        .limit(1)
+    )
+
+
+def declare_analysis(
+    catalog: Catalog, study_name: str, settings: StudySettings, author: str, note: str = ""
+) -> int:
+    """Store ``settings`` as the study's analysis; returns its version (unchanged settings add none)."""
+    _check(settings, f"analysis of study {study_name!r}")
+    stored = settings_to_json(settings)
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        latest = latest_declaration(orm, study)
+        if latest is not None and latest.settings == stored:
+            return latest.version
+        version = 1 if latest is None else latest.version + 1
+        orm.add(
+            AnalysisDeclaration(
+                study_id=study.id,
+                version=version,
+                settings=stored,
+                author=author,
+                note=note,
+                created_at=now(),
+            )
+        )
+    return version
+
+
+def declared_settings(catalog: Catalog, study_name: str, table: pd.DataFrame | None = None):
+    """(settings, version, author) the study's analyses use now; defaults when none was declared."""
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        latest = latest_declaration(orm, study)
+        if latest is not None:
+            what = f"declared analysis v{latest.version} of study {study_name!r}"
+            return settings_from_json(latest.settings, what), latest.version, latest.author
+    table = study_table(catalog, study_name) if table is None else table
+    return default_settings(table), None, ""
+
+
+def analysis_history(catalog: Catalog, study_name: str) -> list[dict]:
+    """Every declared version, oldest first: version, when, who, note, settings."""
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        return [
+            {
+                "version": d.version,
+                "created_at": d.created_at.isoformat(),
+                "author": d.author,
+                "note": d.note,
+                "settings": d.settings,
+            }
+            for d in study.analyses
+        ]
+
+
+def analyse_catalog_study(
+    catalog: Catalog, study_name: str, overrides: dict[str, Any] | None = None
+) -> tuple[StudyAnalysis, AnalysisSource]:
+    """The study's analysis from its declaration; ``overrides`` change it for this run only, and say so."""
+    table = study_table(catalog, study_name)
+    settings, version, author = declared_settings(catalog, study_name, table)
+    overridden: dict[str, tuple[Any, Any]] = {}
+    changes = {k: v for k, v in (overrides or {}).items() if v is not None}
+    if changes:
+        declared = settings_to_json(settings)
+        merged = settings_from_json(
+            {**declared, **settings_to_json(dataclasses.replace(settings, **changes))}, "override"
+        )
+        overridden = {
+            k: (getattr(settings, k), getattr(merged, k))
+            for k in changes
+            if getattr(settings, k) != getattr(merged, k)
+        }
+        settings = merged
+    analysis = analyse_study(table, settings)
+    source = (
+        "declared analysis v" + str(version) if version is not None else "default analysis (none declared)"
+    )
+    analysis.notes.insert(0, f"Settings: the study's {source}.")
+    if overridden:
+        analysis.notes.insert(
+            1,
+            "Overridden for this run only: "
+            + "; ".join(f"{k} {_show(old)} -> {_show(new)}" for k, (old, new) in overridden.items())
+            + ".",
+        )
+    return analysis, AnalysisSource(version, author, overridden)
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, tuple):
+        return ",".join(value)
+    return "all" if value is None else str(value)

@@ -1,0 +1,149 @@
+"""One analysis per study (issue 20, seen 2): declared once in the catalog, versioned, and the same
+benchmarks and pass/fail from `vascsim report`, the JSON API and the dashboard pages."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+
+import pytest
+from click.testing import CliRunner
+from fastapi.testclient import TestClient
+from sqlalchemy import select
+
+from dashboard.app import create_app
+from dashboard.settings import DashboardSettings
+from sessions.accounts import create_user
+from sessions.analysis import (
+    analyse_catalog_study,
+    analysis_history,
+    declare_analysis,
+    declared_settings,
+    settings_from_json,
+)
+from sessions.catalog import Catalog, CatalogError
+from sessions.cli import main
+from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY, DemoSize, run_demo
+from sessions.models import Participant, Study
+from tests.dashboard.conftest import sign_in
+
+PASSWORD = "correct horse battery"
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    home = tmp_path_factory.mktemp("home")
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    run_demo(
+        catalog, home, DemoSize(experts=3, expert_sessions=2, trainees=3, practice_sessions=3, retention=True)
+    )
+    with catalog.session() as orm:
+        create_user(orm, "supervisor", PASSWORD, "supervisor")
+    yield catalog, home
+    catalog.close()
+
+
+def _cli(home, *args):
+    env = {"VASCSIM_HOME": str(home), "VASCSIM_DATABASE_URL": f"sqlite:///{home / 'catalog.sqlite'}"}
+    result = CliRunner().invoke(main, list(args), env=env)
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def test_the_demo_declares_its_analysis(demo):
+    catalog, _ = demo
+    settings, version, author = declared_settings(catalog, DEMO_STUDY)
+    assert version == 1 and author == "vascsim demo" and settings == DEMO_ANALYSIS
+
+
+def test_cli_report_api_and_pages_agree_on_benchmarks_and_every_pass(demo):
+    """Seen: `vascsim report` (rule mean, all metrics) and the dashboard (percentile 75) differed."""
+    catalog, home = demo
+    report = json.loads(_cli(home, "report", "--study", DEMO_STUDY, "--json").stdout)
+    assert report["analysis_version"] == 1 and report["overridden"] == {}
+    cli_benchmarks = {b["metric"]: (b["benchmark"], b["rule"]) for b in report["benchmarks"]}
+    assert {rule for _, rule in cli_benchmarks.values()} == {DEMO_ANALYSIS.benchmark_rule}
+    cli_passed = {row["session_id"]: row["passed"] for row in report["proficiency"]}
+
+    app = create_app(DashboardSettings(home=home, database_url=catalog.url), catalog)
+    with TestClient(app) as client:
+        sign_in(client, "supervisor", PASSWORD)
+        with catalog.session() as orm:
+            study_id = orm.scalar(select(Study.id).where(Study.name == DEMO_STUDY))
+            people = orm.execute(
+                select(Participant.id, Participant.code).where(Participant.study_id == study_id)
+            ).all()
+        overview = client.get(f"/api/studies/{study_id}").json()
+        api_benchmarks = {b["metric"]: (b["benchmark"], b["rule"]) for b in overview["benchmarks"]}
+        assert api_benchmarks == cli_benchmarks
+        api_passed = {}
+        for participant_id, _ in people:
+            progress = client.get(f"/api/participants/{participant_id}/progress").json()
+            api_passed.update({s["uid"]: s["passed"] for s in progress["sessions"]})
+            assert {
+                b["metric"]: (b["benchmark"], b["rule"]) for b in progress["benchmarks"]
+            } == cli_benchmarks
+        assert api_passed == cli_passed
+        page = client.get(f"/studies/{study_id}").text
+        table = page[page.index('id="benchmarks"') : page.index("</table>", page.index('id="benchmarks"'))]
+        shown = re.findall(r"<tr><td>(\w+)</td><td class=\"num\">([^<]+)</td>", table)
+        assert shown == [
+            (b["metric"], b["pass_if"].replace(">", "&gt;").replace("<", "&lt;"))
+            for b in report["benchmarks"]
+        ]
+
+
+def test_an_override_is_for_one_run_and_is_named(demo):
+    catalog, home = demo
+    result = _cli(home, "report", "--study", DEMO_STUDY, "--rule", "mean", "--json")
+    data = json.loads(result.stdout)
+    assert data["overridden"] == {"benchmark_rule": {"declared": "percentile:75", "used": "mean"}}
+    assert {b["rule"] for b in data["benchmarks"]} == {"mean"}
+    analysis, source = analyse_catalog_study(catalog, DEMO_STUDY, {"benchmark_rule": "mean"})
+    assert any(
+        "Overridden for this run only: benchmark_rule percentile:75 -> mean" in n for n in analysis.notes
+    )
+    assert declared_settings(catalog, DEMO_STUDY)[1] == 1  # the declaration itself is unchanged
+
+
+def test_declarations_are_versioned_never_edited(tmp_path):
+    catalog = Catalog(f"sqlite:///{tmp_path / 'c.sqlite'}")
+    with catalog.session() as orm:
+        catalog.study(orm, "course", create=True)
+    first = dataclasses.replace(DEMO_ANALYSIS, benchmark_rule="median")
+    assert declare_analysis(catalog, "course", first, "alice", "initial") == 1
+    assert declare_analysis(catalog, "course", first, "bob") == 1  # nothing changed: no new version
+    assert declare_analysis(catalog, "course", DEMO_ANALYSIS, "bob", "as the demo") == 2
+    history = analysis_history(catalog, "course")
+    assert [(h["version"], h["author"], h["settings"]["benchmark_rule"]) for h in history] == [
+        (1, "alice", "median"),
+        (2, "bob", "percentile:75"),
+    ]
+    catalog.close()
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"rule": "mean"}, "unknown analysis setting.*rule"),
+        ({"groups": "expert"}, "groups must be a list of names"),
+        ({"groups": ["expert", "expert"]}, "two different groups"),
+        ({"metrics": ["no_such_metric"]}, "unknown metric 'no_such_metric'"),
+        ({"consecutive_passes": 0}, "consecutive_passes must be a whole number"),
+        ({"consecutive_passes": True}, "consecutive_passes must be a whole number"),
+        ({"alpha": float("nan")}, "alpha must be a number between 0 and 1"),
+        ({"benchmark_rule": "percentile:0"}, "percentile rule"),
+        ({"level": "cohort"}, "level must be"),
+        ([], "must be an object"),
+    ],
+)
+def test_a_bad_declaration_names_its_field(data, message):
+    with pytest.raises(CatalogError, match=f"^declaration: .*{message}"):
+        settings_from_json(data, "declaration")
+
+
+def test_cli_declares_and_shows(demo):
+    _, home = demo
+    shown = _cli(home, "studies", "analysis", DEMO_STUDY).stdout
+    assert "declared analysis version 1" in shown and "percentile:75" in shown
