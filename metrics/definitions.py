@@ -82,6 +82,7 @@ def movement_count(context: SessionContext) -> float:
     better=HIGHER,
     reference=MOTION_REF,
     group="motion",
+    bounds=(0.0, 1.0),
 )
 def economy_of_motion(context: SessionContext) -> float:
     return kinematics.economy_of_motion(context.motion, context.movements)
@@ -97,6 +98,7 @@ def economy_of_motion(context: SessionContext) -> float:
     better=HIGHER,
     reference=SMOOTH_REF,
     group="motion",
+    bounds=(-math.inf, 0.0),
 )
 def log_dimensionless_jerk(context: SessionContext) -> float:
     return kinematics.log_dimensionless_jerk(context.motion)
@@ -112,6 +114,7 @@ def log_dimensionless_jerk(context: SessionContext) -> float:
     better=HIGHER,
     reference=SMOOTH_REF,
     group="motion",
+    bounds=(-math.inf, 0.0),
 )
 def spectral_arc_length(context: SessionContext) -> float:
     return kinematics.spectral_arc_length(context.motion.speed, context.motion.rate)

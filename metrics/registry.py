@@ -8,6 +8,7 @@ definition or a threshold changes, so old and new numbers are never mixed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -29,6 +30,8 @@ class Metric:
     better: ``"lower"`` or ``"higher"``, which values indicate more skill.
     streams: the session streams it needs (``SessionStreams`` attribute names, or
     ``"events"``); without them the value is NaN.
+    bounds: the values the metric can take (a time or an angle error is never negative,
+    SPARC never positive); learning curves are fitted inside them.
     """
 
     name: str
@@ -39,6 +42,7 @@ class Metric:
     reference: str
     group: str
     compute: Callable[[SessionContext], float]
+    bounds: tuple[float, float] = (-math.inf, math.inf)
 
     def __post_init__(self) -> None:
         if self.better not in (LOWER, HIGHER):
@@ -96,6 +100,7 @@ class Registry:
                     "name": m.name,
                     "unit": m.unit,
                     "better": m.better,
+                    "range": f"[{m.bounds[0]:g}, {m.bounds[1]:g}]",
                     "group": m.group,
                     "streams": ", ".join(m.streams),
                     "definition": m.definition,
@@ -118,11 +123,12 @@ def metric(
     better: str,
     reference: str,
     group: str,
+    bounds: tuple[float, float] = (0.0, math.inf),
 ) -> Callable[[Callable[[SessionContext], float]], Callable[[SessionContext], float]]:
-    """Decorator registering a metric function in :data:`REGISTRY`."""
+    """Decorator registering a metric function in :data:`REGISTRY` (by default a non-negative quantity)."""
 
     def register(function: Callable[[SessionContext], float]) -> Callable[[SessionContext], float]:
-        REGISTRY.add(Metric(name, unit, definition, streams, better, reference, group, function))
+        REGISTRY.add(Metric(name, unit, definition, streams, better, reference, group, function, bounds))
         return function
 
     return register

@@ -131,10 +131,22 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
             line = axis.plot(done["trial"], done[bench.metric], "o", markersize=3, alpha=0.7)
             colour = line[0].get_color()
             fit = fitted.get((participant, bench.metric))
+            end = (done["trial"].iloc[-1], done[bench.metric].iloc[-1]) if len(done) else None
             if fit is not None:
                 n = np.linspace(1, done["trial"].max(), 60)
                 fitted_values = LEARNING_MODELS[fit.model](n, fit.plateau, fit.amplitude, fit.rate)
                 axis.plot(n, fitted_values, "-", color=colour, alpha=0.7, linewidth=1)
+                end = (n[-1], fitted_values[-1])
+            if end is not None and np.isfinite(end[1]):  # each trainee's curve carries its code
+                axis.annotate(
+                    str(participant),
+                    end,
+                    xytext=(3, 0),
+                    textcoords="offset points",
+                    fontsize=6,
+                    color=colour,
+                    va="center",
+                )
             delayed = mine[~practice.loc[mine.index]]
             axis.plot(delayed["trial"], delayed[bench.metric], "s", color=colour, markersize=5)
         axis.axhline(bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")
@@ -149,7 +161,7 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
 
 
 def _fmt(value) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
+    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
         return ""
     if isinstance(value, bool | np.bool_):
         return "yes" if value else "no"
@@ -326,6 +338,18 @@ def _method_lines(analysis: StudyAnalysis) -> list[str]:
     ]
 
 
+def _curves_for_reading(curves: pd.DataFrame) -> pd.DataFrame:
+    """The fits as a reader should take them: a plateau the data cannot pin down is not printed."""
+    if curves.empty:
+        return curves
+    shown = curves.drop(columns=["plateau_determined"]).copy()
+    shown["plateau"] = [
+        f"{p:.3g}" if ok else "not determined by these trials"
+        for p, ok in zip(curves["plateau"], curves["plateau_determined"], strict=True)
+    ]
+    return shown
+
+
 def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vascsim study report") -> Path:
     """Write the report folder; returns the path of ``report.html`` (``report.md`` sits beside it)."""
     folder = Path(folder)
@@ -378,7 +402,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "benchmark_table": _html_table(analysis.benchmarks),
         "trainee_table": _html_table(trainees),
         "learning": learning,
-        "curve_table": _html_table(curves),
+        "curve_table": _html_table(_curves_for_reading(curves)),
         "registry_version": REGISTRY_VERSION,
         "registry_table": _html_table(registry),
         "csv": list(csv),
@@ -410,7 +434,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     lines += ["## Proficiency benchmarks", "", _markdown_table(analysis.benchmarks), ""]
     lines += ["## Trainees", "", _markdown_table(trainees), ""]
     lines += [f"![learning curve]({p})" for p in learning] + [""]
-    lines += ["## Learning-curve fits", "", _markdown_table(curves), ""]
+    lines += ["## Learning-curve fits", "", _markdown_table(_curves_for_reading(curves)), ""]
     lines += [
         f"## Metric definitions (registry version {REGISTRY_VERSION})",
         "",

@@ -149,7 +149,10 @@ def _per_trainee(table, practice, proficiency, benchmarks, settings):
             values = in_practice[bench.metric].to_numpy(dtype=np.float64)
             trials = in_practice["trial"].to_numpy(dtype=np.float64)
             try:
-                curve = fit_learning_curve(values, trials, settings.learning_model, bench.benchmark)
+                metric = REGISTRY[bench.metric]
+                curve = fit_learning_curve(
+                    values, trials, settings.learning_model, bench.benchmark, metric.better, metric.bounds
+                )
             except MetricsError:
                 continue
             curves.append(
@@ -158,14 +161,26 @@ def _per_trainee(table, practice, proficiency, benchmarks, settings):
                     "metric": bench.metric,
                     "model": curve.model,
                     "plateau": curve.plateau,
+                    "plateau_determined": curve.plateau_determined,
                     "amplitude": curve.amplitude,
                     "rate": curve.rate,
                     "r_squared": curve.r_squared,
                     "benchmark": bench.benchmark,
-                    "trials_to_benchmark": curve.trials_to_benchmark,
+                    "first_observed_at_benchmark": curve.first_observed_at_benchmark,
+                    "first_predicted_at_benchmark": curve.first_predicted_at_benchmark,
                 }
             )
-    return pd.DataFrame(rows), pd.DataFrame(curves)
+    trainees = pd.DataFrame(rows)
+    curves = pd.DataFrame(curves)
+    whole = [
+        (trainees, ("trials_to_proficiency", "cusum_competent_at")),
+        (curves, ("first_observed_at_benchmark", "first_predicted_at_benchmark")),
+    ]
+    for frame, columns in whole:  # whole trials, never "6.0"
+        for column in columns:
+            if column in frame.columns:
+                frame[column] = pd.array(frame[column], dtype="Int64")
+    return trainees, curves
 
 
 def metric_unit(name: str) -> str:

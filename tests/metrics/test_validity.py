@@ -160,8 +160,11 @@ def test_learning_curve_recovers_known_parameters(model):
     assert curve.plateau == pytest.approx(plateau, rel=1e-4)
     assert curve.rate == pytest.approx(rate, rel=1e-4)
     reach = (10 / 50) ** (-1 / rate) if model == "power" else 1 - math.log(10 / 50) / rate
-    assert curve.trials_to_benchmark == pytest.approx(reach, rel=1e-3)
-    assert fit_learning_curve(values, model=model, benchmark=55.0).trials_to_benchmark is None
+    assert curve.first_predicted_at_benchmark == math.ceil(reach)  # a whole trial, never 4.71
+    assert curve.first_observed_at_benchmark == int(np.argmax(values <= 70.0)) + 1
+    assert curve.plateau_determined
+    never = fit_learning_curve(values, model=model, benchmark=55.0)
+    assert never.first_predicted_at_benchmark is None and never.first_observed_at_benchmark is None
 
 
 def test_retention_and_cusum_hand_worked():
