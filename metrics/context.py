@@ -9,11 +9,12 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.kinematics import Movements, UniformMotion, find_movements
+from metrics.kinematics import LDLJ_CUTOFF_HZ, Movements, UniformMotion, find_movements
 from metrics.streams import SessionStreams
 
 MOTION_RATE_HZ = 100.0
-"""Speed-based metrics resample the path to at most 100 Hz (smoothing cuts at 6 Hz; 1 kHz adds nothing)."""
+"""Speed-based metrics and path length use the path low-passed at 6 Hz and then decimated to at most
+100 Hz (1 kHz adds nothing below 6 Hz)."""
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,11 @@ class SessionContext:
     @cached_property
     def movements(self) -> Movements:
         return find_movements(self.motion)
+
+    @cached_property
+    def jerk_motion(self) -> UniformMotion:
+        """The path at its own rate, low-passed only at :data:`LDLJ_CUTOFF_HZ`: the basis of LDLJ."""
+        return UniformMotion.of(self.streams.time, self.streams.tool_position, None, LDLJ_CUTOFF_HZ)
 
     @cached_property
     def insertions(self) -> list[Insertion]:

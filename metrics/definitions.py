@@ -47,22 +47,26 @@ def task_time(context: SessionContext) -> float:
 @metric(
     "path_length",
     unit="m",
-    definition="Length of the dominant tool's path: sum of distances between consecutive samples.",
+    definition=(
+        "Length the dominant tool travels within its movements (speed above 2 mm/s, rest to rest), on "
+        "the same path the speed comes from: low-passed at 6 Hz (zero phase) before decimation to "
+        "<= 100 Hz, so sensor noise and a still hand's jitter add no length."
+    ),
     better=LOWER,
     reference=MOTION_REF,
     group="motion",
 )
 def path_length(context: SessionContext) -> float:
-    return kinematics.path_length(context.streams.tool_position)
+    return kinematics.moving_path_length(context.motion, context.movements)
 
 
 @metric(
     "movement_count",
     unit="1",
     definition=(
-        "Number of submovements: peaks of the tool's speed (resampled to <= 100 Hz, 6 Hz zero-phase "
-        "low-pass) above 2 mm/s, rising >= 20 % of the session's peak speed above their valleys, "
-        ">= 0.1 s apart."
+        "Number of submovements of the tool's speed (6 Hz zero-phase low-pass, then <= 100 Hz): "
+        "stretches above 2 mm/s lasting >= 0.1 s, each split at valleys that its peaks rise >= 2 mm/s "
+        "above; a stretch without such a peak (constant speed) is one."
     ),
     better=LOWER,
     reference=MOTION_REF,
@@ -76,8 +80,8 @@ def movement_count(context: SessionContext) -> float:
     "economy_of_motion",
     unit="1",
     definition=(
-        "Sum over submovements of the straight-line distance from onset to end (speed below 10 % of the "
-        "movement's peak) divided by the path length within them; 1 when every movement is straight."
+        "Sum over submovements of the straight-line distance from start to end (rest or the valley "
+        "between peaks) divided by the path length within them; 1 when every movement is straight."
     ),
     better=HIGHER,
     reference=MOTION_REF,
@@ -92,8 +96,9 @@ def economy_of_motion(context: SessionContext) -> float:
     "log_dimensionless_jerk",
     unit="1",
     definition=(
-        "-ln((T^3 / v_peak^2) * integral of |jerk|^2 dt) over the whole session on the smoothed tool path "
-        "(speed-normalised LDLJ); closer to zero is smoother, a minimum-jerk reach scores -5.32."
+        "Median over submovements of -ln((T^3 / v_peak^2) * integral of |jerk|^2 dt), jerk of the tool "
+        "path low-passed at 20 Hz (quintic spline below 200 Hz); closer to zero is smoother, a "
+        "minimum-jerk reach scores -5.32. Per movement, so it is not task time in disguise."
     ),
     better=HIGHER,
     reference=SMOOTH_REF,
@@ -101,7 +106,10 @@ def economy_of_motion(context: SessionContext) -> float:
     bounds=(-math.inf, 0.0),
 )
 def log_dimensionless_jerk(context: SessionContext) -> float:
-    return kinematics.log_dimensionless_jerk(context.motion)
+    fine = context.jerk_motion
+    return kinematics.log_dimensionless_jerk(
+        fine, kinematics.on_grid(context.movements, context.motion, fine)
+    )
 
 
 @metric(
@@ -506,7 +514,7 @@ def subordinate_activity(context: SessionContext) -> float:
 @metric(
     "subordinate_path_length",
     unit="m",
-    definition="Path length of the subordinate hand over the whole session.",
+    definition="Length the subordinate hand travels within its movements, measured as path_length is.",
     streams=("subordinate_displacement",),
     better=LOWER,
     reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
@@ -514,4 +522,7 @@ def subordinate_activity(context: SessionContext) -> float:
 )
 def subordinate_path_length(context: SessionContext) -> float:
     moved = context.streams.subordinate_displacement
-    return NAN if moved is None else kinematics.path_length(moved)
+    if moved is None:
+        return NAN
+    motion = kinematics.UniformMotion.of(context.streams.time, moved, min(100.0, context.streams.sample_rate))
+    return kinematics.moving_path_length(motion, kinematics.find_movements(motion))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,11 +24,17 @@ SMOOTHING_CUTOFF_HZ = 6.0
 def resample_uniform(
     time: NDArray[np.float64], values: NDArray[np.float64], rate: float | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Linear resampling onto a uniform grid at ``rate`` Hz (default: the median rate)."""
+    """Linear resampling onto a uniform grid at ``rate`` Hz (default: the median rate).
+
+    The grid runs from the first sample to the last one it can reach, the last included even
+    when rounding puts it a hair beyond (a rate of 99.99999999999991 keeps its 100th sample).
+    """
     if rate is None:
         rate = 1.0 / float(np.median(np.diff(time)))
-    n = max(2, int(math.floor((time[-1] - time[0]) * rate)) + 1)
+    steps = (time[-1] - time[0]) * rate
+    n = max(2, int(math.floor(steps + 1e-6)) + 1)
     grid = time[0] + np.arange(n) / rate
+    grid[-1] = min(grid[-1], time[-1])  # a grid point a rounding error past the end is the end
     if values.ndim == 1:
         return grid, np.interp(grid, time, values)
     return grid, np.column_stack([np.interp(grid, time, values[:, k]) for k in range(values.shape[1])])
@@ -44,6 +51,10 @@ def smooth(
     if values.shape[0] <= padlen:
         return values
     return signal.sosfiltfilt(sos, values, axis=0)
+
+
+ANTI_ALIAS_FRACTION = 0.4
+"""Before decimating to a rate r, the path is low-passed at no more than 0.4 r (80 % of the new Nyquist)."""
 
 
 def path_length(position: NDArray[np.float64]) -> float:
@@ -75,19 +86,34 @@ class UniformMotion:
         rate: float | None = None,
         cutoff_hz: float = SMOOTHING_CUTOFF_HZ,
     ) -> UniformMotion:
-        grid, uniform = resample_uniform(time, position, rate)
-        rate = 1.0 / (grid[1] - grid[0])
-        smoothed = smooth(uniform, rate, cutoff_hz)
-        speed = np.linalg.norm(np.gradient(smoothed, 1.0 / rate, axis=0), axis=1)
-        return cls(rate, grid, smoothed, speed)
+        """Resample to the source's own (median) rate, low-pass there, then decimate to ``rate``.
+
+        The low-pass runs before any decimation, at ``cutoff_hz`` or the anti-alias limit
+        (:data:`ANTI_ALIAS_FRACTION` of the new rate), whichever is lower: a 99 Hz vibration
+        sampled at 1 kHz does not fold into a 100 Hz path as slow motion.
+        """
+        grid, uniform = resample_uniform(time, position)
+        source_rate = 1.0 / (grid[1] - grid[0])
+        target = source_rate if rate is None or rate >= source_rate * (1 - 1e-9) else float(rate)
+        cut = cutoff_hz if target == source_rate else min(cutoff_hz, ANTI_ALIAS_FRACTION * target)
+        smoothed = smooth(uniform, source_rate, cut)
+        if target != source_rate:
+            coarse, smoothed = resample_uniform(grid, smoothed, target)
+            grid = coarse
+        speed = np.linalg.norm(np.gradient(smoothed, 1.0 / target, axis=0), axis=1)
+        return cls(target, grid, smoothed, speed)
 
 
 @dataclass(frozen=True)
 class Movements:
-    """Submovements found as peaks of the speed profile.
+    """Submovements of the speed profile.
 
-    peaks: sample indices of each movement's speed peak; starts/ends: where the
-    speed first falls below ``onset_fraction`` of that peak on either side.
+    A *movement* is a stretch with speed above :data:`MOVEMENT_SPEED` lasting at least
+    :data:`MIN_MOVEMENT_DURATION`; inside it, each speed peak standing at least
+    :data:`MIN_PEAK_PROMINENCE` above the valleys around it is a submovement (one when
+    none does, e.g. at constant speed). ``starts``/``ends``: each submovement's bounds,
+    at the valleys between peaks and, at a movement's edges, where the speed stops
+    falling below the threshold (a reach is taken from rest to rest).
     """
 
     peaks: NDArray[np.int64]
@@ -99,42 +125,64 @@ class Movements:
         return int(self.peaks.size)
 
 
-MIN_PEAK_SPEED = 0.002
-"""Speed peaks below 2 mm/s are not movements (sensor noise and drift)."""
-PEAK_PROMINENCE_FRACTION = 0.2
-"""A peak counts when it rises at least 20 % of the session's largest speed above the valleys around it."""
-MIN_PEAK_SEPARATION = 0.1
-"""Two peaks closer than 0.1 s are one movement (a human submovement lasts >= ~150 ms)."""
+MOVEMENT_SPEED = 0.002
+"""A movement is where the smoothed tool speed exceeds 2 mm/s (still hand and sensor noise stay below)."""
+MIN_MOVEMENT_DURATION = 0.1
+"""... for at least 0.1 s (a human submovement lasts >= ~150 ms)."""
+MIN_PEAK_PROMINENCE = 0.002
+"""A speed peak is its own submovement when it rises >= 2 mm/s above the valleys on both sides ..."""
+LOCAL_PROMINENCE_FRACTION = 0.1
+"""... and >= 10 % of its own movement's top speed (never a share of the session's fastest peak)."""
+
+
+def _above(mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
 
 
 def find_movements(
     motion: UniformMotion,
-    min_peak_speed: float = MIN_PEAK_SPEED,
-    prominence_fraction: float = PEAK_PROMINENCE_FRACTION,
-    min_separation: float = MIN_PEAK_SEPARATION,
-    onset_fraction: float = 0.1,
+    speed_threshold: float = MOVEMENT_SPEED,
+    min_duration: float = MIN_MOVEMENT_DURATION,
+    min_prominence: float = MIN_PEAK_PROMINENCE,
 ) -> Movements:
-    """Velocity-peak movement segmentation (thresholds above; all documented in docs/metrics.md)."""
+    """Movement segmentation by absolute thresholds (see :class:`Movements`; docs/metrics.md)."""
     speed = motion.speed
-    top = float(speed.max()) if speed.size else 0.0
-    if top < min_peak_speed:
-        empty = np.zeros(0, dtype=np.int64)
-        return Movements(empty, empty, empty)
-    peaks, _ = signal.find_peaks(
-        speed,
-        height=min_peak_speed,
-        prominence=prominence_fraction * top,
-        distance=max(1, int(round(min_separation * motion.rate))),
+    peaks, starts, ends = [], [], []
+    for first, last in zip(*_above(speed > speed_threshold), strict=True):
+        if (last - first + 1) / motion.rate < min_duration:
+            continue
+        while first > 0 and speed[first - 1] < speed[first]:
+            first -= 1  # out to rest (or the valley before the next movement)
+        while last < speed.size - 1 and speed[last + 1] < speed[last]:
+            last += 1
+        inside = speed[first : last + 1]
+        # a peak of its own: >= 2 mm/s and >= 10 % of this movement's top speed above its valleys
+        # (the low-pass's ringing beside a fast reach is not a submovement)
+        prominence = max(min_prominence, LOCAL_PROMINENCE_FRACTION * float(inside.max()))
+        found, _ = signal.find_peaks(inside, prominence=prominence)
+        if found.size == 0:
+            found = np.array([int(np.argmax(inside))])
+        found = found + first
+        bounds = [first]
+        for left, right in pairwise(found):
+            bounds.append(left + int(np.argmin(speed[left : right + 1])))
+        bounds.append(last)
+        peaks.extend(found)
+        starts.extend(bounds[:-1])
+        ends.extend(bounds[1:])
+    as_int = lambda v: np.asarray(v, dtype=np.int64)  # noqa: E731
+    return Movements(as_int(peaks), as_int(starts), as_int(ends))
+
+
+def moving_path_length(motion: UniformMotion, movements: Movements) -> float:
+    """Length travelled within movements (m): jitter of a still hand or sensor noise adds nothing."""
+    return float(
+        sum(
+            path_length(motion.position[a : b + 1])
+            for a, b in zip(movements.starts, movements.ends, strict=True)
+        )
     )
-    starts = np.empty_like(peaks)
-    ends = np.empty_like(peaks)
-    for k, peak in enumerate(peaks):
-        level = onset_fraction * speed[peak]
-        before = np.flatnonzero(speed[:peak] < level)
-        after = np.flatnonzero(speed[peak:] < level)
-        starts[k] = before[-1] if before.size else 0
-        ends[k] = peak + after[0] if after.size else speed.size - 1
-    return Movements(peaks.astype(np.int64), starts.astype(np.int64), ends.astype(np.int64))
 
 
 def economy_of_motion(motion: UniformMotion, movements: Movements) -> float:
@@ -150,23 +198,76 @@ def economy_of_motion(motion: UniformMotion, movements: Movements) -> float:
     return direct / travelled if travelled > 0 else math.nan
 
 
-def log_dimensionless_jerk(motion: UniformMotion) -> float:
-    """LDLJ = -ln((T³ / v_peak²) ∫ |jerk|² dt), speed-normalised (Balasubramanian et al. 2015).
+LDLJ_CUTOFF_HZ = 20.0
+"""Jerk is taken from the path low-passed at 20 Hz (where the source rate allows): the 6 Hz speed filter
+would cut a 1 s minimum-jerk reach's LDLJ by 0.12. LDLJ stays sensitive to measurement noise above the
+hand's band; SPARC is the noise-robust smoothness measure."""
+SPLINE_BELOW_HZ = 200.0
+"""Below 200 Hz jerk comes from a quintic interpolating spline (evaluated at 1 kHz), not finite
+differences: at 30 Hz, three nested central differences smear a 1 s reach's jerk. It passes the
+samples' own noise on: LDLJ at 30 Hz is only as good as the path it is given."""
 
+
+def _jerk_integral(position: NDArray[np.float64], rate: float) -> tuple[float, float, float]:
+    """(duration, peak speed, integral of |jerk|^2 dt) of one sampled path segment."""
+    duration = (position.shape[0] - 1) / rate
+    if rate < SPLINE_BELOW_HZ and position.shape[0] >= 6:
+        from scipy.interpolate import make_interp_spline
+
+        t = np.arange(position.shape[0]) / rate
+        spline = make_interp_spline(t, position, k=5)  # all three axes in one banded solve
+        fine = np.linspace(0.0, t[-1], max(2, int(round(t[-1] * 5.0 * SPLINE_BELOW_HZ)) + 1))
+        dt = fine[1] - fine[0]
+        speed = np.linalg.norm(spline.derivative(1)(fine), axis=1)
+        jerk = spline.derivative(3)(fine)
+    else:
+        dt = 1.0 / rate
+        speed = np.linalg.norm(np.gradient(position, dt, axis=0), axis=1)
+        jerk = position
+        for _ in range(3):
+            jerk = np.gradient(jerk, dt, axis=0)
+    return duration, float(speed.max()), float(np.trapezoid(np.sum(jerk * jerk, axis=1), dx=dt))
+
+
+def log_dimensionless_jerk(motion: UniformMotion, segments: Movements | None = None) -> float:
+    """LDLJ = -ln((T³ / v_peak²) ∫ |jerk|² dt) (Balasubramanian et al. 2015), per movement.
+
+    ``segments``: the movements (index bounds into ``motion``); the result is the median of
+    their LDLJs, so a long session of smooth reaches is not scored as one jerky movement
+    (whole-session LDLJ is mostly ln T). Without segments the whole path is one movement.
     Higher (closer to zero) is smoother; a minimum-jerk reach scores -ln(204.8) = -5.32.
     """
-    dt = 1.0 / motion.rate
-    peak = float(motion.speed.max())
-    duration = motion.time[-1] - motion.time[0]
-    if peak <= 0 or duration <= 0 or motion.position.shape[0] < 7:
-        return math.nan
-    jerk = motion.position
-    for _ in range(3):
-        jerk = np.gradient(jerk, dt, axis=0)
-    integral = float(np.trapezoid(np.sum(jerk * jerk, axis=1), dx=dt))
-    if integral <= 0:
-        return math.nan
-    return -math.log(duration**3 / peak**2 * integral)
+    if segments is None:
+        bounds = [(0, motion.position.shape[0] - 1)]
+    else:
+        bounds = list(zip(segments.starts, segments.ends, strict=True))
+    values = []
+    position = motion.position
+    for start, end in bounds:
+        # from the last sample at rest to the first one at rest again: samples of an exact pause
+        # would make the interpolating spline ring across the reach's first jerk
+        moved = np.flatnonzero(np.any(position[start : end + 1] != position[start], axis=1))
+        if moved.size:
+            start = start + max(0, int(moved[0]) - 1)
+        still = np.flatnonzero(np.any(position[start : end + 1] != position[end], axis=1))
+        if still.size:
+            end = start + min(end - start, int(still[-1]) + 1)
+        if end - start < 6:
+            continue
+        duration, peak, integral = _jerk_integral(motion.position[start : end + 1], motion.rate)
+        if peak > 0 and duration > 0 and integral > 0:
+            values.append(-math.log(duration**3 / peak**2 * integral))
+    return float(np.median(values)) if values else math.nan
+
+
+def on_grid(movements: Movements, source: UniformMotion, target: UniformMotion) -> Movements:
+    """The same movements as index bounds into another motion of the same session (by time)."""
+
+    def index(ix: NDArray[np.int64]) -> NDArray[np.int64]:
+        found = np.searchsorted(target.time, source.time[ix] - 1e-12)
+        return np.clip(found, 0, target.time.size - 1).astype(np.int64)
+
+    return Movements(index(movements.peaks), index(movements.starts), index(movements.ends))
 
 
 def spectral_arc_length(

@@ -52,10 +52,15 @@ def synthetic_session(
         target = entry + np.array([0.0, 0.0, 0.004])
         path = np.zeros((local.size, 3))
         origin = entry + np.array([0.01, 0.01, 0.02])
-        for r in range(reaches):  # sub-movements towards the entry point
+        # sub-movements towards the entry point; a hesitant hand's intermediate waypoints stray
+        # sideways (detours that lengthen the path in the hand's own band, not only tremor)
+        waypoints = [origin + (target - origin) * (r + 1) / reaches for r in range(reaches)]
+        for r in range(reaches - 1):
+            waypoints[r] = waypoints[r] + rng.normal(0.0, 0.03 * hesitation, 3)
+        for r in range(reaches):
             s = (local * 2.0 - r / reaches) * reaches
-            waypoint = origin + (target - origin) * (r + 1) / reaches
-            previous = origin + (target - origin) * r / reaches
+            waypoint = waypoints[r]
+            previous = origin if r == 0 else waypoints[r - 1]
             path += np.where((s >= 0)[:, None], (waypoint - previous) * _minimum_jerk(s)[:, None], 0.0)
         path += origin
         tremor = (0.0001 + 0.0006 * hesitation) * np.sin(2 * np.pi * 9.0 * time[window] + rng.uniform(0, 6))[

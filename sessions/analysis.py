@@ -20,7 +20,7 @@ from sqlalchemy.orm import Session as OrmSession
 from metrics.streams import MetricsError
 from metrics.study import StudyAnalysis, StudySettings, analyse_study
 from sessions.catalog import Catalog, CatalogError, now
-from sessions.models import AnalysisDeclaration, Study
+from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
 from sessions.runner import study_table
 
 DECLARABLE = (
@@ -199,6 +199,13 @@ def analyse_catalog_study(
         }
         settings = merged
     analysis = analyse_study(table, settings)
+    stale = stale_sessions(catalog, study_name)
+    if stale:
+        analysis.notes.insert(
+            0,
+            f"{len(stale)} session(s) carry only metrics of an older registry version and are left out "
+            f"(e.g. {stale[0]}); rescore them with `vascsim score --study {study_name}`.",
+        )
     source = (
         "declared analysis v" + str(version) if version is not None else "default analysis (none declared)"
     )
@@ -211,6 +218,50 @@ def analyse_catalog_study(
             + ".",
         )
     return analysis, AnalysisSource(version, author, overridden)
+
+
+def metric_versions(catalog: Catalog, session_ids: list[int]) -> dict[int, str]:
+    """Per session id: "current", "stale (vN)" (scored only by an older metric registry) or "none"."""
+    from metrics.registry import REGISTRY_VERSION
+
+    found: dict[int, set[str]] = {}
+    with catalog.session() as orm:
+        for start in range(0, len(session_ids), 500):
+            chunk = session_ids[start : start + 500]
+            query = (
+                select(MetricResult.session_id, MetricResult.registry_version)
+                .where(MetricResult.session_id.in_(chunk))
+                .distinct()
+            )
+            for session_id, version in orm.execute(query):
+                found.setdefault(session_id, set()).add(version)
+    result = {}
+    for session_id in session_ids:
+        versions = found.get(session_id, set())
+        if REGISTRY_VERSION in versions:
+            result[session_id] = "current"
+        elif versions:
+            result[session_id] = f"stale (v{max(versions, key=_version_key)})"
+        else:
+            result[session_id] = "none"
+    return result
+
+
+def _version_key(version: str) -> tuple:
+    return tuple(int(part) if part.isdigit() else part for part in version.split("."))
+
+
+def stale_sessions(catalog: Catalog, study_name: str) -> list[str]:
+    """Finished sessions of the study whose metrics come only from an older registry version."""
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        rows = orm.execute(
+            select(Session.id, Session.uid)
+            .join(Participant, Session.participant_id == Participant.id)
+            .where(Participant.study_id == study.id, Session.status.in_(("complete", "recovered")))
+        ).all()
+    versions = metric_versions(catalog, [r[0] for r in rows])
+    return [uid for session_id, uid in rows if versions[session_id].startswith("stale")]
 
 
 def _show(value: Any) -> str:

@@ -571,6 +571,7 @@ def sessions_list(study, status, as_json) -> None:
     import pandas as pd
     from sqlalchemy import select
 
+    from sessions.analysis import metric_versions
     from sessions.models import Participant, Session, Study
 
     catalog, _ = _catalog()
@@ -594,19 +595,21 @@ def sessions_list(study, status, as_json) -> None:
             query = query.where(Study.name == study)
         if status:
             query = query.where(Session.status == status)
-        rows = [
-            dict(
-                zip(("session", "study", "participant", "trial", "phase", "device", "status"), r, strict=True)
-            )
-            for r in orm.execute(query)
-        ]
+        found = orm.execute(query.add_columns(Session.id)).all()
+    versions = metric_versions(catalog, [r[-1] for r in found])
+    columns = ("session", "study", "participant", "trial", "phase", "device", "status")
+    rows = [dict(zip(columns, r[:-1], strict=True), metrics=versions[r[-1]]) for r in found]
     if as_json:
         _json(rows)
         return
-    _print_frame(
-        pd.DataFrame(rows, columns=["session", "study", "participant", "trial", "phase", "device", "status"]),
-        "Sessions",
-    )
+    _print_frame(pd.DataFrame(rows, columns=[*columns, "metrics"]), "Sessions")
+    stale = [r for r in rows if r["metrics"].startswith("stale")]
+    if stale:
+        studies = sorted({r["study"] for r in stale})
+        click.echo(
+            f"{len(stale)} session(s) scored with an older metric registry; rescore: "
+            + "; ".join(f"vascsim score --study {name}" for name in studies)
+        )
 
 
 @sessions.command("show")

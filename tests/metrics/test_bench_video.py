@@ -59,6 +59,12 @@ def test_tracked_path_within_half_a_millimetre_and_metrics_within_two_percent(ca
     measured = metrics_of(tracked.to_streams("bench"))
     expected = metrics_of(SessionStreams("truth", time, truth))
     for name in MOTION:
+        if name == "log_dimensionless_jerk":
+            # Per-movement LDLJ (issue 20) carries the tracked path's in-band error (0.34 mm RMS,
+            # varying over ~0.5 s) into the jerk: -7.78 against -7.47 here. The whole-session form
+            # agreed within 2 % mostly because it measured ln(task time), which both paths share.
+            assert measured[name] == pytest.approx(expected[name], abs=0.4), name
+            continue
         assert measured[name] == pytest.approx(expected[name], rel=0.02), name
     assert measured["movement_count"] == expected["movement_count"]
     assert np.isnan(measured["peak_force"])  # a video has no force

@@ -111,7 +111,7 @@ def test_metrics_of_a_table_without_optional_streams_are_nan_not_guessed():
     streams = SessionStreams("s", t, np.column_stack([minimum_jerk(t, 4, 0.05), 0 * t, 0 * t]))
     values = metrics_of(streams)
     assert values["task_time"] == pytest.approx(4.0)
-    assert values["path_length"] == pytest.approx(0.05, rel=1e-6)
+    assert values["path_length"] == pytest.approx(0.05, rel=1e-5)  # the 6 Hz filtered path
     for name in ("peak_force", "entry_angle_error_deg", "high_stress_area", "peak_stretch", "attempts"):
         assert math.isnan(values[name]), name
 

@@ -147,3 +147,37 @@ def test_cli_declares_and_shows(demo):
     _, home = demo
     shown = _cli(home, "studies", "analysis", DEMO_STUDY).stdout
     assert "declared analysis version 1" in shown and "percentile:75" in shown
+
+
+def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
+    """A registry version bump: old results are shown as stale, left out with a note, and rescored."""
+    from sqlalchemy import update
+
+    from metrics.registry import REGISTRY_VERSION
+    from sessions.models import MetricResult, Session
+
+    home = tmp_path
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    run_demo(
+        catalog,
+        home,
+        DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=3, retention=False),
+    )
+    with catalog.session() as orm:
+        old = orm.scalar(select(Session).order_by(Session.id).limit(1))
+        uid = old.uid
+        orm.execute(
+            update(MetricResult).where(MetricResult.session_id == old.id).values(registry_version="2")
+        )
+    listed = json.loads(_cli(home, "sessions", "list", "--json").stdout)
+    assert {r["session"]: r["metrics"] for r in listed}[uid] == "stale (v2)"
+    assert sum(r["metrics"] == "current" for r in listed) == len(listed) - 1
+    text = _cli(home, "sessions", "list").stdout
+    assert f"rescore: vascsim score --study {DEMO_STUDY}" in text
+    analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert any("older registry version" in note and uid in note for note in analysis.notes)
+    _cli(home, "score", "--study", DEMO_STUDY)
+    listed = json.loads(_cli(home, "sessions", "list", "--json").stdout)
+    assert all(r["metrics"] == "current" for r in listed), listed
+    assert REGISTRY_VERSION == "3"
+    catalog.close()
