@@ -268,6 +268,13 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         "table": records(table),
         "notes": list(analysis.validity.notes) + list(analysis.notes),
         "composite": composite_summary(analysis.validity.composite),
+        "concurrent": None
+        if analysis.concurrent is None
+        else {
+            "rating": analysis.concurrent.rating_col,
+            "table": records(analysis.concurrent.table),
+            "notes": analysis.concurrent.notes,
+        },
         "skilled_group": settings.skilled_group,
         "synthetic": analysis.synthetic,
         "boxes": boxes,

@@ -288,6 +288,9 @@ demonstrate the pipeline; they are not evidence about people.</p>{% endif %}
 <p>{{ composite_text }}</p>
 {{ composite_table }}
 <p><img src="{{ roc }}" alt="ROC curves"></p>
+{% if concurrent_table %}<h2>Concurrent validity</h2>
+<ul>{% for note in concurrent_notes %}<li>{{ note }}</li>{% endfor %}</ul>
+{{ concurrent_table }}{% endif %}
 <h2>Proficiency benchmarks</h2>
 {{ benchmark_table }}
 <h2>Trainees</h2>
@@ -367,6 +370,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "learning_curves.csv": analysis.learning_curves,
         "registry.csv": REGISTRY.describe(),
     }
+    concurrent = analysis.concurrent
+    if concurrent is not None:
+        csv["concurrent_validity.csv"] = concurrent.table
     if analysis.validity.composite is not None:
         csv["composite_scores.csv"] = analysis.validity.composite.scores
         csv["composite_weights.csv"] = analysis.validity.composite.weights.rename_axis("metric").reset_index()
@@ -398,6 +404,8 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "box_plots": box_plots,
         "composite_text": composite_text,
         "composite_table": _html_table(weights),
+        "concurrent_table": _html_table(concurrent.table) if concurrent is not None else "",
+        "concurrent_notes": concurrent.notes if concurrent is not None else [],
         "roc": roc,
         "benchmark_table": _html_table(analysis.benchmarks),
         "trainee_table": _html_table(trainees),
@@ -431,6 +439,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         f"![ROC]({roc})",
         "",
     ]
+    if concurrent is not None:
+        lines += ["## Concurrent validity", "", *[f"- {n}" for n in concurrent.notes], ""]
+        lines += [_markdown_table(concurrent.table), ""]
     lines += ["## Proficiency benchmarks", "", _markdown_table(analysis.benchmarks), ""]
     lines += ["## Trainees", "", _markdown_table(trainees), ""]
     lines += [f"![learning curve]({p})" for p in learning] + [""]

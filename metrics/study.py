@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from metrics.concurrent import ConcurrentValidityResult, concurrent_validity
 from metrics.learning import cusum, fit_learning_curve, retention
 from metrics.proficiency import assess_proficiency, proficiency_benchmarks, trials_to_proficiency
 from metrics.registry import REGISTRY
@@ -34,6 +35,7 @@ class StudySettings:
     benchmark_rule: str = "mean"
     benchmark_metrics: tuple[str, ...] | None = None  # default: the discriminating metrics
     consecutive_passes: int = 2
+    rating_col: str | None = None  # a continuous rating for concurrent validity (e.g. "grs_total")
     learning_model: str = "power"
     cusum_p0: float = 0.2
     cusum_p1: float = 0.5
@@ -53,6 +55,7 @@ class StudyAnalysis:
     learning_curves: pd.DataFrame  # per trainee and benchmark metric
     synthetic: bool = False
     notes: list[str] = field(default_factory=list)
+    concurrent: ConcurrentValidityResult | None = None
 
 
 def practice_mask(table: pd.DataFrame) -> pd.Series:
@@ -109,8 +112,22 @@ def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) ->
     synthetic = (
         bool(table["synthetic"].fillna(False).astype(bool).any()) if "synthetic" in table.columns else False
     )
+    concurrent = None
+    if settings.rating_col is not None:
+        if settings.rating_col not in table.columns or table[settings.rating_col].notna().sum() == 0:
+            notes.append(f"No concurrent validity: no session has a value in '{settings.rating_col}'.")
+        else:
+            concurrent = concurrent_validity(
+                table[practice],
+                settings.rating_col,
+                settings.cluster_col,
+                validity.table["metric"].tolist(),
+                settings.alpha,
+                settings.n_boot,
+                settings.seed,
+            )
     return StudyAnalysis(
-        settings, table, validity, benchmarks, proficiency, trainees, curves, synthetic, notes
+        settings, table, validity, benchmarks, proficiency, trainees, curves, synthetic, notes, concurrent
     )
 
 

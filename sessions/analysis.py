@@ -32,6 +32,7 @@ DECLARABLE = (
     "benchmark_rule",
     "benchmark_metrics",
     "consecutive_passes",
+    "rating_col",
     "learning_model",
     "alpha",
 )
@@ -70,6 +71,10 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
         elif name in ("consecutive_passes",):
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise CatalogError(f"{what}: consecutive_passes must be a whole number >= 1; got {value!r}")
+            values[name] = value
+        elif name == "rating_col":
+            if value is not None and (not isinstance(value, str) or not value):
+                raise CatalogError(f"{what}: rating_col must be a column name or null; got {value!r}")
             values[name] = value
         elif name == "alpha":
             if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0 < value < 1:

@@ -384,11 +384,14 @@ def studies_add(name: str, description: str) -> None:
 @click.option(
     "--consecutive", type=int, default=None, help="Consecutive passes that make a trainee proficient."
 )
+@click.option("--rating", default=None, help="Continuous rating for concurrent validity, e.g. grs_total.")
 @click.option("--by", "author", default=None, help="Who declares this version (default: the login name).")
 @click.option("--note", default="", help="Why this version.")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @user_errors
-def studies_analysis(study, groups, level, metric_names, rule, consecutive, author, note, as_json) -> None:
+def studies_analysis(
+    study, groups, level, metric_names, rule, consecutive, rating, author, note, as_json
+) -> None:
     """Show a study's declared analysis and its versions, or declare a new version.
 
     With no option it prints what every report, the dashboard and exports use. Any option
@@ -402,6 +405,8 @@ def studies_analysis(study, groups, level, metric_names, rule, consecutive, auth
 
     catalog, _ = _catalog()
     changes = _analysis_options(groups, level, metric_names, rule, consecutive)
+    if rating is not None:
+        changes["rating_col"] = rating
     if changes:
         current, _, _ = declared_settings(catalog, study)
         version = declare_analysis(
@@ -748,9 +753,12 @@ def score(uids, study, as_json) -> None:
 )
 @click.option("--metrics", "metric_names", default=None, help="Override: comma-separated primary metrics.")
 @click.option("--rule", default=None, help="Override: benchmark rule, mean, median or percentile:Q.")
+@click.option(
+    "--rating", default=None, help="Override: a continuous rating for concurrent validity, e.g. grs_total."
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
 @user_errors
-def report(study, out, groups, level, metric_names, rule, as_json) -> None:
+def report(study, out, groups, level, metric_names, rule, rating, as_json) -> None:
     """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures).
 
     The analysis is the one the study declared (`vascsim studies analysis STUDY` shows it), the
@@ -764,6 +772,8 @@ def report(study, out, groups, level, metric_names, rule, as_json) -> None:
 
     catalog, home = _catalog()
     overrides = _analysis_options(groups, level, metric_names, rule)
+    if rating is not None:
+        overrides["rating_col"] = rating
     with _stderr_console().status("analysing and writing the report..."):
         analysis, source = analyse_catalog_study(catalog, study, overrides)
         page = write_report(analysis, Path(out) if out else home / "reports" / study, title=f"Study {study}")
@@ -776,6 +786,9 @@ def report(study, out, groups, level, metric_names, rule, as_json) -> None:
                 "validity": analysis.validity.table.to_dict(orient="records"),
                 "benchmarks": analysis.benchmarks.to_dict(orient="records"),
                 "proficiency": analysis.proficiency.to_dict(orient="records"),
+                "concurrent": None
+                if analysis.concurrent is None
+                else analysis.concurrent.table.to_dict(orient="records"),
             }
         )
         return

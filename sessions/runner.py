@@ -210,6 +210,35 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
     return values
 
 
+def _with_ratings(catalog: Catalog, study_name: str, wide: pd.DataFrame) -> pd.DataFrame:
+    """Continuous labels for concurrent validity: years of experience, and per instrument the mean
+    over raters of each session's total (column ``<instrument>_total``, e.g. ``grs_total``)."""
+    from sessions.models import Rating
+
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        years = dict(
+            orm.execute(
+                select(Participant.code, Participant.years_experience).where(Participant.study_id == study.id)
+            ).all()
+        )
+        totals = orm.execute(
+            select(Session.uid, Rating.instrument, Rating.score)
+            .join(Rating, Rating.session_id == Session.id)
+            .join(Participant, Session.participant_id == Participant.id)
+            .where(Participant.study_id == study.id, Rating.item == "total")
+        ).all()
+    wide["years_experience"] = wide["participant_id"].map(years).astype(float)
+    if totals:
+        frame = pd.DataFrame(totals, columns=["session_id", "instrument", "score"])
+        frame["column"] = (
+            frame["instrument"].str.lower().str.replace(r"[^a-z0-9]+", "_", regex=True) + "_total"
+        )
+        means = frame.groupby(["session_id", "column"])["score"].mean().unstack("column")
+        wide = wide.join(means, on="session_id")
+    return wide
+
+
 def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
     """One row per scored session of a study: ids, label, trial, phase, synthetic flag, every metric."""
     with catalog.session() as orm:
@@ -245,6 +274,7 @@ def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
     names = [m.name for m in REGISTRY if m.name in wide.columns]
     wide = wide[[*ids, *names]].sort_values(["participant_id", "trial"], kind="stable").reset_index(drop=True)
     wide[names] = wide[names].astype(float)
+    wide = _with_ratings(catalog, study_name, wide)
     wide["trial"] = wide["trial"].astype(int)
     wide["synthetic"] = wide["synthetic"].astype(bool)
     wide.attrs["registry_version"] = REGISTRY_VERSION

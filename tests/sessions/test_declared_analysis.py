@@ -181,3 +181,39 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
     assert all(r["metrics"] == "current" for r in listed), listed
     assert REGISTRY_VERSION == "3"
     catalog.close()
+
+
+def test_concurrent_validity_from_catalogued_ratings(demo):
+    """GRS totals stored as ratings become a column of the study table, and a report against them."""
+    from datetime import datetime
+
+    from sessions.models import Rating, Session
+    from sessions.runner import study_table
+
+    catalog, home = demo
+    with catalog.session() as orm:
+        rows = orm.execute(
+            select(Session.id, Participant.group_label)
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(Study, Participant.study_id == Study.id)
+            .where(Study.name == DEMO_STUDY)
+        ).all()
+        for k, (session_id, group) in enumerate(rows):
+            for rater, offset in (("A", 0.0), ("B", 1.0)):
+                score = (24.0 if group == "expert" else 12.0) + (k % 3) + offset
+                orm.add(
+                    Rating(
+                        session_id=session_id, rater=rater, instrument="GRS", item="total", score=score,
+                        created_at=datetime(2026, 12, 2),
+                    )
+                )  # fmt: skip
+    table = study_table(catalog, DEMO_STUDY)
+    assert table["grs_total"].notna().all() and table["grs_total"].min() >= 12.5  # mean of the two raters
+    data = json.loads(_cli(home, "report", "--study", DEMO_STUDY, "--rating", "grs_total", "--json").stdout)
+    assert data["overridden"] == {"rating_col": {"declared": None, "used": "grs_total"}}
+    concurrent = {row["metric"]: row for row in data["concurrent"]}
+    assert set(concurrent) == set(DEMO_ANALYSIS.metrics)
+    assert all(row["n"] == 6 for row in concurrent.values())  # participants, not sessions
+    assert all(
+        row["rho_ci_low"] is None or row["rho_ci_low"] != row["rho_ci_low"] for row in concurrent.values()
+    )
