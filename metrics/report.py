@@ -208,17 +208,22 @@ def summary_table(analysis: StudyAnalysis) -> pd.DataFrame:
     return table[columns]
 
 
+NO_INTERVAL = "n/a"
+"""What an AUC without an interval carries: the design is too small for one (the notes say why)."""
+
+
 def auc_with_interval(auc: float, low: float, high: float) -> str:
-    """ "0.83 (0.61-0.95)", or the AUC with the reason it has no interval."""
+    """An AUC with its interval, "0.83 (0.61-0.95)", or "1.00 n/a" where the design is too small."""
     if math.isnan(auc):
         return ""
     if math.isnan(low):
-        return f"{auc:.2f} (too few participants for an interval)"
+        return f"{auc:.2f} {NO_INTERVAL}"
     return f"{auc:.2f} ({low:.2f}-{high:.2f})"
 
 
 def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
-    """The headline table for a terminal: direction, medians, oriented AUC with its interval, Holm p, flag."""
+    """The headline table for a terminal: direction, medians, oriented AUC with its interval, Holm p, flag
+    (read with :func:`compact_caption`)."""
     groups = analysis.settings.groups
     table = summary_table(analysis)
     return pd.DataFrame(
@@ -226,14 +231,28 @@ def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
             "metric": table["metric"],
             "unit": table["unit"],
             "better": table["better"],
-            f"median {groups[0]}": table[f"median_{groups[0]}"],
-            f"median {groups[1]}": table[f"median_{groups[1]}"],
-            f"AUC, {analysis.settings.skilled_group} better (95 % CI)": [
+            str(groups[0]): [_short(v) for v in table[f"median_{groups[0]}"]],
+            str(groups[1]): [_short(v) for v in table[f"median_{groups[1]}"]],
+            "AUC (95% CI)": [
                 auc_with_interval(*v) for v in table[["auc", "auc_ci_low", "auc_ci_high"]].to_numpy()
             ],
-            "Holm p": table["p_holm"],
-            "discriminates": table["discriminates"],
+            "Holm p": [_short(v) for v in table["p_holm"]],
+            "flag": table["discriminates"],
         }
+    )
+
+
+def _short(value: float) -> str:
+    return "" if value != value else f"{value:.3g}"
+
+
+def compact_caption(analysis: StudyAnalysis) -> str:
+    skilled = analysis.settings.skilled_group
+    groups = " and ".join(map(str, analysis.settings.groups))
+    return (
+        f"{groups}: participant medians. AUC: probability that {'an' if skilled[:1] in 'aeiou' else 'a'} "
+        f"{skilled} participant does better (1 = perfect, 0.5 = none); {NO_INTERVAL}: too few participants "
+        "for an interval. flag: discriminates after Holm."
     )
 
 

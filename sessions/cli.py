@@ -15,6 +15,7 @@ from typing import Any
 
 import click
 import numpy as np
+import pandas as pd
 
 from sim.errors import VascsimError
 
@@ -212,20 +213,25 @@ def _stderr_console():
     return Console(stderr=True)
 
 
-def _print_frame(frame, title: str) -> None:
+def _print_frame(frame, title: str, caption: str | None = None) -> None:
+    from rich import box
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=title)
-    for column in frame.columns:
-        table.add_column(str(column))
+    table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True)
+    for k, column in enumerate(frame.columns):
+        # names are never cut and no value ends in an ellipsis: a short value keeps its width, a long
+        # one wraps at its spaces ("0.83" over "(0.61-0.95)")
+        widest = max([len(_cell(v)) for v in frame[column]] or [0])
+        short = max([len(part) for v in frame[column] for part in _cell(v).split()] or [0])
+        table.add_column(str(column), no_wrap=k == 0, overflow="fold", min_width=min(widest, max(short, 4)))
     for row in frame.itertuples(index=False):
         table.add_row(*[_cell(v) for v in row])
     Console().print(table)
 
 
 def _cell(value) -> str:
-    if value is None:
+    if value is None or value is pd.NA:
         return ""
     if isinstance(value, float):
         return "" if value != value else f"{value:.4g}"
@@ -264,7 +270,7 @@ def demo(small: bool, as_json: bool) -> None:
     report (HTML, Markdown, CSV, figures). Re-running replaces the previous demo
     study; participants are labelled synthetic everywhere.
     """
-    from metrics.report import compact_summary, composite_summary, summary_table
+    from metrics.report import compact_caption, compact_summary, composite_summary, summary_table
     from sessions.demo import DEMO_STUDY, DemoSize, run_demo
 
     catalog, home = _catalog()
@@ -297,7 +303,9 @@ def demo(small: bool, as_json: bool) -> None:
         )
         return
     _print_frame(
-        summary, f"Construct validity, {groups[0]} vs {groups[1]}, participant level (SYNTHETIC participants)"
+        summary,
+        f"Construct validity, {groups[0]} vs {groups[1]}, participant level (SYNTHETIC participants)",
+        compact_caption(analysis),
     )
     _print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)")
     for note in validity.notes + analysis.notes:
