@@ -146,7 +146,7 @@ def test_beating_the_experts_on_a_lower_is_better_metric_reads_better(demo_site)
         _sign_in(page, base, "supervisor")
         page.goto(f"{base}/sessions/{own}")
         row = page.locator("#metrics tbody tr", has_text="task_time").first
-        verdict = row.locator("td").last.locator("span")
+        verdict = row.locator("td.verdict span")
         assert verdict.inner_text() == "better"
         colour = verdict.evaluate("(e) => getComputedStyle(e).color")
         failure = page.evaluate(
