@@ -12,6 +12,7 @@ refusal is logged with the station, session and reason.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import logging
@@ -60,6 +61,7 @@ class _Journal:
     def __init__(self, path: Path, schema: pa.Schema) -> None:
         self.path, self.schema = path, schema
         self.last_sequence, self.last_time = -1, -math.inf
+        self.digests: dict[int, bytes] = {}  # sequence -> SHA-256 of the stored batch message
         self._closing = threading.Lock()
         if path.exists():  # after a restart the journal is the truth
             self._replay()
@@ -70,7 +72,8 @@ class _Journal:
 
     def _replay(self) -> None:
         """Read back what was accepted; cut a batch torn by a crash so appends stay readable."""
-        source = pa.OSFile(str(self.path), "rb")
+        data = self.path.read_bytes()
+        source = pa.BufferReader(data)
         good = 0
         try:
             reader = ipc.open_stream(source)
@@ -81,6 +84,7 @@ class _Journal:
                 except StopIteration:
                     break
                 self.last_sequence = int(item.custom_metadata[b"sequence"])
+                self.digests[self.last_sequence] = hashlib.sha256(data[good : source.tell()]).digest()
                 if item.batch.num_rows:
                     self.last_time = float(item.batch.column(0)[-1].as_py())
                 good = source.tell()
@@ -103,6 +107,7 @@ class _Journal:
         self._sink.write(message)
         self._sink.flush()
         self.last_sequence = sequence
+        self.digests[sequence] = hashlib.sha256(message).digest()
         if batch.num_rows:
             self.last_time = float(batch.column(0)[-1].as_py())
 
@@ -221,6 +226,9 @@ class _RemoteSession:
             )
         header = json.loads(header_path.read_text())
         self.closed_counts: dict[str, int] | None = None
+        # after a close in this process: what each stored batch was (a closed session's journals are
+        # gone after a restart, and a resent batch is then answered as a duplicate unchecked)
+        self.closed_digests: dict[str, dict[int, bytes]] = {}
         self.journals: dict[str, _Journal] = {}
         if header.get("status") != "recording":
             self.closed_counts = dict(header.get("remote", {}).get("batches", {}))
@@ -303,12 +311,24 @@ class IngestStore:
         with session.lock:
             if session.closed_counts is not None:
                 if sequence < session.closed_counts.get(stream, 0):
+                    known = session.closed_digests.get(stream, {}).get(sequence)
+                    if known is not None and known != hashlib.sha256(message).digest():
+                        raise RemoteError(
+                            409,
+                            f"{stream} batch {sequence} was stored with different content before the close",
+                        )
                     return {"stream": stream, "ack": sequence, "duplicate": True}, None
                 raise RemoteError(
                     409, f"session {session_id} is closed; {stream} batch {sequence} comes too late"
                 )
             journal = session.journals[stream]
             if sequence <= journal.last_sequence:  # stored: durable once the journal is synced
+                if journal.digests.get(sequence) != hashlib.sha256(message).digest():
+                    raise RemoteError(
+                        409,
+                        f"{stream} batch {sequence} was already stored with different content; "
+                        "a sequence number names one batch",
+                    )
                 return {"stream": stream, "ack": sequence, "duplicate": True}, journal
             if sequence != journal.last_sequence + 1:
                 raise RemoteError(
@@ -334,10 +354,19 @@ class IngestStore:
                 422,
                 f"unknown schema version {header['schema_version']!r}; this server reads {SCHEMA_VERSION}",
             )
+        _refuse_non_finite(header, "the session header")
         session = self.session(station, session_id)
         with session.lock:
             if session.closed_counts is not None:
                 raise RemoteError(409, f"session {session_id} is closed; its header can no longer change")
+            current = json.loads((session.directory / HEADER_FILE).read_text())
+            if "received_unix" in current:  # the station's header is already stored
+                sent = {k: v for k, v in header.items() if k != "schema_version"}
+                kept = {k: current.get(k) for k in sent}
+                extra = set(current) - set(sent) - _SERVER_HEADER_KEYS
+                if kept == sent and not extra:
+                    return {"header": True, "duplicate": True}
+                raise RemoteError(409, f"session {session_id} already has a header; it is not replaced")
             stored = {
                 **header,
                 "schema_version": SCHEMA_VERSION,
@@ -379,12 +408,34 @@ class IngestStore:
                 raise RemoteError(409, f"session {session_id} cannot close yet ({detail})")
             session.close_files()
             header = finalize(session.directory, status, {"remote": {"batches": counts}})
+            session.closed_digests = {stream: journal.digests for stream, journal in session.journals.items()}
             session.journals, session.closed_counts = {}, dict(counts)
         return {
             "closed": True,
             "duplicate": False,
             "rows": {"samples": header["samples"]["rows"], "events": header["events"]["rows"]},
         }
+
+
+_SERVER_HEADER_KEYS = frozenset(
+    {"schema_version", "status", "station", "session", "received_unix", "flush_interval_s"}
+)
+
+
+def _no_constant(name: str) -> Any:
+    raise RemoteError(422, f"body holds {name}, which is not a JSON number")
+
+
+def _refuse_non_finite(value: Any, what: str) -> None:
+    """NaN and infinities are not JSON: a header holding them is refused, never stored."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise RemoteError(422, f"{what} holds {value}, which is not a JSON number")
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _refuse_non_finite(item, f"{what}[{key!r}]")
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            _refuse_non_finite(item, f"{what}[{index}]")
 
 
 def create_app(store: IngestStore):
@@ -417,7 +468,7 @@ def create_app(store: IngestStore):
 
     async def read_json(request: Request) -> Any:
         try:
-            return json.loads(await read_body(request, MAX_HEADER_BYTES))
+            return json.loads(await read_body(request, MAX_HEADER_BYTES), parse_constant=_no_constant)
         except (json.JSONDecodeError, UnicodeDecodeError) as error:
             raise RemoteError(422, f"body is not JSON: {error}") from error
 
@@ -478,7 +529,7 @@ def create_app(store: IngestStore):
 
     async def text_frame(station: str, session_id: str, text: str | None) -> dict[str, Any]:
         try:
-            request = json.loads(text or "")
+            request = json.loads(text or "", parse_constant=_no_constant)
         except json.JSONDecodeError as error:
             raise RemoteError(422, f"text frame is not JSON: {error}") from error
         op = request.get("op") if isinstance(request, dict) else None
@@ -551,11 +602,24 @@ def create_app(store: IngestStore):
                     if pending is not None:
                         pending.add_done_callback(_outcome_unread)
 
+    from starlette.exceptions import HTTPException
+
+    async def http_error(request: Request, error: HTTPException) -> JSONResponse:
+        """Routing errors (404, 405 with its Allow header) in the one error shape."""
+        return JSONResponse(
+            {"error": str(error.detail)}, status_code=error.status_code, headers=error.headers
+        )
+
+    async def server_error(request: Request, error: Exception) -> JSONResponse:
+        log.exception("ingest request %s %s failed", request.method, request.url.path)
+        return JSONResponse({"error": f"internal error: {type(error).__name__}"}, status_code=500)
+
     return Starlette(
         routes=[
             Route("/api/sessions/{session_id}/header", header, methods=["PUT"]),
             Route("/api/sessions/{session_id}/close", close, methods=["POST"]),
             Route("/api/sessions/{session_id}/{stream}/{sequence}", batches, methods=["POST"]),
             WebSocketRoute("/api/sessions/{session_id}/ws", websocket_stream),
-        ]
+        ],
+        exception_handlers={HTTPException: http_error, Exception: server_error},
     )

@@ -107,6 +107,17 @@ def decode_batch(stream: str, sequence: int, body: bytes) -> tuple[pa.RecordBatc
         batch.validate(full=True)
     except pa.ArrowInvalid as error:
         raise RemoteError(422, f"malformed {stream} batch: {error}") from error
+    for index, field in enumerate(schema):
+        # Arrow does not hold data to a field's declared nullability; a null stored here would make
+        # the session's Parquet unwritable at close, so it never gets in
+        nulls = batch.column(index).null_count
+        if nulls and not field.nullable:
+            raise RemoteError(
+                422, f"{field.name} is declared non-null; this {stream} batch has {nulls} null(s)"
+            )
+    times = float_values(batch.column(0))
+    if times.size > 1 and np.any(np.diff(times) < 0):
+        raise RemoteError(422, f"{stream} batch {sequence}: time goes backwards inside the batch")
     for index in _FINITE[stream]:
         column = batch.column(index)
         if column.null_count or not np.isfinite(float_values(column)).all():

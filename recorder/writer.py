@@ -59,7 +59,7 @@ def sha256_of(path: Path) -> str:
 def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
     temporary = path.with_suffix(path.suffix + ".tmp")
     with open(temporary, "w") as handle:
-        json.dump(data, handle, indent=2, sort_keys=True)
+        json.dump(data, handle, indent=2, sort_keys=True, allow_nan=False)  # NaN is not JSON
         handle.flush()
         os.fsync(handle.fileno())
     os.replace(temporary, path)
