@@ -360,7 +360,7 @@ def change_user(request: Request, user_id: Id, body: UserChange, viewer: Admin) 
         if body.role is not None:
             user.role = accounts.check_role(body.role)
         if body.active is not None:
-            user.active = body.active
+            accounts.set_active(orm, user, body.active)
         if body.password is not None:
             accounts.set_password(orm, user, body.password)
         return _user_record(user, _linked(orm, user.id))

@@ -78,6 +78,14 @@ def set_password(orm: OrmSession, user: User, password: str) -> None:
     orm.execute(delete(LoginSession).where(LoginSession.user_id == user.id))  # signs every browser out
 
 
+def set_active(orm: OrmSession, user: User, active: bool) -> None:
+    """Activate or deactivate an account; deactivation ends every sign-in, so re-activating it later
+    does not bring the old ones back."""
+    user.active = active
+    if not active:
+        orm.execute(delete(LoginSession).where(LoginSession.user_id == user.id))
+
+
 def authenticate(orm: OrmSession, username: str, password: str) -> User | None:
     """The active user with this name and password, or None (same work whether or not the name exists)."""
     user = orm.scalar(select(User).where(User.username == username))

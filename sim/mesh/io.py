@@ -40,6 +40,14 @@ def load_mesh(path: str | Path, reorient: bool = False) -> TetMesh:
             f"mesh file {path} has no linear tetrahedra (cell types: {', '.join(kinds) or 'none'})"
         )
     tets = np.vstack([raw.cells[i].data for i in blocks]).astype(np.int64)
+    n_points = len(raw.points)
+    bad = (tets < 0) | (tets >= n_points)
+    if bad.any():  # before any indexing: -1 would wrap to the last node, N+7 would be an IndexError
+        element = int(np.argmax(bad.any(axis=1)))
+        raise MeshError(
+            f"mesh file {path}: tetrahedron {element} refers to node {int(tets[bad][0])}, but the file "
+            f"has nodes 0..{n_points - 1}"
+        )
     regions = _regions(raw, blocks, len(tets))
     used, tets = np.unique(tets, return_inverse=True)
     tets = tets.reshape(-1, 4)

@@ -151,3 +151,22 @@ def test_only_admins_reach_administration(seeded, client_for, role):
     assert client.delete("/api/stations/1", headers=headers).status_code == 403
     assert client.patch("/api/users/1", json={"active": False}, headers=headers).status_code == 403
     assert client.post("/api/studies", json={"name": "x"}, headers=headers).status_code == 403
+
+
+def test_deactivating_an_account_ends_its_sign_ins_for_good(seeded, client_for):
+    """Issue 23 (7): re-activating a deactivated account brought back its old sign-ins."""
+    admin, csrf = client_for("admin")
+    trainee, _ = client_for("trainee")
+    assert trainee.get("/api/me").status_code == 200
+    users = {u["username"]: u["id"] for u in admin.get("/api/users").json()}
+    headers = {"X-CSRF-Token": csrf}
+    assert (
+        admin.patch(f"/api/users/{users['trainee']}", json={"active": False}, headers=headers).status_code
+        == 200
+    )
+    assert trainee.get("/api/me").status_code == 401
+    assert (
+        admin.patch(f"/api/users/{users['trainee']}", json={"active": True}, headers=headers).status_code
+        == 200
+    )
+    assert trainee.get("/api/me").status_code == 401  # the old cookie stays dead; a new sign-in is needed

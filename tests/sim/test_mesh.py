@@ -161,6 +161,13 @@ def test_load_mesh_errors(tmp_path):
     with pytest.raises(MeshError, match=r"inverted.vtu: mesh element 0 is inverted"):
         load_mesh(inverted)
     assert load_mesh(inverted, reorient=True).volume == pytest.approx(1 / 6)
+    for k, index in enumerate((-1, 4, 4 + 7, 2**40)):  # issue 23 (7): IndexError, or -1 the last node
+        outside = tmp_path / f"outside{k}.vtu"
+        meshio.write(outside, meshio.Mesh(UNIT_TET, [("tetra", np.array([[0, 1, 2, index]]))]))
+        with pytest.raises(
+            MeshError, match=rf"tetrahedron 0 refers to node {index}, but the file has nodes 0..3"
+        ):
+            load_mesh(outside)
     garbage = tmp_path / "garbage.vtu"
     garbage.write_bytes(b"\x00not a mesh")
     with pytest.raises(MeshError, match="could not be read"):
