@@ -354,6 +354,9 @@ def _method_lines(analysis: StudyAnalysis) -> list[str]:
         f"Benchmarks: rule '{s.benchmark_rule}' over {s.skilled_group} participants' medians; a session "
         "passes when every benchmarked metric is at least as good; proficient after "
         f"{s.consecutive_passes} consecutive passes.",
+        "Retention: each trainee's last retention-phase session against the mean of their last "
+        f"{s.retention_baseline} practice sessions, per benchmarked metric by its direction; retained "
+        "when that session passes the benchmarks.",
         f"Learning curves: {s.learning_model} law per trainee and benchmarked metric; "
         "CUSUM on failed sessions "
         f"with acceptable failure rate {s.cusum_p0} and unacceptable {s.cusum_p1} (alpha = beta = 0.1).",

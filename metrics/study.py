@@ -35,6 +35,9 @@ class StudySettings:
     benchmark_rule: str = "mean"
     benchmark_metrics: tuple[str, ...] | None = None  # default: the discriminating metrics
     consecutive_passes: int = 2
+    retention_baseline: int = (
+        2  # retention: the last delayed session against the mean of this many last practice ones
+    )
     rating_col: str | None = None  # a continuous rating for concurrent validity (e.g. "grs_total")
     learning_model: str = "power"
     cusum_p0: float = 0.2
@@ -156,7 +159,10 @@ def _per_trainee(table, practice, proficiency, benchmarks, settings):
             changes = []
             for bench in benchmarks.itertuples():
                 kept = retention(
-                    in_practice[bench.metric], float(delayed[bench.metric].iloc[-1]), bench.better
+                    in_practice[bench.metric],
+                    float(delayed[bench.metric].iloc[-1]),
+                    bench.better,
+                    settings.retention_baseline,
                 )
                 changes.append(kept.worse)
                 record[f"retention_change_{bench.metric}"] = kept.change

@@ -32,6 +32,7 @@ DECLARABLE = (
     "benchmark_rule",
     "benchmark_metrics",
     "consecutive_passes",
+    "retention_baseline",
     "rating_col",
     "learning_model",
     "alpha",
@@ -68,9 +69,9 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
             if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
                 raise CatalogError(f"{what}: {name} must be a list of names; got {value!r}")
             values[name] = tuple(value)
-        elif name in ("consecutive_passes",):
+        elif name in ("consecutive_passes", "retention_baseline"):
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise CatalogError(f"{what}: consecutive_passes must be a whole number >= 1; got {value!r}")
+                raise CatalogError(f"{what}: {name} must be a whole number >= 1; got {value!r}")
             values[name] = value
         elif name == "rating_col":
             if value is not None and (not isinstance(value, str) or not value):

@@ -393,12 +393,18 @@ def studies_add(name: str, description: str) -> None:
     "--consecutive", type=int, default=None, help="Consecutive passes that make a trainee proficient."
 )
 @click.option("--rating", default=None, help="Continuous rating for concurrent validity, e.g. grs_total.")
+@click.option(
+    "--retention-baseline",
+    type=int,
+    default=None,
+    help="Retention: compare the delayed session with the mean of this many last practice sessions.",
+)
 @click.option("--by", "author", default=None, help="Who declares this version (default: the login name).")
 @click.option("--note", default="", help="Why this version.")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @user_errors
 def studies_analysis(
-    study, groups, level, metric_names, rule, consecutive, rating, author, note, as_json
+    study, groups, level, metric_names, rule, consecutive, rating, retention_baseline, author, note, as_json
 ) -> None:
     """Show a study's declared analysis and its versions, or declare a new version.
 
@@ -415,6 +421,8 @@ def studies_analysis(
     changes = _analysis_options(groups, level, metric_names, rule, consecutive)
     if rating is not None:
         changes["rating_col"] = rating
+    if retention_baseline is not None:
+        changes["retention_baseline"] = retention_baseline
     if changes:
         current, _, _ = declared_settings(catalog, study)
         version = declare_analysis(

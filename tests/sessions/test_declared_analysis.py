@@ -132,6 +132,7 @@ def test_declarations_are_versioned_never_edited(tmp_path):
         ({"metrics": ["no_such_metric"]}, "unknown metric 'no_such_metric'"),
         ({"consecutive_passes": 0}, "consecutive_passes must be a whole number"),
         ({"consecutive_passes": True}, "consecutive_passes must be a whole number"),
+        ({"retention_baseline": 0}, "retention_baseline must be a whole number"),
         ({"alpha": float("nan")}, "alpha must be a number between 0 and 1"),
         ({"benchmark_rule": "percentile:0"}, "percentile rule"),
         ({"level": "cohort"}, "level must be"),
@@ -147,6 +148,44 @@ def test_cli_declares_and_shows(demo):
     _, home = demo
     shown = _cli(home, "studies", "analysis", DEMO_STUDY).stdout
     assert "declared analysis version 1" in shown and "percentile:75" in shown
+
+
+def test_what_counts_as_retention_is_declared_and_used(tmp_path):
+    catalog = Catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}")
+    run_demo(catalog, tmp_path, DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=3))
+    before, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    _cli(
+        tmp_path,
+        "studies",
+        "analysis",
+        DEMO_STUDY,
+        "--retention-baseline",
+        "1",
+        "--note",
+        "last session only",
+    )
+    after, source = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert source.version == 2 and after.settings.retention_baseline == 1
+    column = next(c for c in before.trainees.columns if c.startswith("retention_change_"))
+    sessions = after.sessions
+    for row in after.trainees.itertuples():
+        mine = sessions[
+            (sessions["participant_id"] == row.participant_id) & (sessions["phase"] == "practice")
+        ]
+        delayed = sessions[
+            (sessions["participant_id"] == row.participant_id) & (sessions["phase"] == "retention")
+        ]
+        metric = column[len("retention_change_") :]
+        expected = float(delayed[metric].iloc[-1]) - float(mine[metric].iloc[-1])
+        assert getattr(row, column) == pytest.approx(expected)
+    assert any("mean of their last 1 practice sessions" in line for line in _method(after))
+    catalog.close()
+
+
+def _method(analysis):
+    from metrics.report import _method_lines
+
+    return _method_lines(analysis)
 
 
 def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
