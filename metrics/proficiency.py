@@ -43,6 +43,11 @@ def _rule_value(values: np.ndarray, rule: str, better: str) -> float:
     raise MetricsError(f"benchmark rule must be 'mean', 'median' or 'percentile:Q'; got {rule!r}")
 
 
+def check_rule(rule: str) -> None:
+    """MetricsError unless ``rule`` is a benchmark rule this module knows."""
+    _rule_value(np.array([1.0, 2.0]), rule, "lower")
+
+
 def proficiency_benchmarks(
     table: pd.DataFrame,
     metrics: Sequence[str],

@@ -209,7 +209,8 @@ def _level_note(level: str, n_participants: dict[str, int], n_sessions: dict[str
         return f"Analysis at participant level (median of each participant's sessions); {counts}."
     return (
         f"Analysis at trial level on request ({counts}): p-values treat sessions as independent and so "
-        "overstate the evidence; AUC intervals resample participants."
+        "overstate the evidence, so a metric is flagged only when the test permuting labels across "
+        "participants agrees; AUC intervals count participants."
     )
 
 

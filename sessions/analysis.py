@@ -91,7 +91,7 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
 
 
 def _check(settings: StudySettings, what: str) -> None:
-    from metrics.proficiency import _rule_value
+    from metrics.proficiency import check_rule
     from metrics.registry import REGISTRY
 
     if len(settings.groups) != 2 or settings.groups[0] == settings.groups[1]:
@@ -104,7 +104,7 @@ def _check(settings: StudySettings, what: str) -> None:
         for names in (settings.metrics or (), settings.benchmark_metrics or ()):
             for name in names:
                 REGISTRY[name]  # the error lists every known metric
-        _rule_value(pd.Series([1.0, 2.0]).to_numpy(), settings.benchmark_rule, "lower")
+        check_rule(settings.benchmark_rule)
     except MetricsError as error:
         raise CatalogError(f"{what}: {error}") from None
 
