@@ -1,27 +1,27 @@
 """Tissue streams of a simulator session, derived from what was recorded and the task's tissue model.
 
-The runtime records, every haptic tick, the needle tip, its speed, the needle state
-and the nominated triangle with the barycentric weights of the contact point. While
-the needle indents that triangle (state ``contact``) those determine the tissue's
-state exactly: the runtime drove the triangle's nodes to ``b_k d`` with ``d`` the
-tip's displacement from the contact point on the undeformed surface. From them and
-the same tissue model this module derives:
+The runtime streams ``local_stress`` and ``stretch`` live, at the FEM layer's rate, whenever
+the needle touches or is inside the tissue. It also records, every haptic tick, the needle
+tip, its speed, the needle state and the nominated triangle with the barycentric weights of
+the contact point, and the header records the needle-force law (:func:`session_forces`). While
+the needle indents that triangle (state ``contact``) those determine the tissue's state
+exactly, so this module derives from them, with the same tissue model and the same code the
+runtime used (the force kernel of :mod:`sim.needle_load`, or the paper's barycentric drive
+``b_k d`` for sessions recorded under it):
 
-- ``stretch``: the paper's stretch statistic lambda = 1 + |d| / h (h: wall depth under
-  the contact, as the biphase model uses it), per tick of indentation;
-- ``local_stress``: the largest von Mises stress (Pa) of the elements within
-  :data:`NEAR_CONTACT_M` of the contact point, per tick of indentation;
-- ``stress_field``: von Mises stress of every exterior triangle (centre, area) at
-  the last tick of indentation before the first pierce, the moment of insertion.
-
-Outside indentation (free, or with the needle through the wall) both per-tick
-streams are NaN: the stretch statistic is defined for indentation, and a pierced
-needle's load depends on its whole shape, which is not recorded.
+- ``stretch``: the stretch statistic lambda = 1 + |d| / h (h: wall depth under the contact,
+  as the biphase model uses it), per tick of indentation;
+- ``local_stress``: the largest von Mises stress (Pa) near the contact, per tick of
+  indentation (for sessions that did not stream it; for those that did, the derivation is
+  the test oracle of the live stream);
+- ``stress_field``: von Mises stress of every exterior triangle (centre, area) at the last
+  tick of indentation before the first pierce, the moment of insertion.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -30,9 +30,16 @@ from numpy.typing import NDArray
 from metrics.streams import SessionStreams
 from sim.fem import BiphaseTissue, TissueModel
 from sim.fem.fields import IndentationStress, TissueFieldReplay, contact_depth
+from sim.needle import Needle
+from sim.needle_forces import NeedleForces
+from sim.needle_load import KernelLoad, kernel_factory
 
 NEAR_CONTACT_M = 0.002
-"""Elements whose centroid lies within 2 mm of the contact point count as "near the contact"."""
+"""With the paper's rule, elements whose centroid lies within 2 mm of the contact point count as "near
+the contact" (the force kernel's local stress is that of the elements within 1 mm, as the runtime
+streams it)."""
+WIRE_RADIUS = 0.5 * Needle.curved().wire_diameter
+"""The runner's needle (a 0.25 mm wire)."""
 CONTACT_STATE = 1
 PIERCED_STATE = 2
 
@@ -56,46 +63,67 @@ def indentation_runs(streams: SessionStreams) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
-def with_tissue_fields(streams: SessionStreams, tissue: Tissue) -> SessionStreams:
+def session_forces(streams: SessionStreams) -> NeedleForces:
+    """The needle-force law a session ran under (its header's ``needle_forces``; sessions recorded
+    before the header said so ran under the source paper's barycentric rule)."""
+    recorded = streams.attributes.get("needle_forces")
+    return NeedleForces.paper() if recorded is None else NeedleForces.from_dict(dict(recorded))
+
+
+@dataclass(frozen=True)
+class _Contact:
+    """A nominated contact as the runtime had it, rebuilt from the recorded triangle and weights."""
+
+    triangle: int
+    nodes: NDArray[np.int64]
+    barycentric: NDArray[np.float64]
+    point: NDArray[np.float64]
+    normal: NDArray[np.float64]
+
+
+def with_tissue_fields(
+    streams: SessionStreams, tissue: Tissue, forces: NeedleForces | None = None
+) -> SessionStreams:
     """The streams with ``stretch``, ``local_stress`` and ``stress_field`` derived (see the module).
 
-    Streams that already carry them, or lack what is needed (needle state, tip, contact
-    triangle and weights, tip speed), are returned unchanged."""
+    forces: the needle-force law the session ran under (default: :func:`session_forces`). Per-tick
+    streams the runtime recorded are kept; only what is missing is derived. Streams that lack what
+    is needed (needle state, tip, contact triangle and weights, tip speed) are returned unchanged."""
     needed = ("needle_state", "tip_position", "contact_triangle", "contact_barycentric", "tip_speed")
     if any(getattr(streams, name) is None for name in needed):
         return streams
-    if streams.stretch is not None or streams.local_stress is not None or streams.stress_field is not None:
+    per_tick_known = streams.stretch is not None or streams.local_stress is not None
+    if per_tick_known and streams.stress_field is not None:
         return streams
-    mesh = tissue.mesh
-    rest = mesh.points
-    centroids = rest[mesh.tets].mean(axis=1)
+    forces = forces or session_forces(streams)
+    indentation = _KernelIndentation if forces.load == "kernel" else _BarycentricIndentation
     n = streams.time.size
     stretch = np.full(n, np.nan)
     local_stress = np.full(n, np.nan)
     stress_field = None
     pierced = np.flatnonzero(streams.needle_state == PIERCED_STATE)
     first_pierce = int(pierced[0]) if pierced.size else None
-    operators: dict[tuple, IndentationStress] = {}
+    models: dict[tuple, object] = {}
+    mesh = tissue.mesh
     for start, stop in indentation_runs(streams):
         triangle = int(streams.contact_triangle[start])
-        nodes = mesh.surface_triangles[triangle]
         weights = streams.contact_barycentric[start]
-        point = weights @ rest[nodes]
-        tool_displacement = streams.tip_position[start:stop] - point
-        stretch[start:stop] = 1.0 + np.linalg.norm(tool_displacement, axis=1) / contact_depth(tissue, nodes)
         key = (triangle, *weights.tolist())
-        if key not in operators:
-            near = np.flatnonzero(np.linalg.norm(centroids - point, axis=1) <= NEAR_CONTACT_M)
-            near = (
-                near if near.size else np.array([int(np.argmin(np.linalg.norm(centroids - point, axis=1)))])
+        if key not in models:
+            nodes = mesh.surface_triangles[triangle]
+            contact = _Contact(
+                triangle, nodes, weights, weights @ mesh.points[nodes], mesh.surface_normals[triangle]
             )
-            operators[key] = IndentationStress(tissue, nodes, weights, near)
+            models[key] = indentation(tissue, contact, forces)
+        model = models[key]
+        tool_displacement = streams.tip_position[start:stop] - model.contact.point
         speed = streams.tip_speed[start:stop]
-        local_stress[start:stop] = operators[key].von_mises(tool_displacement, speed).max(axis=1)
-        if first_pierce is not None and stop == first_pierce:
-            stress_field = insertion_stress_field(
-                tissue, nodes, weights, tool_displacement[-1], float(speed[-1])
-            )
+        if not per_tick_known:
+            stretch[start:stop], local_stress[start:stop] = model.per_tick(tool_displacement, speed)
+        if first_pierce is not None and stop == first_pierce and streams.stress_field is None:
+            stress_field = model.stress_field(tool_displacement[-1], float(speed[-1]))
+    if per_tick_known:
+        return dataclasses.replace(streams, stress_field=stress_field)
     return dataclasses.replace(
         streams,
         stretch=None if np.all(np.isnan(stretch)) else stretch,
@@ -104,17 +132,60 @@ def with_tissue_fields(streams: SessionStreams, tissue: Tissue) -> SessionStream
     )
 
 
-def insertion_stress_field(
-    tissue: Tissue,
-    nodes: NDArray[np.int64],
-    weights: NDArray[np.float64],
-    tool_displacement: NDArray[np.float64],
-    needle_speed: float,
-) -> pd.DataFrame:
-    """Von Mises stress (Pa) of each exterior triangle's element for one indentation state,
-    with the triangle's centre (m) and area (m^2): the table the stress-localisation metrics read."""
-    drive = np.outer(weights, tool_displacement)  # what the runtime drove the triangle's nodes to
-    _, surface = TissueFieldReplay(tissue).state(nodes, drive, needle_speed)
+class _BarycentricIndentation:
+    """The paper's rule: the triangle's nodes driven to b_k d; the stress of the elements within
+    :data:`NEAR_CONTACT_M` from the linear operators of :class:`IndentationStress`."""
+
+    def __init__(self, tissue: Tissue, contact: _Contact, forces: NeedleForces) -> None:
+        self.tissue, self.contact = tissue, contact
+        centroids = tissue.mesh.points[tissue.mesh.tets].mean(axis=1)
+        distance = np.linalg.norm(centroids - contact.point, axis=1)
+        near = np.flatnonzero(distance <= NEAR_CONTACT_M)
+        near = near if near.size else np.array([int(np.argmin(distance))])
+        self.operator = IndentationStress(tissue, contact.nodes, contact.barycentric, near)
+        self.depth = contact_depth(tissue, contact.nodes)
+
+    def per_tick(self, tool_displacement: NDArray, speed: NDArray) -> tuple[NDArray, NDArray]:
+        stretch = 1.0 + np.linalg.norm(tool_displacement, axis=1) / self.depth
+        return stretch, self.operator.von_mises(tool_displacement, speed).max(axis=1)
+
+    def stress_field(self, tool_displacement: NDArray, speed: float) -> pd.DataFrame:
+        drive = np.outer(self.contact.barycentric, tool_displacement)
+        return _surface_table(self.tissue, self.contact.nodes, drive, speed, None)
+
+
+class _KernelIndentation:
+    """The force kernel (:mod:`sim.needle_load`): the same load, share and local-stress operator the
+    runtime built at the first touch, evaluated tick by tick."""
+
+    def __init__(self, tissue: Tissue, contact: _Contact, forces: NeedleForces) -> None:
+        self.tissue, self.contact = tissue, contact
+        self.load = KernelLoad(tissue, kernel_factory(forces, WIRE_RADIUS, [contact]))
+        self.operator = self.load.local_stress(tissue)
+        depth = self.load.depth
+        self.depth = depth if np.isfinite(depth) else contact_depth(tissue, self.load.nodes)
+
+    def _forces(self, d: NDArray, speed: float) -> tuple[NDArray, float]:
+        share = self.load.soft_share(d[None, :], speed)
+        return self.load.elastic_forces(d[None, :], share), share
+
+    def per_tick(self, tool_displacement: NDArray, speed: NDArray) -> tuple[NDArray, NDArray]:
+        stress = np.empty(len(tool_displacement))
+        for k, (d, v) in enumerate(zip(tool_displacement, speed, strict=True)):
+            stress[k] = self.operator.maximum(self._forces(d, float(v))[0].reshape(-1))
+        return 1.0 + np.linalg.norm(tool_displacement, axis=1) / self.depth, stress
+
+    def stress_field(self, tool_displacement: NDArray, speed: float) -> pd.DataFrame:
+        kernel_forces, share = self._forces(tool_displacement, speed)
+        reactions = self.load.nodal_forces(kernel_forces)
+        drive = self.load.equivalent_drive(reactions, share)
+        return _surface_table(self.tissue, self.load.nodes, drive, speed, share)
+
+
+def _surface_table(tissue: Tissue, nodes, drive, speed: float, share: float | None) -> pd.DataFrame:
+    """Von Mises stress (Pa) of each exterior triangle's element for one drive, with the triangle's
+    centre (m) and area (m^2)."""
+    _, surface = TissueFieldReplay(tissue).state(nodes, drive, speed, share)
     corners = tissue.mesh.points[tissue.mesh.surface_triangles]
     centres = corners.mean(axis=1)
     areas = 0.5 * np.linalg.norm(

@@ -54,7 +54,13 @@ class RuntimeRecorder:
         """One scene frame per graphics step: what a replay needs to draw it without re-simulating."""
         drive = fem.contact if fem.state != "free" else None
         self.writer.scene.add(
-            now, STATE_CODES.get(fem.state, 0), fem.tip_speed, fem.needle_force, fem.needle_vertices, drive
+            now,
+            STATE_CODES.get(fem.state, 0),
+            fem.tip_speed,
+            fem.needle_force,
+            fem.needle_vertices,
+            drive,
+            fem.soft_share,
         )
 
     def on_sample(
@@ -72,6 +78,8 @@ class RuntimeRecorder:
                 row[15:18] = fem.tip_tangent
             row[COLUMN["contact_triangle"]] = fem.contact_triangle
             row[22:25] = fem.barycentric
+            row[25] = fem.local_stress  # held between FEM steps: the latest snapshot's
+            row[26] = fem.stretch
             row[COLUMN["pierced"]] = STATE_CODES.get(fem.state, 0)
         row[18:21] = force
         row[COLUMN["grip"]] = sample.buttons & 1

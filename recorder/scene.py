@@ -10,6 +10,7 @@ replay re-simulates instead.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -40,9 +41,15 @@ SCENE_SCHEMA = pa.schema(
         pa.field(
             "drive_intended", pa.list_(pa.float64()), metadata={"unit": "m", "description": "xyz per node"}
         ),
+        pa.field(
+            "drive_soft_share",
+            pa.float64(),
+            metadata={"unit": "1", "description": "biphase soft share of the drive (null: from its strain)"},
+        ),
     ],
     metadata={"stream": "scene"},
 )
+_SCENE_SCHEMA_BEFORE_SHARE = pa.schema(list(SCENE_SCHEMA)[:-1], metadata=SCENE_SCHEMA.metadata)
 
 
 class SceneLog:
@@ -59,6 +66,7 @@ class SceneLog:
         force: NDArray[np.float64],
         needle: NDArray[np.float64],
         drive: tuple[NDArray[np.int64], NDArray[np.float64]] | None,
+        soft_share: float = math.nan,
     ) -> None:
         nodes, intended = (np.zeros(0, np.int32), np.zeros(0)) if drive is None else drive
         self._rows.append(
@@ -70,6 +78,7 @@ class SceneLog:
                 np.asarray(needle, dtype=np.float64).reshape(-1).copy(),
                 np.asarray(nodes, dtype=np.int32).reshape(-1).copy(),
                 np.asarray(intended, dtype=np.float64).reshape(-1).copy(),
+                float(soft_share),
             )
         )
 
@@ -79,8 +88,8 @@ class SceneLog:
     def table(self) -> pa.Table:
         columns = list(zip(*self._rows, strict=True)) if self._rows else [[] for _ in SCENE_SCHEMA]
         arrays = [
-            pa.array(list(column), type=field.type)
-            if field.name in ("time", "state", "tip_speed")
+            pa.array(list(column), type=field.type, from_pandas=True)  # nan share: null (unknown)
+            if field.name in ("time", "state", "tip_speed", "drive_soft_share")
             else pa.array([v.tolist() for v in column], type=field.type)
             for column, field in zip(columns, SCENE_SCHEMA, strict=True)
         ]
@@ -108,4 +117,9 @@ def read_scene(session) -> pa.Table | None:
     record = session.header.get("scene")
     if record is None:
         return None
-    return _read_checked(session.path, SCENE_FILE, record, True, SCENE_SCHEMA)
+    try:
+        return _read_checked(session.path, SCENE_FILE, record, True, SCENE_SCHEMA)
+    except RecorderError:  # recorded before the drive's soft share was: derive it from the drive
+        table = _read_checked(session.path, SCENE_FILE, record, True, _SCENE_SCHEMA_BEFORE_SHARE)
+        share = pa.nulls(table.num_rows, pa.float64())
+        return table.append_column(SCENE_SCHEMA.field("drive_soft_share"), share)

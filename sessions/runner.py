@@ -22,7 +22,7 @@ from recorder.runtime import RuntimeRecorder
 from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
 from sessions.config import data_home
 from sessions.models import MetricResult, Participant, Session, StreamFile, Study
-from sessions.tasks import session_tissue, task_spec, tissue_for
+from sessions.tasks import session_tissue, task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
@@ -51,6 +51,8 @@ def _header(plan: SessionPlan, uid: str, participant: Participant) -> dict:
         "task": plan.task,
         "device": plan.device,
         "clock": plan.clock,
+        "tissue_preset": task_preset(plan.task).name,
+        "needle_forces": task_preset(plan.task).forces.as_dict(),
     }
 
 
@@ -123,7 +125,8 @@ def run_session(
         header = _header(plan, uid, participant)
     writer = SessionWriter(directory, header, flush_interval=0.1)
     tissue = tissue_for(plan.task, home / "cache")
-    simulation = RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device))
+    forces = task_preset(plan.task).forces
+    simulation = RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device, forces=forces))
     try:
         if plan.clock == "simulated":
             simulation.run_simulated(duration)

@@ -26,16 +26,19 @@ TASKS = {
     "wall-stitch": TaskSpec(
         "wall-stitch",
         "wall_patch",
-        "One stitch through a 1.5 mm vessel-wall patch (12 x 10 mm, biphase elastin/collagen, held on three "
-        "sides) near its free wound edge.",
+        "One stitch through a 1.5 mm porcine arterial-wall patch (12 x 10 mm, biphase elastin/collagen, "
+        "held on three sides) near its free wound edge; 0.3 mm cells in the 3.5 x 4 mm stitch region.",
         (0.0105, 0.0051, 0.0015),
         (0.0, 0.0, 1.0),
         (1.0, 0.0, 0.0),
         {
             "size_m": [0.012, 0.01, 0.0015],
-            "cells": [12, 10, 3],
+            "cell_m": 0.001,
+            "stitch_cell_m": 0.0003,
+            "stitch_region_m": [[0.0085, 0.012], [0.0031, 0.0071]],
             "fixed": ["x0", "y0", "y1"],
             "model": "biphase",
+            "tissue": "porcine-artery",
         },
     )
 }
@@ -47,16 +50,48 @@ def task_spec(name: str) -> TaskSpec:
     return TASKS[name]
 
 
+def task_mesh(spec: TaskSpec):
+    """The task's patch mesh: ``stitch_cell_m`` cells over the stitch region (x and y) and through
+    the wall, graded to ``cell_m`` elsewhere, so the needle's force kernel spans 3 cells."""
+    from sim.mesh import grid_box_mesh, refined_coordinates
+
+    p = spec.parameters
+    (length, width, thickness), coarse, fine = p["size_m"], p["cell_m"], p["stitch_cell_m"]
+    (x0, x1), (y0, y1) = p["stitch_region_m"]
+    return grid_box_mesh(
+        refined_coordinates(length, coarse, fine, x0, x1),
+        refined_coordinates(width, coarse, fine, y0, y1),
+        refined_coordinates(thickness, coarse, fine, 0.0, thickness),
+    )
+
+
+def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
+    """Surface nodes in the task's stitch region (x, y box; every depth): the contact candidates."""
+    (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
+    points = mesh.points[mesh.surface_nodes]
+    inside = (points[:, 0] >= x0 - 1e-9) & (points[:, 0] <= x1 + 1e-9)
+    inside &= (points[:, 1] >= y0 - 1e-9) & (points[:, 1] <= y1 + 1e-9)
+    return mesh.surface_nodes[inside]
+
+
+def task_preset(task: str):
+    """The task's tissue preset (:mod:`sim.tissue_presets`): biphase parameters and needle forces."""
+    from sim.tissue_presets import tissue_preset
+
+    return tissue_preset(task_spec(task).parameters.get("tissue", "paper"))
+
+
 @cache
 def tissue_for(task: str, cache_dir: Path | None = None):
-    """The task's precomputed tissue model (built once per process, cached on disk)."""
+    """The task's precomputed tissue model (built once per process, cached on disk): the preset's
+    biphase wall on the task mesh, its condensed inverse over the stitch region's surface nodes."""
     from sim.fem import BiphaseTissue
-    from sim.mesh import box_mesh
 
     spec = task_spec(task)
-    mesh = box_mesh(tuple(spec.parameters["size_m"]), tuple(spec.parameters["cells"]))
+    mesh = task_mesh(spec)
     fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
-    tissue = BiphaseTissue.build(mesh, fixed)
+    candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
+    tissue = BiphaseTissue.build(mesh, fixed, task_preset(task).biphase, contact_nodes=candidates)
     tissue.precompute(cache_dir=cache_dir)
     return tissue
 

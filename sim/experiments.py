@@ -96,3 +96,76 @@ def indentation_curve(
         precompute_seconds=seconds,
         fast_speed=speed,
     )
+
+
+@dataclass(frozen=True)
+class KernelIndentation:
+    """A needle pressed straight into a wall through the force kernel, per depth.
+
+    depth (m) along the inward normal; force (N) normal reaction on the needle; soft_share of the
+    biphase split; local_stress (Pa); pierce_depth (m): the first depth whose force reaches the
+    puncture force (nan if none does); puncture_force (N).
+    """
+
+    depth: NDArray[np.float64]
+    force: NDArray[np.float64]
+    soft_share: NDArray[np.float64]
+    local_stress: NDArray[np.float64]
+    pierce_depth: float
+    puncture_force: float
+    kernel_nodes: int
+
+    def as_dict(self) -> dict[str, object]:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()}
+
+
+def kernel_indentation_curve(
+    tissue,
+    forces,
+    point: ArrayLike,
+    normal: ArrayLike,
+    depths: ArrayLike,
+    wire_radius: float = 1.25e-4,
+    needle_speed: float = 0.0,
+) -> KernelIndentation:
+    """The force-depth curve the runtime's force kernel gives at a surface ``point`` with outward
+    ``normal`` (the same :class:`sim.needle_load.KernelLoad` a first touch builds there)."""
+    from types import SimpleNamespace
+
+    from sim.needle_load import KernelLoad, kernel_factory
+
+    mesh = tissue.mesh
+    n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
+    centroids = mesh.points[mesh.surface_triangles].mean(axis=1)
+    triangle = int(np.argmin(np.linalg.norm(centroids - np.asarray(point), axis=1)))
+    nodes = mesh.surface_triangles[triangle]
+    contact = SimpleNamespace(
+        point=np.asarray(point, dtype=np.float64),
+        normal=n,
+        nodes=nodes,
+        barycentric=np.full(3, 1 / 3),
+        triangle=triangle,
+    )
+    load = KernelLoad(tissue, kernel_factory(forces, wire_radius, [contact]))
+    stress = load.local_stress(tissue)
+    levels = np.asarray(depths, dtype=np.float64)
+    force, share, local = [], [], []
+    for depth in levels:
+        d = (-depth * n)[None, :]
+        s = load.soft_share(d, needle_speed)
+        kernel_force = load.elastic_forces(d, s)
+        force.append(-float(kernel_force.sum(axis=0) @ n))  # the tissue pushes the needle back out
+        share.append(s)
+        local.append(stress.maximum(kernel_force.reshape(-1)))
+    force_array = np.array(force)
+    threshold = forces.puncture_force if forces.puncture_force is not None else np.inf
+    reached = np.flatnonzero(force_array >= threshold)
+    return KernelIndentation(
+        levels,
+        force_array,
+        np.array(share),
+        np.array(local),
+        float(levels[reached[0]]) if reached.size else float("nan"),
+        float(threshold),
+        len(load.nodes),
+    )

@@ -16,18 +16,25 @@ Three entry points, called by the multi-rate loop at their own rates:
 States: ``free`` -> ``contact`` -> ``pierced`` -> ``exited`` -> ``free`` (pulled
 through). Every transition is a :class:`NeedleEvent`.
 
-Piercing (defaults in :class:`PiercingRules`): a needle in contact pierces when
-its entry angle (tip tangent against the inward surface normal; 0 deg is
-perpendicular) is at most ``max_entry_angle_deg`` and the stress at its tip (the
-normal reaction over the wire's cross-section) reaches ``puncture_stress``. With
-the biphase model a faster needle meets the stiff phase sooner (its strain limit
-falls with speed), reaches the puncture stress at a shallower depth and so
-pierces sooner: a decisive needle pierces.
+How the needle loads the tissue and what resists it after piercing is set by
+:class:`sim.needle_forces.NeedleForces`: by default a mesh-independent force kernel
+around the tip with the wire's near field (:mod:`sim.fem.kernel`), a force-based
+puncture threshold, then cutting, friction and the far wall's emergence peak along
+the needle; ``NeedleForces.paper()`` is the source paper's barycentric rule.
 
-After piercing, the tissue holds the needle where it crosses the entry (and,
-once out, the exit) triangle: the needle slides freely along its own axis, and
-its sideways offset from the entry point drives the triangle's nodes. Levering
-the needle instead of rotating it along its curve therefore loads the wall.
+Piercing (angle and grasp in :class:`PiercingRules`): a needle in contact pierces
+when its entry angle (tip tangent against the inward surface normal; 0 deg is
+perpendicular) is at most ``max_entry_angle_deg`` and the normal force reaches the
+puncture force (or, with the paper's rule, the stress at its tip, the normal
+reaction over the wire's cross-section, reaches ``puncture_stress``). With the
+biphase model a faster needle meets the stiff phase sooner (its strain limit falls
+with speed), reaches the puncture threshold at a shallower depth and so pierces
+sooner: a decisive needle pierces.
+
+After piercing, the tissue holds the needle where it crosses the entry (and, once
+out, the exit) surface: its sideways offset from the entry point loads the wall
+there, and along its own axis it meets the passage forces. Levering the needle
+instead of rotating it along its curve therefore loads the wall.
 """
 
 from __future__ import annotations
@@ -42,7 +49,10 @@ from numpy.typing import NDArray
 from sim.collision.mesh import CollisionMesh, TriangleContact, segment_ends
 from sim.errors import VascsimError
 from sim.fem import BiphaseTissue, TissueModel
+from sim.fem.fields import LocalStress, contact_depth
 from sim.needle import Needle, Pose
+from sim.needle_forces import NeedleForces
+from sim.needle_load import KernelLoad, kernel_factory
 
 EVENT_KINDS = (
     "contact_start",
@@ -53,6 +63,7 @@ EVENT_KINDS = (
     "release",
     "regrab",
     "implausible_hit",
+    "overstress",
 )
 
 
@@ -146,10 +157,26 @@ class NeedleInteraction:
         rules: PiercingRules | None = None,
         collision: CollisionMesh | None = None,
         grasp: Pose | None = None,
+        forces: NeedleForces | None = None,
     ) -> None:
         self.tissue = tissue
         self.needle = needle
         self.rules = rules or PiercingRules()
+        self.forces = forces or NeedleForces()
+        self._load: KernelLoad | None = None  # the kernels' stiffness for the current contact set
+        self._load_key: tuple = ()
+        self.soft_share = math.nan
+        """The biphase soft share of the last FEM step with the force kernel (1 in a one-phase tissue;
+        nan with the barycentric rule, whose drive determines it)."""
+        self.local_stress = math.nan
+        """Largest von Mises stress (Pa) within 1 mm of the contact at the last FEM step (nan when free)."""
+        self.stretch = math.nan
+        """The stretch statistic 1 + |d| / h at the last FEM step (nan when free)."""
+        self._stress: LocalStress | None = None
+        self._stress_key: tuple[int, ...] = ()
+        self._overstressed = False
+        self._wall_path = math.inf  # straight-line length through the wall from the entry (m)
+        self._deepest = 0.0  # deepest tip depth reached into the wall since piercing (m)
         self.collision = collision or CollisionMesh(tissue.mesh)
         self.state = "free"
         self.grasped = True
@@ -278,6 +305,7 @@ class NeedleInteraction:
         self.contacts = [TriangleContact.from_hit(self.collision, hits, 0, point)]
         self.state = "contact"
         self._handle = None
+        self._load = None
         tangent = self.tip_tangent()
         return [
             self._event("contact_start", time, hits, 0, "", entry_angle_deg(tangent, self.contacts[0].normal))
@@ -302,7 +330,13 @@ class NeedleInteraction:
 
     def _track_passage(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
         entry = self.contacts[0]
-        through_entry = np.flatnonzero(hits.triangle == entry.triangle)
+        points = hits.points(*segment_ends(vertices)) if len(hits) else np.zeros((0, 3))
+        # the crossing back through the entry surface: the entry triangle, or (on a fine mesh, as the
+        # needle's body sweeps a little sideways) an entering crossing the wall still holds
+        near_entry = np.array(
+            [bool(hits.entering[k]) and self._holds(entry, points[k]) for k in range(len(hits))], dtype=bool
+        )
+        through_entry = np.flatnonzero((hits.triangle == entry.triangle) | near_entry)
         still_held = [
             c
             for c in self.contacts
@@ -317,10 +351,11 @@ class NeedleInteraction:
         walls = [k for k in ahead if hits.entering[k]]
         if self.state == "pierced" and exits:
             k = exits[-1]
-            point = hits.points(*segment_ends(vertices))[k]
+            point = points[k]
             self.contacts = [entry, TriangleContact.from_hit(self.collision, hits, k, point)]
             self.state = "exited"
             self._handle = None
+            self._load = None
             events.append(
                 self._event(
                     "exit",
@@ -336,14 +371,15 @@ class NeedleInteraction:
         return events
 
     def _crosses_plane_near(self, vertices: NDArray, contact: TriangleContact) -> bool:
-        """Whether the needle still crosses the entry plane close to the entry point.
-
-        Close: within the nominated triangle's size plus 1 mm, so a needle held
-        sideways in the wound still counts as passing through it.
-        """
+        """Whether the needle still crosses the entry plane close to the entry point (see :meth:`_holds`)."""
         point = self._needle_point_at_plane(vertices, contact)
-        if point is None:
-            return False
+        return point is not None and self._holds(contact, point)
+
+    def _holds(self, contact: TriangleContact, point: NDArray) -> bool:
+        """Whether the wall still holds the needle crossing its plane at ``point``: within the
+        nominated triangle's size plus 1 mm of the contact point, so a needle held sideways in the
+        wound still counts as passing through it, and one whose other end crosses the plane far
+        away (as it is pulled clear) does not."""
         corners = self.collision.corners[contact.triangle]
         reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 1e-3
         return float(np.linalg.norm(point - contact.point)) <= reach
@@ -387,16 +423,39 @@ class NeedleInteraction:
         self._fem_time = time
         if self.state == "free" or not self.contacts:
             self.last_contact = None
+            self.local_stress = self.stretch = math.nan
             return FemStep.untouched()
         vertices = self.needle_vertices()
         tip = vertices[0]
-        if self.state == "contact":
-            return self._contact_step(time, tip)
-        return self._pierced_step(vertices)
+        step = self._contact_step(time, tip) if self.state == "contact" else self._pierced_step(vertices)
+        if self.state == "free":  # the tip was withdrawn this step
+            self.local_stress = self.stretch = math.nan
+        elif len(step.contact_nodes) == 0:  # in the wall's state but no longer held (being pulled clear)
+            self.local_stress, self.stretch = 0.0, 1.0
+        return self._check_stress(time, step)
+
+    def _check_stress(self, time: float, step: FemStep) -> FemStep:
+        """An ``overstress`` event when the local stress first rises past the damage threshold."""
+        limit = self.forces.damage_stress
+        over = limit is not None and self.local_stress >= limit
+        if over and not self._overstressed:
+            contact = self.contacts[0] if self.contacts else None
+            step.events.append(
+                NeedleEvent(
+                    "overstress",
+                    time,
+                    -1 if contact is None else contact.triangle,
+                    (math.nan,) * 3 if contact is None else tuple(contact.barycentric),
+                    tip_speed=self.tip_speed,
+                    detail=f"local stress {self.local_stress / 1e6:.2f} MPa over {limit / 1e6:.2f} MPa",
+                )
+            )
+        self._overstressed = over
+        return step
 
     def _let_go(self, time: float, kind: str, contact: TriangleContact, detail: str) -> NeedleEvent:
         """Back to the free state, and the event saying where the tissue let go of the needle."""
-        self.state, self.contacts, self._handle = "free", [], None
+        self.state, self.contacts, self._handle, self._load = "free", [], None, None
         return NeedleEvent(
             kind, time, contact.triangle, tuple(contact.barycentric), tip_speed=self.tip_speed, detail=detail
         )
@@ -407,16 +466,30 @@ class NeedleInteraction:
             event = self._let_go(time, "contact_end", contact, "tip withdrawn above the surface")
             return FemStep.untouched([event])
         displacement = tip - contact.point
-        intended = contact.barycentric[:, None] * displacement
-        reactions = self._reactions(contact.nodes, intended, displacement)
+        if self.forces.load == "kernel":
+            nodes, reactions = self._kernel_reactions(
+                (("surface", 0),), displacement[None, :], np.zeros((1, 3))
+            )
+        else:
+            nodes = contact.nodes
+            intended = contact.barycentric[:, None] * displacement
+            reactions = self._reactions(contact.nodes, intended, displacement)
+            self._nodal_stress(nodes, reactions, [contact.point], displacement[None, :])
         force = -reactions.sum(axis=0)
         events = []
         angle = entry_angle_deg(self.tip_tangent(), contact.normal)
         normal_force = float(force @ contact.normal)  # the tissue pushes the needle back out
-        tip_stress = normal_force / self.needle.wire_area
-        if angle <= self.rules.max_entry_angle_deg and tip_stress >= self.rules.puncture_stress:
+        threshold = self.forces.puncture_force
+        punctured = (
+            normal_force >= threshold
+            if threshold is not None
+            else normal_force / self.needle.wire_area >= self.rules.puncture_stress
+        )
+        if angle <= self.rules.max_entry_angle_deg and punctured:
             self.state = "pierced"
             self._handle = None
+            self._load = None
+            self._start_passage(contact)
             events.append(
                 NeedleEvent(
                     "pierce",
@@ -428,21 +501,35 @@ class NeedleInteraction:
                     f"normal force {normal_force:.3f} N",
                 )
             )
-        return FemStep(force, contact.nodes, reactions, events)
+        return FemStep(force, nodes, reactions, events)
+
+    def _start_passage(self, contact: TriangleContact) -> None:
+        """At the pierce: the wall's length along the tip's direction from the entry point (to the
+        far surface the emergence ramp ends on), and no wall cut yet."""
+        self._deepest = 0.0
+        direction = self.tip_tangent()
+        self._wall_path = self.collision.distance_through(contact.point, direction, contact.triangle)
 
     def _pierced_step(self, vertices: NDArray) -> FemStep:
         tangent = self.tip_tangent()
-        nodes, intended = [], []
-        for contact in self.contacts:
+        nodes, intended, crossings = [], [], []
+        for rank, contact in enumerate(self.contacts):
             point = self._needle_point_at_plane(vertices, contact)
-            if point is None:
-                continue
+            if point is None or not self._holds(contact, point):
+                continue  # the needle has left this crossing (the wall lets go of it)
             offset = point - contact.point
             sideways = offset - offset.dot(tangent) * tangent  # the needle slides freely along itself
+            crossings.append((rank, sideways))
             nodes.append(contact.nodes)
             intended.append(contact.barycentric[:, None] * sideways)  # np.outer, without its wrapper
         if not nodes:
             return FemStep.untouched()
+        if self.forces.load == "kernel":
+            axial = self._axial_forces(vertices, tangent, len(crossings))
+            key = tuple(("wall", rank) for rank, _ in crossings)
+            sideways = np.array([offset for _, offset in crossings])
+            all_nodes, reactions = self._kernel_reactions(key, sideways, axial)
+            return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
         if len(nodes) == 1:
             all_nodes, merged = nodes[0], intended[0]
         else:  # entry and exit triangles may share nodes: add their intended displacements
@@ -450,7 +537,69 @@ class NeedleInteraction:
             merged = np.zeros((len(all_nodes), 3))
             np.add.at(merged, np.searchsorted(all_nodes, np.concatenate(nodes)), np.concatenate(intended))
         reactions = self._reactions(all_nodes, merged, merged.sum(axis=0))
+        points = [c.point for c in self.contacts]
+        self._nodal_stress(all_nodes, reactions, points, np.array([o for _, o in crossings]))
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
+
+    def _nodal_stress(self, nodes: NDArray, reactions: NDArray, points: list, displacements: NDArray) -> None:
+        """Local stress and stretch of the barycentric rule's nodal forces (operator per contact set)."""
+        if self._stress is None or self._stress_key != tuple(nodes.tolist()):
+            self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points)
+            self._stress_key = tuple(nodes.tolist())
+        self.local_stress = self._stress.maximum(reactions.reshape(-1))
+        depth = contact_depth(self.tissue, self.contacts[0].nodes)
+        self.stretch = 1.0 + float(np.linalg.norm(displacements, axis=1).max()) / depth
+
+    def _axial_forces(self, vertices: NDArray, tangent: NDArray, kernels: int) -> NDArray:
+        """(kernels, 3) the passage forces on the tissue along the needle (cutting, friction, the far
+        wall's emergence ramp), shared between the kernels the needle crosses."""
+        forces = self.forces
+        if not forces.resists_passage:
+            return np.zeros((kernels, 3))
+        entry = self.contacts[0].point
+        depth = float(np.linalg.norm(vertices[0] - entry))
+        speed = float(self.tip_velocity @ tangent)
+        if self.state == "pierced":
+            cutting = depth >= self._deepest
+            self._deepest = max(self._deepest, depth)
+            inside = min(depth, self._wall_path)
+            ramp = depth - (self._wall_path - forces.emergence_ramp)
+        else:  # through both walls: the shaft spans the wall from entry to exit
+            cutting, ramp = False, 0.0
+            inside = float(np.linalg.norm(self.contacts[-1].point - entry))
+        resistance = forces.axial_resistance(speed, inside, cutting, ramp)
+        return np.tile(resistance / kernels * tangent, (kernels, 1))
+
+    def _kernel_reactions(
+        self, key: tuple, displacements: NDArray, extra_forces: NDArray
+    ) -> tuple[NDArray[np.int64], NDArray]:
+        """(kernel nodes, their forces on the tissue (k, 3)) for kernel displacements (m, 3) plus
+        explicit forces on the tissue (m, 3) (N); remembers the equivalent penalty drive."""
+        if self._load is None or key != self._load_key:
+            began = perf_counter()
+            chosen = [self.contacts[rank] for _, rank in key]
+            tangent = None if key[0][0] == "surface" else self.tip_tangent()
+            make = kernel_factory(self.forces, 0.5 * self.needle.wire_diameter, chosen, tangent)
+            soft = self.tissue.soft if isinstance(self.tissue, BiphaseTissue) else self.tissue
+            built = make(soft)
+            nodes = np.unique(np.concatenate([kernel.nodes for kernel in built[0]]))
+            unsolved = tuple(int(n) for n in nodes if self.tissue.needs_solve(int(n)))
+            self._load = KernelLoad(self.tissue, lambda model: built if model is soft else make(model))
+            self._stress = self._load.local_stress(self.tissue)
+            self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))
+            self._load_key = key
+        load = self._load
+        total = load.total_displacements(displacements, extra_forces)
+        share = load.soft_share(total, self.tip_speed)
+        self.soft_share = share
+        kernel_forces = load.elastic_forces(displacements, share) + extra_forces
+        reactions = load.nodal_forces(kernel_forces)
+        self.last_contact = (load.nodes, load.equivalent_drive(reactions, share))
+        self.local_stress = self._stress.maximum(kernel_forces.reshape(-1))
+        self.stretch = 1.0 + float(np.sqrt(np.einsum("ij,ij->i", total, total).max())) / (
+            load.depth if math.isfinite(load.depth) else contact_depth(self.tissue, load.nodes)
+        )
+        return load.nodes, reactions
 
     def _reactions(self, nodes: NDArray[np.int64], intended: NDArray, tool_displacement: NDArray) -> NDArray:
         self.last_contact = (nodes, intended)

@@ -99,7 +99,7 @@ class SceneReplay:
         if drive is None:
             displacement, stress = self.fields.state(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
         else:
-            displacement, stress = self.fields.state(drive[0], drive[1], float(track.tip_speed[k]))
+            displacement, stress = self.fields.state(drive[0], drive[1], float(track.tip_speed[k]), drive[2])
         shown = (
             self.insertion_point
             if self.pierce_time is not None and track.times[k] >= self.pierce_time

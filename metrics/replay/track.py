@@ -28,14 +28,15 @@ STATE_NAMES = {code: name for name, code in STATE_CODES.items()}
 class ReplayTrack:
     """Per video frame: time (F,) s; needle (F, V, 3) m, tip first; state (F,) 0 free .. 3 exited;
     force (F, 3) N, the tissue's reaction on the needle; tip_speed (F,) m/s; drives: per frame the
-    contact nodes and intended displacements (k, 3) m the tissue was driven at, or None."""
+    contact nodes, intended displacements (k, 3) m the tissue was driven at and the biphase soft share
+    of the drive (nan: derived from the drive), or None."""
 
     times: NDArray[np.float64]
     needle: NDArray[np.float64]
     state: NDArray[np.int8]
     force: NDArray[np.float64]
     tip_speed: NDArray[np.float64]
-    drives: list[tuple[NDArray[np.int64], NDArray[np.float64]] | None]
+    drives: list[tuple[NDArray[np.int64], NDArray[np.float64], float] | None]
 
     @property
     def tip(self) -> NDArray[np.float64]:
@@ -69,8 +70,13 @@ def scene_track(scene, fps: float = 30.0) -> ReplayTrack:
     force = scene.column("force").combine_chunks().flatten().to_numpy().reshape(-1, 3)
     nodes = scene.column("drive_nodes").to_pylist()
     intended = scene.column("drive_intended").to_pylist()
+    shares = scene.column("drive_soft_share").to_numpy()
     drives = [
-        (np.asarray(nodes[k], dtype=np.int64), np.asarray(intended[k], dtype=np.float64).reshape(-1, 3))
+        (
+            np.asarray(nodes[k], dtype=np.int64),
+            np.asarray(intended[k], dtype=np.float64).reshape(-1, 3),
+            float(shares[k]),
+        )
         if nodes[k]
         else None
         for k in pick
@@ -139,7 +145,9 @@ def replay_track(session, tissue, fps: float = 30.0, needle: Needle | None = Non
         speeds[k] = fem.tip_speed
         contact = fem.contact if fem.state in ("contact", "pierced", "exited") else None
         drives.append(
-            None if contact is None or len(contact[0]) == 0 else (contact[0].copy(), contact[1].copy())
+            None
+            if contact is None or len(contact[0]) == 0
+            else (contact[0].copy(), contact[1].copy(), float(fem.soft_share))
         )
     return ReplayTrack(
         times=np.array([when for when, _, _ in captured]),

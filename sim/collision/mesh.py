@@ -7,12 +7,14 @@ tissue: PAPER.md section 7, that delay would cause force discontinuities.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.collision.segments import SegmentHits, candidate_pairs, intersect_pairs
+from sim.geometry import ray_triangle_distances
 from sim.mesh.tetmesh import TetMesh
 
 
@@ -55,6 +57,18 @@ class CollisionMesh:
         points = self.mesh.points.copy()
         points[nodes] += displacement
         self.update(points)
+
+    def distance_through(
+        self, point: NDArray[np.float64], direction: NDArray[np.float64], entry: int
+    ) -> float:
+        """Distance (m) from an entry ``point`` on triangle ``entry`` along ``direction`` to the first
+        other exterior triangle: the length of a straight path through the tissue (inf if none)."""
+        unit = np.asarray(direction, dtype=np.float64)
+        unit = unit / np.linalg.norm(unit)
+        distances = ray_triangle_distances(np.asarray(point, dtype=np.float64), unit, self.corners)
+        distances[entry] = np.inf
+        distances[distances < 1e-9] = np.inf  # triangles sharing the entry point
+        return float(distances.min()) if distances.size else math.inf
 
     def query(self, vertices: NDArray[np.float64]) -> SegmentHits:
         """Every crossing of a needle polyline (vertices tip first) with the valid triangles.

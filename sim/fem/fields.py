@@ -168,15 +168,23 @@ class TissueFieldReplay:
         return p.soft_share(strain, p.strain_limit_at(max(float(needle_speed), 0.0)))
 
     def state(
-        self, nodes: ArrayLike, intended: ArrayLike, needle_speed: float = 0.0
+        self,
+        nodes: ArrayLike,
+        intended: ArrayLike,
+        needle_speed: float = 0.0,
+        soft_share: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(N, 3) displacement of every node (m) and (F,) von Mises stress (Pa) under each exterior
-        triangle, for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s)."""
+        triangle, for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s).
+
+        soft_share: the biphase split the runtime applied (the force kernel's, from its own strain);
+        None or nan derives it from the drive (the barycentric rule's drive sums to the tip's)."""
         ids = np.asarray(nodes, dtype=np.int64).ravel()
         drive = np.asarray(intended, dtype=np.float64).reshape(-1, 3)
         if ids.size == 0:
             return np.zeros((self.mesh.n_nodes, 3)), np.zeros(len(self._surface))
-        share = self.soft_share(ids, drive, needle_speed)
+        known = soft_share is not None and np.isfinite(soft_share)
+        share = float(soft_share) if known else self.soft_share(ids, drive, needle_speed)
         parts = self._phase_parts(ids)
         # per set of arrays: the reactions its displacement (G/s . sR) and its stress (S G . sR) take
         displacement_reactions: list = [None] * len(parts)
@@ -223,3 +231,69 @@ def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):
                     vals.append(value)
     shape = (9 * len(elements), 3 * model.mesh.n_nodes)
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+
+
+LOCAL_STRESS_RADIUS = 1e-3
+"""Elements whose centroid lies within 1 mm of a contact (the needle's force kernel) are "local"."""
+
+
+class LocalStress:
+    """The largest von Mises stress (Pa) of the elements near a contact, for any load on its nodes.
+
+    The load is q generalised forces f mapped to nodal forces R = M f on ``nodes`` (M: (3k, q); the
+    identity for plain nodal forces, the kernel's weights for a force kernel). In the biphase model
+    the stress of the superimposed phases is S_soft G_soft R_total (the stiff phase's S G is the soft
+    one's when its K0 is a multiple), so one operator serves both phases: solved once per contact set
+    (q right-hand sides), then each FEM step is a (6E x q) product and a maximum.
+    """
+
+    __slots__ = ("_operator", "elements")
+
+    def __init__(
+        self,
+        tissue: TissueModel | BiphaseTissue,
+        nodes: ArrayLike,
+        force_map: NDArray[np.float64],
+        centres: ArrayLike,
+        radius: float = LOCAL_STRESS_RADIUS,
+    ) -> None:
+        model = _phases(tissue)[0]
+        mesh = model.mesh
+        ids = np.asarray(nodes, dtype=np.int64).ravel()
+        force_map = np.asarray(force_map, dtype=np.float64).reshape(3 * len(ids), -1)
+        centroids = _centroids(model)
+        points = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+        distance = np.min(np.linalg.norm(centroids[:, None, :] - points[None], axis=2), axis=1)
+        near = np.flatnonzero(distance <= radius)
+        self.elements = near if near.size else np.array([int(np.argmin(distance))])
+        rhs = np.zeros((3 * mesh.n_nodes, force_map.shape[1]), order="F")
+        rhs[(3 * ids[:, None] + np.arange(3)).ravel()] = force_map
+        columns = model._factor(rhs).reshape(mesh.n_nodes, 3, -1)  # displacement per unit force
+        tets = mesh.tets[self.elements]
+        grad = np.einsum("maiq,maj->mijq", columns[tets], model._gradients[self.elements])
+        strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
+        lam, mu = (values[self.elements] for values in model.lame)
+        trace = np.einsum("miiq->mq", strain)
+        stress = 2 * mu[:, None, None, None] * strain
+        for i in range(3):
+            stress[:, i, i] += lam[:, None] * trace
+        mean = np.einsum("miiq->mq", stress) / 3
+        for i in range(3):
+            stress[:, i, i] -= mean
+        # von Mises = sqrt(3/2 s:s): six independent components, off-diagonals weighted by sqrt 2
+        rows = [stress[:, 0, 0], stress[:, 1, 1], stress[:, 2, 2]]
+        rows += [np.sqrt(2.0) * stress[:, i, j] for i, j in ((0, 1), (0, 2), (1, 2))]
+        self._operator = np.ascontiguousarray(np.sqrt(1.5) * np.stack(rows, axis=1).reshape(-1, rhs.shape[1]))
+
+    def maximum(self, forces: NDArray[np.float64]) -> float:
+        """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""
+        values = self._operator.dot(forces).reshape(-1, 6)
+        return float(np.sqrt(np.einsum("ij,ij->i", values, values).max()))
+
+
+def _centroids(model: TissueModel) -> NDArray[np.float64]:
+    """Element centroids (m), cached on the model."""
+    cached = model.__dict__.get("_centroids")
+    if cached is None:
+        cached = model.__dict__["_centroids"] = model.mesh.points[model.mesh.tets].mean(axis=1)
+    return cached

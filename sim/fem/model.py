@@ -420,6 +420,22 @@ class TissueModel:
         return columns, block, self.contact_nodes
 
     # -- solving -------------------------------------------------------------------------
+    @property
+    def lame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per-element Lame parameters (lambda, mu) in Pa."""
+        return self._lame
+
+    @property
+    def vertex_normals(self) -> NDArray[np.float64]:
+        """(N, 3) area-weighted outward normals at the nodes (zero off the exterior surface)."""
+        return self._vertex_normals
+
+    def compliance_block(self, nodes: ArrayLike) -> NDArray[np.float64]:
+        """(3k, 3k) block of K0^-1 (m/N) at the nodes' dofs: displacement per unit nodal force
+        (precomputed where the nodes are candidates, solved on demand and cached otherwise)."""
+        ids = _contact_ids(nodes, self.mesh.n_nodes)
+        return self._contact_columns(ids)[1]
+
     def contact(self, nodes: ArrayLike) -> ContactHandle:
         """A per-tick handle for a fixed contact set (e.g. a triangle's 3 nodes)."""
         ids = _contact_ids(nodes, self.mesh.n_nodes)

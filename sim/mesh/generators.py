@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import MeshError
 from sim.mesh.tetmesh import TetMesh, signed_volumes
@@ -61,9 +61,21 @@ def box_mesh(size: float | Sequence[float] = 0.01, divisions: int | Sequence[int
         raise MeshError(f"box size must be positive and finite (m); got {tuple(lengths.tolist())}")
     if min(cells) < 1:
         raise MeshError(f"box divisions must be at least 1 per axis; got {cells}")
-    shape = tuple(n + 1 for n in cells)
+    return grid_box_mesh(*(np.arange(n + 1) * (length / n) for n, length in zip(cells, lengths, strict=True)))
+
+
+def grid_box_mesh(xs: ArrayLike, ys: ArrayLike, zs: ArrayLike) -> TetMesh:
+    """A box meshed on a tensor grid with the given node coordinates per axis (m, increasing), 6 tets
+    per cell; e.g. with :func:`refined_coordinates` fine where a needle goes in, coarse elsewhere.
+    Node sets ``x0, x1, y0, y1, z0, z1`` name the six faces."""
+    axes = [np.asarray(v, dtype=np.float64).ravel() for v in (xs, ys, zs)]
+    for name, values in zip("xyz", axes, strict=True):
+        if values.size < 2 or not np.all(np.isfinite(values)) or np.any(np.diff(values) <= 0):
+            raise MeshError(f"{name} coordinates must be at least two increasing finite numbers (m)")
+    shape = tuple(len(v) for v in axes)
+    cells = tuple(n - 1 for n in shape)
     grid = np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), axis=-1).reshape(-1, 3)
-    points = grid * (lengths / np.asarray(cells))
+    points = np.column_stack([axes[k][grid[:, k]] for k in range(3)])
     corners = structured_tets(cells)
     tets = np.ravel_multi_index(tuple(corners[..., k] for k in range(3)), shape)
     tets = orient_positive(points, tets)
@@ -72,6 +84,32 @@ def box_mesh(size: float | Sequence[float] = 0.01, divisions: int | Sequence[int
         node_sets[f"{name}0"] = np.flatnonzero(grid[:, axis] == 0)
         node_sets[f"{name}1"] = np.flatnonzero(grid[:, axis] == cells[axis])
     return TetMesh(points, tets, node_sets=node_sets, region_names={0: "tissue"})
+
+
+def refined_coordinates(length: float, coarse: float, fine: float, start: float, stop: float) -> NDArray:
+    """Node coordinates 0..length (m) with spacing at most ``fine`` on [start, stop] and growing by at
+    most 1.5x per cell towards ``coarse`` outside it (a graded grid, no abrupt jump in cell size)."""
+    if not 0 < fine <= coarse or not 0 <= start < stop <= length:
+        raise MeshError(
+            f"refinement needs 0 < fine <= coarse and 0 <= start < stop <= length; got fine={fine}, "
+            f"coarse={coarse}, start={start}, stop={stop}, length={length}"
+        )
+    cells = max(1, math.ceil((stop - start) / fine - 1e-9))
+    middle = np.linspace(start, stop, cells + 1)
+
+    def graded(distance: float) -> list[float]:
+        """Offsets from the refined zone outwards to ``distance``, spacing growing from fine."""
+        offsets, step, at = [], fine, 0.0
+        while distance - at > 1e-12:
+            step = min(step * 1.5, coarse)
+            remaining = distance - at
+            at = distance if remaining < 1.5 * step else at + step
+            offsets.append(at)
+        return offsets
+
+    below = [start - d for d in graded(start)][::-1]
+    above = [stop + d for d in graded(length - stop)]
+    return np.array(below + middle.tolist() + above)
 
 
 @dataclass(frozen=True)

@@ -77,11 +77,12 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         + 4
         + 64
         + 3
-        + 3 * 64
+        + 3 * SharedGraphics.MAX_VERTICES
         + 1
-        + 16 * 4
+        + 4 * SharedGraphics.MAX_CONTACT
         + display_capacity * 2
         + 1
+        + 8  # the FEM slot's force, local stress and stretch, and spare
     )
     simulation.holder = SharedHolder(arena)
     simulation.forces = SharedForceHistory(arena)

@@ -15,6 +15,7 @@ step function runs unchanged on either side.
 
 from __future__ import annotations
 
+import math
 import mmap
 import os
 import time
@@ -255,7 +256,7 @@ class SharedGraphics:
     Layout: [seq, time, n_vertices, vertices (64 x 3), n_contact, nodes (16), intended (16 x 3)].
     """
 
-    MAX_VERTICES, MAX_CONTACT = 64, 16
+    MAX_VERTICES, MAX_CONTACT = 64, 192  # a needle through a wall: two force kernels of up to ~90 nodes
 
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(3 + 3 * self.MAX_VERTICES + 1 + self.MAX_CONTACT * 4)
@@ -300,11 +301,12 @@ class SharedFem:
     """The FEM layer's snapshot: whole in the process that writes it, and the fields the haptic
     process records (tip, speed, direction, contact triangle, barycentrics, state) in shared memory.
 
-    Layout: [seq, time, tip 3, tip speed, tangent 3, triangle, barycentric 3, state code].
+    Layout: [seq, time, tip 3, tip speed, tangent 3, triangle, barycentric 3, state code, needle force 3,
+    local stress, stretch].
     """
 
     def __init__(self, arena: Arena) -> None:
-        self._slot = arena.take(15)
+        self._slot = arena.take(19)
         self._owner = os.getpid()
         self._local = None
 
@@ -321,6 +323,9 @@ class SharedFem:
         slot[9] = snapshot.contact_triangle
         slot[10:13] = snapshot.barycentric
         slot[13] = STATE_CODES.get(snapshot.state, 0)
+        slot[14:17] = snapshot.needle_force
+        slot[17] = snapshot.local_stress
+        slot[18] = snapshot.stretch
         slot[0] += 1
 
     def get(self):
@@ -334,7 +339,7 @@ class SharedFem:
         state = {code: name for name, code in STATE_CODES.items()}.get(int(copy[13]), "free")
         return FemSnapshot(
             float(copy[1]),
-            np.zeros(3),
+            copy[14:17],
             copy[2:5].reshape(1, 3),
             state,
             np.zeros(0, dtype=np.int64),
@@ -344,4 +349,7 @@ class SharedFem:
             copy[6:9],
             int(copy[9]),
             tuple(float(w) for w in copy[10:13]),
+            math.nan,
+            float(copy[17]),
+            float(copy[18]),
         )

@@ -35,6 +35,7 @@ from sim.errors import VascsimError
 from sim.fem import BiphaseTissue, TissueModel
 from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
+from sim.needle_forces import NeedleForces
 from sim.runtime.logs import HapticColumns, interpolate_force
 from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead
 from sim.runtime.safety import ForceSafety, SafetySettings
@@ -108,6 +109,9 @@ class FemSnapshot(NamedTuple):
     tip_tangent: NDArray[np.float64] | None = None
     contact_triangle: int = -1
     barycentric: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    soft_share: float = math.nan  # the biphase split of the drive (nan: the drive's own strain sets it)
+    local_stress: float = math.nan  # Pa, largest von Mises stress within 1 mm of the contact
+    stretch: float = math.nan  # the stretch statistic 1 + |d| / h
 
 
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
@@ -237,10 +241,11 @@ class Simulation:
         renderer: Callable[[GraphicsSnapshot], None] | None = None,
         on_event: Callable[[NeedleEvent | RuntimeEvent], None] | None = None,
         on_sample: Callable[..., None] | None = None,
+        forces: NeedleForces | None = None,
     ) -> None:
         self.settings = settings or RuntimeSettings()
         self.device = device
-        self.interaction = NeedleInteraction(tissue, needle, rules)
+        self.interaction = NeedleInteraction(tissue, needle, rules, forces=forces)
         self.safety = ForceSafety(device.limits, self.settings.safety, tick=self.settings.period("haptic"))
         self.holder = Mailbox()
         self.fem = Mailbox()
@@ -333,6 +338,9 @@ class Simulation:
                 interaction.tip_tangent(),
                 -1 if nominated is None else nominated.triangle,
                 (math.nan,) * 3 if nominated is None else tuple(nominated.barycentric.tolist()),
+                interaction.soft_share,
+                interaction.local_stress,
+                interaction.stretch,
             )
         )
 

@@ -9,7 +9,10 @@ from recorder.runtime import RuntimeRecorder
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
+from sim.needle_forces import NeedleForces
 from sim.runtime import Simulation
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 
 def record_pass(directory, tissue, **parameters):
@@ -18,7 +21,9 @@ def record_pass(directory, tissue, **parameters):
         needle, [0.0105, 0.0051, 0.0015], [0, 0, 1], [1, 0, 0], SuturingPassParameters(**parameters)
     )
     writer = SessionWriter(directory, {"session_id": directory.name, "participant_id": "p1", "label": "x"})
-    run = RuntimeRecorder(writer).attach(Simulation(tissue, needle, ScriptedDevice(suturing.pose_and_grip)))
+    run = RuntimeRecorder(writer).attach(
+        Simulation(tissue, needle, ScriptedDevice(suturing.pose_and_grip), forces=PAPER)
+    )
     run.run_simulated(suturing.duration)
     writer.close()
     return open_session(directory), suturing

@@ -21,11 +21,13 @@ from recorder.runtime import RuntimeRecorder
 from recorder.scene import read_scene
 from sessions.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
-from sessions.tasks import tissue_for
+from sessions.tasks import task_preset, tissue_for
 from sim.fem.fields import TissueFieldReplay
 from sim.needle import Needle
 from sim.render import TissueRenderer, compare_images, write_image
 from sim.runtime import Simulation
+
+FORCES = task_preset("wall-stitch").forces  # the calibrated needle the runner uses
 
 GOLDEN = Path(__file__).parents[1] / "data" / "golden"
 
@@ -37,7 +39,9 @@ def record_pass(folder: Path, tissue, skill: float, seed: int, participant: str,
     )
     header = {"session_id": folder.name, "participant_id": participant, "label": label, "task": "wall-stitch"}
     writer = SessionWriter(folder, header, flush_interval=0.1)
-    RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device)).run_simulated(duration)
+    RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device, forces=FORCES)).run_simulated(
+        duration
+    )
     writer.close()
     return folder
 
@@ -81,17 +85,17 @@ def test_tissue_state_per_frame_equals_the_models_full_solve(recorded):
     driven = [k for k, drive in enumerate(track.drives) if drive is not None]
     assert len(driven) > 5
     for k in driven[:: max(1, len(driven) // 6)]:
-        nodes, intended = track.drives[k]
-        displacement, stress = fields.state(nodes, intended, float(track.tip_speed[k]))
-        full = tissue.solve(
-            {int(n): a for n, a in zip(nodes, intended, strict=True)},
-            tool_displacement=intended.sum(axis=0),
-            needle_speed=float(track.tip_speed[k]),
-            full_field=True,
-            fields=True,
+        nodes, intended, share = track.drives[k]
+        assert 0.0 < share <= 1.0  # the force kernel's split, recorded with its drive
+        displacement, stress = fields.state(nodes, intended, float(track.tip_speed[k]), share)
+        # independently: each phase solved on its share of the drive, the answers superimposed
+        soft, stiff = (
+            phase.solve({int(n): f * a for n, a in zip(nodes, intended, strict=True)}, full_field=True)
+            for phase, f in ((tissue.soft, share), (tissue.stiff, 1.0 - share))
         )
-        np.testing.assert_allclose(displacement, full.displacement, rtol=0, atol=1e-15)
-        np.testing.assert_allclose(stress, full.von_mises[tissue.mesh.surface_elements], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(displacement, soft.displacement + stiff.displacement, rtol=0, atol=1e-15)
+        von_mises = tissue._fields(soft, stiff)["von_mises"][tissue.mesh.surface_elements]
+        np.testing.assert_allclose(stress, von_mises, rtol=1e-9, atol=1e-9)
 
 
 def _insertion_frame(recorded, size=(320, 180)):

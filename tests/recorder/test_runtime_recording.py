@@ -8,7 +8,10 @@ from recorder.runtime import RuntimeRecorder, quaternion_of
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import quaternion_matrix
 from sim.needle import Needle, rotation_about
+from sim.needle_forces import NeedleForces
 from sim.runtime import Simulation
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +28,7 @@ def test_every_tick_and_event_is_recorded(tmp_path, setup, clock):
         tmp_path / "s", {"participant": "synthetic-01", "clock": clock}, flush_interval=0.05
     )
     simulation = RuntimeRecorder(writer).attach(
-        Simulation(tissue, needle, ScriptedDevice(suturing.pose_and_grip))
+        Simulation(tissue, needle, ScriptedDevice(suturing.pose_and_grip), forces=PAPER)
     )
     duration = 2.5
     result = simulation.run_simulated(duration) if clock == "simulated" else simulation.run_realtime(duration)

@@ -14,7 +14,8 @@ VASCSIM = Path(sys.executable).with_name("vascsim")
 
 
 def test_indentation_json_matches_the_core():
-    result = CliRunner().invoke(main, ["indentation", "--steps", "5", "--max-strain", "0.4", "--json"])
+    arguments = ["indentation", "--tissue", "paper", "--steps", "5", "--max-strain", "0.4", "--json"]
+    result = CliRunner().invoke(main, arguments)
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     curve = indentation_curve(np.linspace(0, 0.4, 5))
@@ -28,7 +29,7 @@ def test_indentation_json_matches_the_core():
 def test_indentation_prints_table_through_the_console_script():
     env = dict(os.environ, COLUMNS="160")
     result = subprocess.run(
-        [str(VASCSIM), "indentation", "--steps", "3"],
+        [str(VASCSIM), "indentation", "--tissue", "paper", "--steps", "3"],
         capture_output=True,
         text=True,
         env=env,
@@ -39,6 +40,41 @@ def test_indentation_prints_table_through_the_console_script():
     assert "729 nodes, 3072 elements" in result.stdout
     assert "precompute" in result.stdout
     assert "force biphase" in result.stdout
+
+
+def test_calibrated_indentation_is_the_runtime_kernel_and_pierces_in_the_published_band(tmp_path):
+    """The default curve: the porcine-artery wall-stitch patch through the force kernel; its force at
+    each depth is what the kernel computes, and the wall gives at 0.7-1.1 mm under 0.8 N."""
+    from sessions.tasks import task_preset, task_spec, tissue_for
+    from sim.experiments import kernel_indentation_curve
+
+    env = dict(os.environ, VASCSIM_HOME=str(tmp_path))
+    result = CliRunner(env=env).invoke(main, ["indentation", "--steps", "13", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["tissue"] == "porcine-artery" and data["puncture_force"] == 0.8
+    assert 0.7e-3 <= data["pierce_depth"] <= 1.1e-3
+    spec = task_spec("wall-stitch")
+    again = kernel_indentation_curve(
+        tissue_for("wall-stitch", None),
+        task_preset("wall-stitch").forces,
+        spec.entry,
+        spec.normal,
+        np.linspace(0, 1.2e-3, 13),
+        needle_speed=0.004,
+    )
+    np.testing.assert_allclose(data["force"], again.force, rtol=1e-9, atol=1e-12)
+    assert np.all(np.diff(data["force"][1:]) > 0)
+    printed = subprocess.run(
+        [str(VASCSIM), "indentation", "--steps", "4"],
+        capture_output=True,
+        text=True,
+        env=dict(env, COLUMNS="80"),
+        timeout=300,
+        check=False,
+    )
+    assert printed.returncode == 0, printed.stderr
+    assert "force (mN)" in printed.stdout and "pierces at" in printed.stdout
 
 
 def test_bad_option_is_one_line_and_nonzero():
@@ -55,7 +91,8 @@ def test_help_explains_commands():
     assert result.exit_code == 0
     assert "demo" in result.output
     demo_help = CliRunner().invoke(main, ["indentation", "--help"])
-    assert "729 nodes" in demo_help.output and "--max-strain" in demo_help.output
+    assert "porcine-artery" in demo_help.output and "10 mm cube" in demo_help.output
+    assert "--max-strain" in demo_help.output and "--max-depth" in demo_help.output
     assert "synthetic study" in CliRunner().invoke(main, ["demo", "--help"]).output
 
 

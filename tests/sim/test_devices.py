@@ -18,6 +18,9 @@ from sim.fem import Material, TissueModel
 from sim.interaction import NeedleInteraction
 from sim.mesh import box_mesh
 from sim.needle import Needle, NeedleError, Pose, TurnAbout, rotation_about
+from sim.needle_forces import NeedleForces
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 
 def old_reports(translation, rotation, buttons=0):
@@ -177,7 +180,7 @@ def stitch(model, parameters):
     needle = Needle.curved()
     suturing = SuturingPass(needle, [0.0105, 0.0051, 0.0015], [0, 0, 1], [1, 0, 0], parameters)
     device = ScriptedDevice(suturing.pose_and_grip)
-    interaction = NeedleInteraction(model, needle)
+    interaction = NeedleInteraction(model, needle, forces=PAPER)
     events, lateral = [], []
     for tick in range(int(suturing.duration * 1000) + 1):
         t = tick / 1000

@@ -11,6 +11,9 @@ from sim.fem import BiphaseTissue, Material, TissueModel
 from sim.interaction import NeedleInteraction, PiercingRules, entry_angle_deg
 from sim.mesh import box_mesh
 from sim.needle import Needle, Pose, rotation_about, rotation_aligning
+from sim.needle_forces import NeedleForces
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 HAPTIC_DT, FEM_EVERY, GRAPHICS_EVERY = 0.001, 2, 33  # 1 kHz haptics, 500 Hz FEM, ~30 Hz graphics
 
@@ -64,7 +67,7 @@ def needle_tip_start(tip, tilt_deg=0.0, needle=None):
 
 def test_perpendicular_entry_pierces_then_exits_the_far_wall_and_pulls_through(wall):
     needle = Needle.straight(0.01)
-    interaction = NeedleInteraction(wall, needle)
+    interaction = NeedleInteraction(wall, needle, forces=PAPER)
     start = needle_tip_start([0.0051, 0.0047, 0.0025])  # 1 mm above the top face
     events, forces = run(interaction, straight_down(start, 0.005), 3.0)
     assert kinds(events)[:4] == ["contact_start", "pierce", "exit", "pull_through"]
@@ -100,7 +103,7 @@ def test_radial_pass_through_an_artery_wall_exits_into_the_lumen():
     def trajectory(t):
         return Pose(tip_start - rotation @ needle.vertices[0] + [-0.004 * t, 0, 0], rotation)
 
-    events, _ = run(NeedleInteraction(model, needle), trajectory, 1.5)
+    events, _ = run(NeedleInteraction(model, needle, forces=PAPER), trajectory, 1.5)
     assert kinds(events)[:3] == ["contact_start", "pierce", "exit"]
     triangles = mesh.surface_triangles
     assert set(triangles[events[0].triangle]) <= set(mesh.node_sets["outer"])
@@ -109,7 +112,7 @@ def test_radial_pass_through_an_artery_wall_exits_into_the_lumen():
 
 def test_grazing_entry_slides_without_piercing(wall):
     needle = Needle.straight(0.01)
-    interaction = NeedleInteraction(wall, needle)
+    interaction = NeedleInteraction(wall, needle, forces=PAPER)
     tilt = 70.0
     start = needle_tip_start([0.003, 0.0047, 0.0017], tilt_deg=tilt)
     down_then_up = straight_down(start, 0.004, tilt_deg=tilt)
@@ -134,7 +137,7 @@ def test_decisive_needle_pierces_sooner_with_the_biphase_model():
     tissue.precompute(use_cache=False)
     depths = {}
     for speed in (0.001, 0.02):
-        interaction = NeedleInteraction(tissue, Needle.straight(0.01))
+        interaction = NeedleInteraction(tissue, Needle.straight(0.01), forces=PAPER)
         start = needle_tip_start([0.0051, 0.0047, 0.0016])
         events, _ = run(interaction, straight_down(start, speed), 1.5e-3 / speed)
         pierce = next(e for e in events if e.kind == "pierce")
@@ -148,7 +151,7 @@ def test_decisive_needle_pierces_sooner_with_the_biphase_model():
 
 def test_release_and_regrab_while_pierced(wall):
     needle = Needle.straight(0.01)
-    interaction = NeedleInteraction(wall, needle)
+    interaction = NeedleInteraction(wall, needle, forces=PAPER)
     start = needle_tip_start([0.0051, 0.0047, 0.0025])
     approach = straight_down(start, 0.005)
     release_at, regrab_at = 0.75, 1.0
@@ -185,7 +188,7 @@ def test_curved_needle_rotated_through_a_wall_enters_and_exits(wall):
         rotation = rotation_about([0, -1, 0], tip_angle - math.pi) @ in_plane
         return Pose(centre - rotation @ centre_local, rotation)
 
-    interaction = NeedleInteraction(wall, needle)
+    interaction = NeedleInteraction(wall, needle, forces=PAPER)
     events, _ = run(interaction, trajectory, 2.2)
     sequence = kinds(events)
     assert sequence[:3] == ["contact_start", "pierce", "exit"], sequence
@@ -212,7 +215,7 @@ def test_collision_uses_the_subordinate_hands_deformation(wall):
 
 
 def test_distributed_contact_force_is_the_sum_of_nodal_reactions(wall):
-    interaction = NeedleInteraction(wall, Needle.straight(0.01))
+    interaction = NeedleInteraction(wall, Needle.straight(0.01), forces=PAPER)
     start = needle_tip_start([0.0051, 0.0047, 0.0017])
     run(interaction, straight_down(start, 0.005), 0.1)
     assert interaction.state == "contact"
@@ -256,13 +259,13 @@ def test_each_contact_change_records_the_columns_it_had_to_solve(wall):
     entry triangle's three nodes at the first touch, the exit face's three when it is reached."""
     needle = Needle.straight(0.01)
     start = needle_tip_start([0.0051, 0.0047, 0.0025])
-    precomputed = NeedleInteraction(wall, needle)
+    precomputed = NeedleInteraction(wall, needle, forces=PAPER)
     run(precomputed, straight_down(start, 0.005), 3.0)
     assert len(precomputed.contact_builds) >= 2
     assert all(unsolved == () and seconds >= 0 for _, unsolved, seconds in precomputed.contact_builds)
 
     fixed = np.union1d(wall.mesh.node_sets["x0"], wall.mesh.node_sets["x1"])
-    on_demand = NeedleInteraction(TissueModel(wall.mesh, Material(20e3, 0.45), fixed), needle)
+    on_demand = NeedleInteraction(TissueModel(wall.mesh, Material(20e3, 0.45), fixed), needle, forces=PAPER)
     events, _ = run(on_demand, straight_down(start, 0.005), 3.0)
     builds = on_demand.contact_builds
     # first touch (3 new nodes), pierce (the same triangle: cached), exit (entry + the exit face's

@@ -10,7 +10,10 @@ import pytest
 
 from sim.errors import SolverError
 from sim.fem import BiphaseTissue, Material, TissueModel
+from sim.needle_forces import NeedleForces
 from sim.runtime.prefetch import ColumnWorker, Prefetcher, arc_ahead, line_ahead
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 
 @pytest.fixture
@@ -215,7 +218,7 @@ def test_a_needle_still_in_the_air_already_asks_for_its_exit_face(small_box):
     tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["x0"])
     needle = Needle.curved()
     stitch = SuturingPass(needle, [0.002, 0.0025, 0.003], [0, 0, 1], [1, 0, 0])
-    simulation = Simulation(tissue, needle, ScriptedDevice(stitch.pose_and_grip))
+    simulation = Simulation(tissue, needle, ScriptedDevice(stitch.pose_and_grip), forces=PAPER)
     vertices = needle.world_vertices(stitch.pose_and_grip(0.4)[0])  # approaching, 2 mm above the top
     free = FemSnapshot(0.4, np.zeros(3), vertices, "free", np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
     simulation._prefetcher = prefetcher = Prefetcher(tissue, simulation.interaction.collision)

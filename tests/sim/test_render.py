@@ -39,7 +39,8 @@ def pressed_cube_frame():
 
 def test_render_matches_the_reference_image(tmp_path):
     mesh, frame = pressed_cube_frame()
-    renderer = TissueRenderer(mesh, size=(320, 240), offscreen=True)
+    # the paper's 20 kPa cube: a colour scale of 0-5 kPa (the calibrated wall's default is 0-500 kPa)
+    renderer = TissueRenderer(mesh, size=(320, 240), offscreen=True, stress_range=(0.0, 5e3))
     pixels = renderer.render(frame)
     renderer.close()
     assert pixels.shape == (240, 320, 3) and pixels.dtype == np.uint8

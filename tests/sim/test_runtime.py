@@ -11,8 +11,11 @@ from sim.devices import DeviceLostError, ScriptedDevice, SuturingPass
 from sim.devices.base import DeviceLimits
 from sim.errors import ModelError
 from sim.needle import Needle, Pose
+from sim.needle_forces import NeedleForces
 from sim.runtime import RunResult, RuntimeSettings, SafetySettings, Simulation
 from sim.runtime.safety import ForceSafety
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 LIMITS = DeviceLimits(max_force=0.02, max_force_rate=2.0)  # tight, so the pass exercises the limits
 
@@ -28,7 +31,7 @@ def make(tissue, device_wrapper=None, limits=LIMITS, **settings):
     device = ScriptedDevice(suturing.pose_and_grip, limits=limits)
     if device_wrapper is not None:
         device = device_wrapper(device)
-    simulation = Simulation(tissue, needle, device, RuntimeSettings(**settings))
+    simulation = Simulation(tissue, needle, device, RuntimeSettings(**settings), forces=PAPER)
     return simulation, suturing, device
 
 
@@ -272,6 +275,9 @@ from sim.fem import BiphaseTissue
 from sim.mesh import box_mesh
 from sim.needle import Needle
 from sim.runtime import Simulation
+from sim.needle_forces import NeedleForces
+
+PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 class ForcesToFile:  # the device as the haptic process drives it; each force sent appended to a file
     def __init__(self, device, path):
@@ -292,7 +298,7 @@ needle = Needle.curved()
 suturing = SuturingPass(needle, [0.0105, 0.0051, 0.0015], [0, 0, 1], [1, 0, 0])
 limits = DeviceLimits(max_force=0.02, max_force_rate=2.0)
 device = ForcesToFile(ScriptedDevice(suturing.pose_and_grip, limits=limits), sys.argv[1] + ".forces")
-simulation = Simulation(tissue, needle, device)
+simulation = Simulation(tissue, needle, device, forces=PAPER)
 def started():
     with open(sys.argv[1] + ".pid", "w") as out:
         out.write(str(os.getpid()))

@@ -1,0 +1,170 @@
+"""Needle-force figures of issue 21: the cost of the force kernel, passage forces and live stress.
+
+Run:  .venv/bin/python benchmarks/needle_forces.py
+
+1. Kernel force per tick: the 3m x 3m stiffness product, the nodal spread and the biphase blend,
+   for a kernel of k nodes (k = 3 on a coarse mesh, up to ~40 on the refined stitch region).
+2. FEM step on the ~10k-node artery (vessel_10k, porcine-artery preset, precomputed): a needle
+   pressing on the wall (kernel + local stress) and one through it (lateral kernel, cutting,
+   friction, emergence, local stress); median and p99 of repeats.
+3. Contact start on the same artery: building the kernel set's stiffness and its local-stress
+   operator when the needle first touches, at 40 entry points; median, p99, max.
+4. The haptic and FEM layers' compute time during a whole simulated stitch on the wall-stitch
+   task (kernel contact), from the runtime's own telemetry.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from sessions.tasks import task_preset, task_spec, tissue_for
+from sim.devices import ScriptedDevice, SuturingPass
+from sim.fem import BiphaseTissue
+from sim.interaction import NeedleInteraction
+from sim.needle import Needle, Pose
+from sim.runtime import Simulation
+from sim.scenarios import scenario
+from sim.tissue_presets import tissue_preset
+
+
+def percentiles(samples: list[float]) -> tuple[float, float, float]:
+    values = np.asarray(samples)
+    return float(np.median(values)), float(np.percentile(values, 99)), float(values.max())
+
+
+def timed(function, repeats: int) -> list[float]:
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        samples.append(time.perf_counter() - start)
+    return samples
+
+
+def artery() -> tuple[BiphaseTissue, object]:
+    case = scenario("vessel_10k")
+    preset = tissue_preset("porcine-artery")
+    tissue = BiphaseTissue.build(
+        case.mesh, case.fixed_nodes, preset.biphase, contact_nodes=case.contact_nodes
+    )
+    started = time.perf_counter()
+    tissue.precompute(use_cache=False)
+    tissue.soft.factorize()
+    print(
+        f"artery: {case.mesh.n_nodes} nodes, {len(case.contact_nodes)} candidates, precompute + factor "
+        f"{time.perf_counter() - started:.1f} s",
+        flush=True,
+    )
+    return tissue, case
+
+
+def pressing(interaction: NeedleInteraction, outer: float, angle: float, z: float, depth: float) -> None:
+    """Hold the needle's tip ``depth`` inside the artery's outer surface, pointing at its axis."""
+    normal = np.array([math.cos(angle), math.sin(angle), 0.0])
+    from sim.needle import rotation_aligning
+
+    needle = interaction.needle
+    rotation = rotation_aligning(needle.vertices[0] - needle.vertices[1], -normal)
+    tip = (outer - depth) * normal + [0, 0, z]
+    interaction.hold(0.0, Pose(tip - rotation @ needle.vertices[0], rotation), True)
+
+
+def kernel_figures(tissue: BiphaseTissue, case) -> None:
+    forces = tissue_preset("porcine-artery").forces
+    needle = Needle.curved(segments=16)
+    outer = float(np.hypot(case.mesh.points[:, 0], case.mesh.points[:, 1]).max())
+    starts, steps = [], []
+    interaction = None
+    for k in range(40):
+        interaction = NeedleInteraction(tissue, needle, forces=forces)
+        angle, z = math.radians(200 + 3 * k), 0.011 + 0.0002 * k
+        pressing(interaction, outer, angle, z, 1e-5)
+        interaction.graphics_step(0.0)  # the first touch nominates the triangle
+        if interaction.state != "contact":
+            continue
+        pressing(interaction, outer, angle, z, 2e-4)
+        began = time.perf_counter()
+        interaction.fem_step(0.001)  # builds the kernel set and its stress operator
+        starts.append(time.perf_counter() - began)
+        steps += timed(lambda i=interaction: i.fem_step(0.002), 200)
+    load = interaction._load
+    print(f"kernel nodes at the last entry: {len(load.nodes)}", flush=True)
+    d = np.array([[0.0, 0.0, -2e-4]])
+    tick = timed(lambda: load.nodal_forces(load.elastic_forces(d, load.soft_share(d, 0.004))), 20000)
+    p50, p99, _ = percentiles(tick)
+    print(
+        f"kernel_force_tick_us median={p50 * 1e6:.2f} p99={p99 * 1e6:.2f} (k={len(load.nodes)})", flush=True
+    )
+    p50, p99, top = percentiles(starts)
+    print(
+        f"contact_start_ms median={p50 * 1e3:.2f} p99={p99 * 1e3:.2f} max={top * 1e3:.2f} "
+        f"({len(starts)} first touches on the 10k artery: kernel stiffness + local-stress operator)",
+        flush=True,
+    )
+    p50, p99, _ = percentiles(steps)
+    print(f"fem_step_pressing_us median={p50 * 1e6:.1f} p99={p99 * 1e6:.1f}", flush=True)
+
+
+def passage_figure(tissue: BiphaseTissue, case) -> None:
+    """A needle through the artery wall: pierce, then step it forward a little each FEM step."""
+    forces = tissue_preset("porcine-artery").forces
+    needle = Needle.curved(segments=16)
+    outer = float(np.hypot(case.mesh.points[:, 0], case.mesh.points[:, 1]).max())
+    interaction = NeedleInteraction(tissue, needle, forces=forces)
+    angle, z = math.radians(250), 0.015
+    pressing(interaction, outer, angle, z, 1e-5)
+    interaction.graphics_step(0.0)
+    depth, now = 1e-5, 0.0
+    while interaction.state == "contact" and depth < 1.4e-3:
+        depth += 2e-5
+        now += 0.002
+        pressing(interaction, outer, angle, z, depth)
+        interaction.fem_step(now)
+    if interaction.state != "pierced":
+        raise SystemExit(f"benchmark set-up failed: needle state {interaction.state} at {depth * 1e3:.2f} mm")
+    samples = []
+    for _ in range(2000):
+        depth += 1e-7
+        now += 0.002
+        pressing(interaction, outer, angle, z, depth)
+        began = time.perf_counter()
+        interaction.fem_step(now)
+        samples.append(time.perf_counter() - began)
+    p50, p99, _ = percentiles(samples)
+    print(
+        f"fem_step_pierced_us median={p50 * 1e6:.1f} p99={p99 * 1e6:.1f} (pierced at {depth * 1e3:.2f} mm: "
+        f"lateral kernel, cutting, friction, emergence, local stress)",
+        flush=True,
+    )
+
+
+def stitch_telemetry() -> None:
+    tissue = tissue_for("wall-stitch", None)
+    spec = task_spec("wall-stitch")
+    needle = Needle.curved()
+    suturing = SuturingPass(needle, spec.entry, spec.normal, spec.bite_direction)
+    simulation = Simulation(
+        tissue, needle, ScriptedDevice(suturing.pose_and_grip), forces=task_preset("wall-stitch").forces
+    )
+    result = simulation.run_simulated(suturing.duration)
+    for layer in ("haptic", "fem"):
+        summary = result.telemetry[layer]
+        print(
+            f"wall_stitch_{layer}_compute_us median={summary.compute_p50 * 1e6:.1f} "
+            f"p99={summary.compute_p99 * 1e6:.1f} ({summary.steps} steps, one simulated stitch)",
+            flush=True,
+        )
+
+
+def main() -> None:
+    tissue, case = artery()
+    kernel_figures(tissue, case)
+    passage_figure(tissue, case)
+    stitch_telemetry()
+
+
+if __name__ == "__main__":
+    main()

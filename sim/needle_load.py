@@ -1,0 +1,130 @@
+"""The needle's load through force kernels in a one- or two-phase tissue, as the FEM layer applies it.
+
+A :class:`KernelLoad` is made when the needle's contact set changes (first touch, pierce, exit):
+it holds each phase's kernel stiffness (:class:`sim.fem.kernel.KernelContact`). Per FEM step it
+turns the kernels' displacements d (where the needle is against where it met the wall) into the
+forces on the tissue. In the biphase model (PAPER.md section 6) the soft phase answers up to the
+strain limit and the stiff phase beyond it, split by the soft share of the indentation strain
+max |d| / h: F = (share + (1 - share) s) K_soft d when the stiff phase's K0 is s times the soft
+one's (one Poisson ratio), otherwise share K_soft d + (1 - share) K_stiff d.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.fem import BiphaseTissue, TissueModel
+from sim.fem.fields import LocalStress
+from sim.fem.kernel import ForceKernel, KernelContact, kernel_at, lateral_near_field, normal_near_field
+from sim.needle_forces import NeedleForces
+
+KernelFactory = Callable[[TissueModel], tuple[list[ForceKernel], list[NDArray[np.float64]]]]
+"""Builds the kernels and their (3, 3) near-field compliances on one phase's model."""
+
+
+def kernel_factory(
+    forces: NeedleForces, wire_radius: float, contacts: list, tangent: NDArray[np.float64] | None = None
+) -> KernelFactory:
+    """Builds the force kernels of nominated contacts (each with ``point``, ``normal``, ``nodes``,
+    ``barycentric`` and ``triangle``: a :class:`sim.collision.mesh.TriangleContact`) on one phase's
+    model: a needle pressing on the surface (``tangent`` None: near field along the normal) or
+    bearing sideways in the wall it passes through (near field across the needle's ``tangent``)."""
+
+    def make(model: TissueModel) -> tuple[list[ForceKernel], list[NDArray[np.float64]]]:
+        elements = model.mesh.surface_elements
+        kernels, fields = [], []
+        for contact in contacts:
+            kernel = kernel_at(
+                model,
+                contact.point,
+                contact.normal,
+                forces.kernel_radius,
+                fallback=(contact.nodes, contact.barycentric),
+                element=int(elements[contact.triangle]),
+            )
+            if not forces.near_field:
+                field = np.zeros((3, 3))
+            elif tangent is None:
+                field = normal_near_field(kernel, wire_radius)
+            else:
+                field = lateral_near_field(kernel, wire_radius, tangent, forces.lateral_scale)
+            kernels.append(kernel)
+            fields.append(field)
+        return kernels, fields
+
+    return make
+
+
+class KernelLoad:
+    """Forces of a fixed set of force kernels on a :class:`TissueModel` or :class:`BiphaseTissue`."""
+
+    __slots__ = ("_stiff", "_stiff_scale", "depth", "kernels", "nodes", "parameters", "soft")
+
+    def __init__(self, tissue: TissueModel | BiphaseTissue, make_kernels: KernelFactory) -> None:
+        biphase = isinstance(tissue, BiphaseTissue)
+        soft_model = tissue.soft if biphase else tissue
+        kernels, near_field = make_kernels(soft_model)
+        self.kernels = kernels
+        self.soft = KernelContact(soft_model, kernels, near_field)
+        self.nodes = self.soft.nodes
+        self.parameters = tissue.parameters if biphase else None
+        self._stiff: KernelContact | None = None
+        self._stiff_scale = 1.0
+        self.depth = math.inf
+        if biphase:
+            shared = tissue.stiff.inverse_source
+            if shared is not None and shared[0] is tissue.soft:
+                self._stiff_scale = shared[1]
+            else:
+                self._stiff = KernelContact(tissue.stiff, *make_kernels(tissue.stiff))
+            self.depth = tissue.depth_under(self.nodes)
+
+    def total_displacements(
+        self, displacements: NDArray[np.float64], extra_forces: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
+        """(m, 3) the kernels' displacements (m): the imposed ones plus what explicit forces on the
+        tissue (m, 3) (N; the passage forces along a needle in the wall) would add in the soft phase."""
+        if extra_forces is None or not np.any(extra_forces):
+            return displacements
+        return displacements + self.soft.compliance.dot(extra_forces.reshape(-1)).reshape(-1, 3)
+
+    def soft_share(self, displacements: NDArray[np.float64], speed: float) -> float:
+        """The soft phase's share (1 in a one-phase tissue) at the kernels' total displacements (m, 3)
+        (m): a wall stretched by friction meets its stiff phase as an indented one does."""
+        p = self.parameters
+        if p is None:
+            return 1.0
+        strain = float(np.sqrt(np.einsum("ij,ij->i", displacements, displacements).max())) / self.depth
+        return p.soft_share(strain, p.strain_limit_at(max(speed, 0.0)))
+
+    def elastic_forces(self, displacements: NDArray[np.float64], share: float) -> NDArray[np.float64]:
+        """(m, 3) elastic forces on the tissue (N) at each kernel for displacements (m, 3) (m)."""
+        d = displacements.reshape(-1)
+        soft = self.soft.stiffness.dot(d)
+        if share == 1.0:
+            return soft.reshape(-1, 3)
+        if self._stiff is None:
+            return ((share + (1.0 - share) * self._stiff_scale) * soft).reshape(-1, 3)
+        return (share * soft + (1.0 - share) * self._stiff.stiffness.dot(d)).reshape(-1, 3)
+
+    def drive_scale(self, share: float) -> float:
+        """share + (1 - share) s: the factor by which the two phases' penalty answer to one drive
+        exceeds the soft phase's (what :meth:`equivalent_drive` divides by)."""
+        return share + (1.0 - share) * self._stiff_scale
+
+    def local_stress(self, tissue: TissueModel | BiphaseTissue) -> LocalStress:
+        """The local-stress operator of these kernels (within 1 mm of their points), per kernel force."""
+        return LocalStress(tissue, self.nodes, self.soft.force_map, [k.point for k in self.kernels])
+
+    def nodal_forces(self, kernel_forces: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(k, 3) forces (N) on :attr:`nodes` for the kernels' forces (m, 3)."""
+        return self.soft.nodal_forces(kernel_forces.reshape(-1))
+
+    def equivalent_drive(self, nodal_forces: NDArray[np.float64], share: float) -> NDArray[np.float64]:
+        """(k, 3) penalty drive (m) of :attr:`nodes` that the tissue answers with ``nodal_forces`` when
+        split between the phases by ``share`` (what the display and the replay drive)."""
+        return self.soft.equivalent_drive(nodal_forces) / self.drive_scale(share)
