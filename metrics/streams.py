@@ -159,6 +159,10 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     metadata = header
     stress = column("local_stress").astype(np.float64)
     stretch = column("stretch").astype(np.float64)
+    # the tissue's force on the needle where recorded (schema 2); older sessions kept only what the
+    # device was sent, which equals it unless the device clamped or scaled it
+    reaction = columns("reaction_x", "reaction_y", "reaction_z")
+    force = reaction if np.all(np.isfinite(reaction)) else columns("force_x", "force_y", "force_z")
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),
         participant_id=participant_id or metadata.get("participant_id"),
@@ -166,7 +170,7 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
         time=column("time").astype(np.float64),
         tool_position=columns("tool_x", "tool_y", "tool_z"),
         tip_position=columns("tip_x", "tip_y", "tip_z"),
-        force=columns("force_x", "force_y", "force_z"),
+        force=force,
         needle_state=column("pierced").astype(np.int8),
         local_stress=None if np.all(np.isnan(stress)) else stress,
         stretch=None if np.all(np.isnan(stretch)) else stretch,

@@ -10,7 +10,14 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from recorder.schema import EVENT_SCHEMA, SAMPLE_SCHEMA, SCHEMA_VERSION, RecorderError
+from recorder.schema import (
+    EVENT_SCHEMA,
+    READABLE_VERSIONS,
+    SAMPLE_SCHEMA,
+    SAMPLE_SCHEMA_V1,
+    RecorderError,
+    upgraded_samples,
+)
 from recorder.writer import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, read_header, sha256_of
 
 
@@ -46,16 +53,21 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
     path = Path(path)
     header = read_header(path)
     version = header.get("schema_version")
-    if version != SCHEMA_VERSION:
+    if version not in READABLE_VERSIONS:
         raise RecorderError(
             f"{path}: schema version {version!r} is not one this vascsim reads "
-            f"(it reads version {SCHEMA_VERSION})"
+            f"(it reads versions {', '.join(map(str, READABLE_VERSIONS))})"
         )
     if header.get("status") == "recording":
         if (path / SAMPLES_JOURNAL).exists():
             raise RecorderError(f"{path} was not closed (a crash?); run `vascsim recover {path}` first")
         raise RecorderError(f"{path} is still marked as recording but has no journal")
-    samples = _read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA)
+    if version == 1:
+        samples = upgraded_samples(
+            _read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA_V1)
+        )
+    else:
+        samples = _read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA)
     events = _read_checked(path, EVENTS_FILE, header.get("events"), verify, EVENT_SCHEMA)
     times = samples.column("time").to_numpy()
     backwards = np.flatnonzero(np.diff(times) < 0)

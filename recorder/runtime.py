@@ -82,6 +82,9 @@ class RuntimeRecorder:
             row[26] = fem.stretch
             row[COLUMN["pierced"]] = STATE_CODES.get(fem.state, 0)
         row[18:21] = force
+        reaction = COLUMN["reaction_x"]
+        if fem is not None:
+            row[reaction : reaction + 3] = fem.needle_force  # the tissue's, not what the device was sent
         row[COLUMN["grip"]] = sample.buttons & 1
         row[COLUMN["period"]] = 0.0 if self._last_time is None else now - self._last_time
         self._last_time = now

@@ -12,7 +12,10 @@ from sim.errors import VascsimError
 from sim.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
 from sim.runtime.shared import EVENT_CODES as RUNTIME_EVENT_KINDS
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""2 added the tissue's reaction force on the needle (``reaction_x/y/z``); version 1 files are read
+with those columns NaN (not recorded)."""
+READABLE_VERSIONS = (1, 2)
 
 
 class RecorderError(VascsimError):
@@ -55,7 +58,11 @@ SAMPLE_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("grip", "1", "needle-holder grip closed (1) or open (0)"),
     ("period", "s", "haptic loop period"),
     ("compute", "s", "haptic step compute time"),
+    ("reaction_x", "N", "the tissue's force on the needle (before the device's scale, clamp and rate limit)"),
+    ("reaction_y", "N", ""),
+    ("reaction_z", "N", ""),
 )
+REACTION_COLUMNS = ("reaction_x", "reaction_y", "reaction_z")
 SAMPLE_COLUMNS = tuple(name for name, _, _ in SAMPLE_FIELDS)
 COLUMN = {name: i for i, name in enumerate(SAMPLE_COLUMNS)}
 INTEGER_COLUMNS = {"contact_triangle": pa.int32(), "pierced": pa.int8(), "grip": pa.int8()}
@@ -70,6 +77,21 @@ SAMPLE_SCHEMA = pa.schema(
     [_field(*spec) for spec in SAMPLE_FIELDS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": str(SCHEMA_VERSION)},
 )
+SAMPLE_SCHEMA_V1 = pa.schema(
+    [_field(*spec) for spec in SAMPLE_FIELDS if spec[0] not in REACTION_COLUMNS],
+    metadata={"vascsim.schema": "samples", "vascsim.schema_version": "1"},
+)
+
+
+def upgraded_samples(table: pa.Table) -> pa.Table:
+    """A version-1 samples table with the version-2 columns it lacks added as NaN (not recorded)."""
+    import numpy as np
+
+    for name in REACTION_COLUMNS:
+        if name not in table.column_names:
+            table = table.append_column(SAMPLE_SCHEMA.field(name), pa.array(np.full(table.num_rows, np.nan)))
+    return table.select(list(SAMPLE_COLUMNS)).cast(SAMPLE_SCHEMA)
+
 
 # Every kind the simulator emits (needle events, runtime events), plus the recorder's own.
 EVENT_KINDS = tuple(

@@ -53,6 +53,7 @@ def _header(plan: SessionPlan, uid: str, participant: Participant) -> dict:
         "clock": plan.clock,
         "tissue_preset": task_preset(plan.task).name,
         "needle_forces": task_preset(plan.task).forces.as_dict(),
+        "haptic_scale": 1.0,  # the device is sent the tissue's force, clamped to its rating
     }
 
 

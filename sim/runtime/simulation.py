@@ -67,8 +67,13 @@ class RuntimeSettings:
     safety: SafetySettings = field(default_factory=SafetySettings)
     prefetch_radius: float = 0.002
     prefetch_reach: float = 0.01
+    haptic_scale: float = 1.0
+    """Factor on the tissue's force before the device's clamp and rate limit, for a device that cannot
+    render the tissue's force (a session header records it); the recorded reaction force is unscaled."""
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.haptic_scale <= 1.0:
+            raise RuntimeError_(f"haptic_scale must be in (0, 1]; got {self.haptic_scale}")
         if not 200.0 <= self.fem_rate <= 1000.0:
             raise RuntimeError_(f"fem_rate must be 200-1000 Hz (PAPER.md section 7); got {self.fem_rate}")
         if self.haptic_rate < self.fem_rate:
@@ -288,6 +293,8 @@ class Simulation:
         grip = sample.pressed(0)
         self.holder.put(HolderSnapshot(now, pose, sample.velocity, grip))
         target = self.forces.at(now - self.settings.force_delay)
+        if self.settings.haptic_scale != 1.0:
+            target = self.settings.haptic_scale * target
         force = self.safety.filter(now, target, self.forces.latest_time)
         self._flush_safety_events()
         try:

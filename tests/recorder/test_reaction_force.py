@@ -1,0 +1,86 @@
+"""The device sees safe forces; the record keeps the tissue's (schema 2), and version-1 files still read."""
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from metrics.streams import from_recorded
+from recorder import SessionWriter, open_session
+from recorder.runtime import RuntimeRecorder
+from recorder.schema import REACTION_COLUMNS, SAMPLE_SCHEMA_V1
+from recorder.writer import sha256_of
+from sessions.tasks import task_preset, task_spec, tissue_for
+from sim.devices import ScriptedDevice, SuturingPass
+from sim.devices.base import TOUCH_LIMITS
+from sim.devices.scripted import SuturingPassParameters
+from sim.needle import Needle
+from sim.runtime import RuntimeSettings, Simulation
+from sim.runtime.simulation import RuntimeError_
+
+
+def record(folder, settings=None):
+    """A levering trainee's stitch on a Touch-rated device (0.88 N): the tissue's force exceeds it."""
+    spec = task_spec("wall-stitch")
+    suturing = SuturingPass(
+        Needle.curved(),
+        spec.entry,
+        spec.normal,
+        spec.bite_direction,
+        SuturingPassParameters(wrist_rotation=0.5),
+    )
+    device = ScriptedDevice(suturing.pose_and_grip, limits=TOUCH_LIMITS)
+    writer = SessionWriter(folder, {"session_id": folder.name, "task": "wall-stitch"}, flush_interval=0.1)
+    simulation = Simulation(
+        tissue_for("wall-stitch", None),
+        Needle.curved(),
+        device,
+        settings,
+        forces=task_preset("wall-stitch").forces,
+    )
+    RuntimeRecorder(writer).attach(simulation).run_simulated(suturing.duration)
+    writer.close()
+    return open_session(folder)
+
+
+def magnitudes(session, names):
+    return np.linalg.norm(np.column_stack([session.samples.column(n).to_numpy() for n in names]), axis=1)
+
+
+def test_the_record_keeps_the_tissue_force_while_the_device_gets_its_rated_clamp(tmp_path):
+    session = record(tmp_path / "s")
+    sent = magnitudes(session, ("force_x", "force_y", "force_z"))
+    tissue = magnitudes(session, REACTION_COLUMNS)
+    assert sent.max() <= TOUCH_LIMITS.max_force + 1e-9
+    assert tissue.max() > 1.2 * TOUCH_LIMITS.max_force  # what the trainee really did to the wall
+    streams = from_recorded(session)
+    np.testing.assert_allclose(np.linalg.norm(streams.force, axis=1), tissue)  # metrics read the tissue's
+
+
+def test_a_scale_factor_reduces_what_the_device_is_sent_not_what_is_recorded(tmp_path):
+    full = record(tmp_path / "full")
+    half = record(tmp_path / "half", RuntimeSettings(haptic_scale=0.5))
+    np.testing.assert_allclose(magnitudes(half, REACTION_COLUMNS), magnitudes(full, REACTION_COLUMNS))
+    sent_full, sent_half = (magnitudes(s, ("force_x", "force_y", "force_z")) for s in (full, half))
+    assert sent_half.max() < 0.9 * sent_full.max()
+    with pytest.raises(RuntimeError_, match="haptic_scale"):
+        RuntimeSettings(haptic_scale=0.0)
+
+
+def test_a_version_1_session_reads_with_its_reaction_unknown(tmp_path):
+    """Sessions recorded before schema 2: the reaction columns are NaN and metrics use the sent force."""
+    session = record(tmp_path / "s")
+    old = session.samples.drop_columns(list(REACTION_COLUMNS)).cast(SAMPLE_SCHEMA_V1)
+    pq.write_table(old, tmp_path / "s" / "samples.parquet")
+    header = json.loads((tmp_path / "s" / "header.json").read_text())
+    header["schema_version"] = 1
+    header["samples"]["sha256"] = sha256_of(tmp_path / "s" / "samples.parquet")
+    (tmp_path / "s" / "header.json").write_text(json.dumps(header))
+    again = open_session(tmp_path / "s")
+    assert again.samples.schema.names == session.samples.schema.names
+    assert np.all(np.isnan(again.samples.column("reaction_x").to_numpy()))
+    streams = from_recorded(again)
+    np.testing.assert_allclose(
+        streams.force, np.column_stack([old.column(c).to_numpy() for c in ("force_x", "force_y", "force_z")])
+    )
