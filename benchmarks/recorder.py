@@ -50,6 +50,9 @@ from recorder.remote import encode_batch, pack_frame  # noqa: E402
 from recorder.writer import samples_batch  # noqa: E402
 from sim.runtime.cpu import IdlePolling, stolen_seconds  # noqa: E402
 from sim.runtime.realtime import _set_all_threads, _sleep_until  # noqa: E402
+from sim.tissue_presets import tissue_preset  # noqa: E402
+
+ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 
 
 def paced_cost(directory: str, seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
@@ -138,7 +141,7 @@ def haptic_process_cost(directory: str, seconds: float = 30.0) -> tuple[np.ndarr
 
     needle = Needle.curved()
     mesh, fixed = paper_cube()
-    cube = BiphaseTissue.build(mesh, fixed)
+    cube = BiphaseTissue.build(mesh, fixed, ARTERY)
     cube.precompute(use_cache=False)
     trajectory, total = sequence_of_passes(practice_passes(scenario("paper_cube"), needle, 20))
     duration = min(seconds, total)
@@ -231,6 +234,7 @@ def throughput(directory: str, samples: int = 3_000_000) -> float:
 SERVER = """
 import sys, json, uvicorn
 from recorder.ingest import IngestStore, create_app
+
 tokens = json.loads(sys.argv[2])
 uvicorn.run(create_app(IngestStore(sys.argv[1], tokens)), host="127.0.0.1", port=int(sys.argv[3]),
             log_level="warning", ws_max_size=16 * 2**20, ws_per_message_deflate=False)

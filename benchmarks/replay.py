@@ -38,11 +38,14 @@ from sim.fem import BiphaseTissue  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
 from sim.scenarios import practice_passes, scenario  # noqa: E402
+from sim.tissue_presets import tissue_preset  # noqa: E402
+
+ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 
 
 def record(case_name: str, folder: Path, precompute: bool):
     case = scenario(case_name)
-    tissue = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
+    tissue = BiphaseTissue.build(case.mesh, case.fixed_nodes, ARTERY, contact_nodes=case.contact_nodes)
     if precompute:
         tissue.precompute(use_cache=False)
     needle = Needle.curved()
@@ -80,7 +83,7 @@ def naive_screenshot_fps(tissue, frames: int = 60) -> float:
 
 def fresh_model(case_name: str, precompute: bool):
     case = scenario(case_name)
-    tissue = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
+    tissue = BiphaseTissue.build(case.mesh, case.fixed_nodes, ARTERY, contact_nodes=case.contact_nodes)
     if precompute:
         tissue.precompute(use_cache=False)
     return tissue

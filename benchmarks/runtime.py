@@ -45,9 +45,13 @@ from sim.needle import Needle
 from sim.runtime import RuntimeSettings, Simulation
 from sim.runtime.cpu import stolen_seconds
 from sim.scenarios import practice_passes, scenario
+from sim.tissue_presets import tissue_preset
+
+ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 
 STEAL_SAMPLER = """
 import os, sys, time
+
 os.sched_setaffinity(0, {int(sys.argv[2])})
 os.nice(5)
 prefix = "cpu" + sys.argv[1] + " "
@@ -305,7 +309,7 @@ def main() -> None:
     needle = Needle.curved()
 
     mesh, fixed = paper_cube()
-    cube = BiphaseTissue.build(mesh, fixed)
+    cube = BiphaseTissue.build(mesh, fixed, ARTERY)
     cube.precompute(use_cache=False)
     if args.only in (None, "simulated"):
         simulated_throughput(cube, needle)
@@ -348,7 +352,7 @@ def simulated_passes(count: int) -> None:
     """Set up the test cube and run ``count`` simulated stitches (what valgrind counts)."""
     needle = Needle.curved()
     mesh, fixed = paper_cube()
-    cube = BiphaseTissue.build(mesh, fixed)
+    cube = BiphaseTissue.build(mesh, fixed, ARTERY)
     cube.precompute(use_cache=False)
     one = practice_passes(scenario("paper_cube"), needle, 1)[0]
     for _ in range(count):
@@ -401,7 +405,7 @@ def realtime_cube(cube, needle, seconds, size, render, kernel_trace) -> None:
 
 def realtime_artery(needle, seconds, size, render, precomputed, kernel_trace) -> None:
     case = scenario("vessel_10k")
-    artery = BiphaseTissue.build(case.mesh, case.fixed_nodes, contact_nodes=case.contact_nodes)
+    artery = BiphaseTissue.build(case.mesh, case.fixed_nodes, ARTERY, contact_nodes=case.contact_nodes)
     if precomputed:
         artery.precompute(use_cache=False)
     trajectory, total = sequence_of_passes(practice_passes(case, needle, 20))

@@ -268,7 +268,10 @@ def contact_to_pierce_time(context: SessionContext) -> float:
 @metric(
     "peak_force",
     unit="N",
-    definition="Largest magnitude of the force sent to the device (the tissue's reaction).",
+    definition=(
+        "Largest magnitude of the tissue's reaction force on the needle (before the device's clamp; "
+        "sessions recorded before schema 2: the force the device was sent)."
+    ),
     streams=("force",),
     better=LOWER,
     reference="O'Toole et al. 1999, J Am Coll Surg 189:114",

@@ -172,6 +172,11 @@ class NeedleInteraction:
         """Largest von Mises stress (Pa) within 1 mm of the contact at the last FEM step (nan when free)."""
         self.stretch = math.nan
         """The stretch statistic 1 + |d| / h at the last FEM step (nan when free)."""
+        self.live_stress = True
+        """Whether each FEM step computes the local stress. Its operator costs one sparse solve per
+        contact change (13-25 ms on the 10k artery, which holds the interpreter): the real-time runtime
+        leaves it off unless asked (``RuntimeSettings.live_stress_in_real_time``) and scoring derives
+        the stress of the indentation afterwards; simulated time streams it."""
         self._stress: LocalStress | None = None
         self._stress_key: tuple[int, ...] = ()
         self._overstressed = False
@@ -543,10 +548,13 @@ class NeedleInteraction:
 
     def _nodal_stress(self, nodes: NDArray, reactions: NDArray, points: list, displacements: NDArray) -> None:
         """Local stress and stretch of the barycentric rule's nodal forces (operator per contact set)."""
-        if self._stress is None or self._stress_key != tuple(nodes.tolist()):
-            self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points)
-            self._stress_key = tuple(nodes.tolist())
-        self.local_stress = self._stress.maximum(reactions.reshape(-1))
+        if not self.live_stress:
+            self.local_stress = math.nan
+        else:
+            if self._stress is None or self._stress_key != tuple(nodes.tolist()):
+                self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points)
+                self._stress_key = tuple(nodes.tolist())
+            self.local_stress = self._stress.maximum(reactions.reshape(-1))
         depth = contact_depth(self.tissue, self.contacts[0].nodes)
         self.stretch = 1.0 + float(np.linalg.norm(displacements, axis=1).max()) / depth
 
@@ -585,7 +593,7 @@ class NeedleInteraction:
             nodes = np.unique(np.concatenate([kernel.nodes for kernel in built[0]]))
             unsolved = tuple(int(n) for n in nodes if self.tissue.needs_solve(int(n)))
             self._load = KernelLoad(self.tissue, lambda model: built if model is soft else make(model))
-            self._stress = self._load.local_stress(self.tissue)
+            self._stress = self._load.local_stress(self.tissue) if self.live_stress else None
             self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))
             self._load_key = key
         load = self._load
@@ -595,7 +603,9 @@ class NeedleInteraction:
         kernel_forces = load.elastic_forces(displacements, share) + extra_forces
         reactions = load.nodal_forces(kernel_forces)
         self.last_contact = (load.nodes, load.equivalent_drive(reactions, share))
-        self.local_stress = self._stress.maximum(kernel_forces.reshape(-1))
+        self.local_stress = (
+            math.nan if self._stress is None else self._stress.maximum(kernel_forces.reshape(-1))
+        )
         self.stretch = 1.0 + float(np.sqrt(np.einsum("ij,ij->i", total, total).max())) / (
             load.depth if math.isfinite(load.depth) else contact_depth(self.tissue, load.nodes)
         )

@@ -199,6 +199,12 @@ class _SurfaceGeometry:
     areas: NDArray[np.float64]
 
 
+def warm_kernel_geometry(tissue: TissueModel) -> None:
+    """Build the free surface nodes' positions, normals and areas now, so a first touch does not
+    (about 5 ms on the 10k artery)."""
+    _surface_geometry(tissue)
+
+
 def _surface_geometry(tissue: TissueModel) -> _SurfaceGeometry:
     """Free surface nodes with their positions, unit vertex normals and nodal areas (a third of each
     adjacent exterior triangle's area); cached on the model."""
