@@ -49,7 +49,7 @@ from sim.mesh.tetmesh import TetMesh, signed_volumes
 # error of a penalty spring is about (local stiffness / C), i.e. ~1e-5 relative.
 DEFAULT_PENALTY_FACTOR = 1e5
 # Memory budget of the on-demand column cache.
-DEFAULT_COLUMN_CACHE_BYTES = 256 * 2**20
+DEFAULT_COLUMN_CACHE_BYTES = 1024 * 2**20
 
 
 @dataclass
