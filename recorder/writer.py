@@ -162,6 +162,9 @@ class SessionWriter:
         self.record = self._producer.record  # type: ignore[method-assign]
         self._events: list[tuple] = []
         self._events_lock = threading.Lock()
+        self._flush_lock = threading.Lock()  # one flush at a time: the writer thread's, a caller's, close's
+        self._block_lock = threading.Lock()  # record_block callers share the ring's head
+        self._closed = False
         self._sample_sink = open(self.directory / SAMPLES_JOURNAL, "wb")
         self._sample_stream = ipc.new_stream(self._sample_sink, SAMPLE_SCHEMA)
         self._event_sink = open(self.directory / EVENTS_JOURNAL, "wb")
@@ -189,7 +192,18 @@ class SessionWriter:
         return self._producer.record(row)
 
     def record_block(self, rows: NDArray[np.float64]) -> int:
-        """Queue many rows at once (imports, replays); returns how many fitted."""
+        """Queue many rows at once (imports, replays); returns how many fitted. Safe from any thread
+        against other ``record_block`` calls and flushes; ``record`` (the haptic loop's, lock-free)
+        must not run at the same time from another thread."""
+        with self._block_lock:
+            self._check_open("record to")
+            return self._push_block(rows)
+
+    def _check_open(self, what: str) -> None:
+        if self._closed:
+            raise RecorderError(f"cannot {what} {self.directory}: the session writer is closed")
+
+    def _push_block(self, rows: NDArray[np.float64]) -> int:
         counters = self._counters
         head = int(counters[HEAD])
         count = min(self._capacity - (head - int(counters[TAIL])), len(rows))
@@ -240,12 +254,21 @@ class SessionWriter:
     def _run(self) -> None:
         try:
             while not self._stop.wait(self.flush_interval):
-                self.flush()
+                with self._flush_lock:
+                    if self._stop.is_set():
+                        break
+                    self._flush()
         except BaseException as error:  # reported by close(); recording stops being durable
             self._error = error
 
     def flush(self) -> None:
-        """Make everything queued so far durable (journal append + fsync)."""
+        """Make everything queued so far durable (journal append + fsync); safe from any thread
+        (flushes run one at a time). Raises :class:`RecorderError` once the writer is closed."""
+        with self._flush_lock:
+            self._check_open("flush")
+            self._flush()
+
+    def _flush(self) -> None:
         started = clock.perf_counter()
         head, tail = int(self._counters[HEAD]), int(self._counters[TAIL])
         written: list[tuple[str, pa.RecordBatch]] = []
@@ -294,11 +317,16 @@ class SessionWriter:
     # -- closing -------------------------------------------------------------------------------------
     def close(self, status: str = "complete") -> dict[str, Any]:
         """Final flush, Parquet conversion with verification and checksums; returns the header."""
-        self._stop.set()
+        with self._flush_lock:
+            self._check_open("close")
+            self._stop.set()
         self._thread.join()
         if self._error is not None:
             raise RecorderError(f"recording to {self.directory} failed: {self._error}") from self._error
-        self.flush()
+        with self._block_lock, self._flush_lock:
+            self._check_open("close")
+            self._flush()
+            self._closed = True
         for stream, sink in (
             (self._sample_stream, self._sample_sink),
             (self._event_stream, self._event_sink),
