@@ -517,7 +517,7 @@ class NeedleInteraction:
 
     def _pierced_step(self, vertices: NDArray) -> FemStep:
         tangent = self.tip_tangent()
-        nodes, intended, crossings = [], [], []
+        crossings = []
         for rank, contact in enumerate(self.contacts):
             point = self._needle_point_at_plane(vertices, contact)
             if point is None or not self._holds(contact, point):
@@ -525,9 +525,7 @@ class NeedleInteraction:
             offset = point - contact.point
             sideways = offset - offset.dot(tangent) * tangent  # the needle slides freely along itself
             crossings.append((rank, sideways))
-            nodes.append(contact.nodes)
-            intended.append(contact.barycentric[:, None] * sideways)  # np.outer, without its wrapper
-        if not nodes:
+        if not crossings:
             return FemStep.untouched()
         if self.forces.load == "kernel":
             axial = self._axial_forces(vertices, tangent, len(crossings))
@@ -535,6 +533,10 @@ class NeedleInteraction:
             sideways = np.array([offset for _, offset in crossings])
             all_nodes, reactions = self._kernel_reactions(key, sideways, axial)
             return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
+        nodes = [self.contacts[rank].nodes for rank, _ in crossings]
+        # the paper's rule: each crossed triangle's nodes driven by their barycentric weights (np.outer,
+        # without its wrapper)
+        intended = [self.contacts[rank].barycentric[:, None] * offset for rank, offset in crossings]
         if len(nodes) == 1:
             all_nodes, merged = nodes[0], intended[0]
         else:  # entry and exit triangles may share nodes: add their intended displacements
