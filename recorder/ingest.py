@@ -29,6 +29,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
 
+from recorder.integrity import CHECKSUM_NAME, scan_journal
 from recorder.remote import (
     MAX_BATCH_BYTES,
     MAX_HEADER_BYTES,
@@ -58,10 +59,13 @@ def _schema_message(schema: pa.Schema) -> bytes:
 class _Journal:
     """One stream's append-only journal: the last stored sequence and sample time, and appends."""
 
-    def __init__(self, path: Path, schema: pa.Schema) -> None:
-        self.path, self.schema = path, schema
+    def __init__(self, path: Path, schema: pa.Schema, checksummed: bool = True) -> None:
+        """``checksummed``: every stored batch carries its checksum (the header's
+        ``journal_checksum``); a journal from before checksums is read without requiring them."""
+        self.path, self.schema, self.checksummed = path, schema, checksummed
         self.last_sequence, self.last_time = -1, -math.inf
         self.digests: dict[int, bytes] = {}  # sequence -> SHA-256 of the stored batch message
+        self.cut: dict[str, Any] | None = None  # what a restart cut from the journal (damage)
         self._closing = threading.Lock()
         if path.exists():  # after a restart the journal is the truth
             self._replay()
@@ -71,30 +75,23 @@ class _Journal:
             self._sync()
 
     def _replay(self) -> None:
-        """Read back what was accepted; cut a batch torn by a crash so appends stay readable."""
-        data = self.path.read_bytes()
-        source = pa.BufferReader(data)
-        good = 0
-        try:
-            reader = ipc.open_stream(source)
-            good = source.tell()
-            while True:
-                try:
-                    item = reader.read_next_batch_with_custom_metadata()
-                except StopIteration:
-                    break
-                self.last_sequence = int(item.custom_metadata[b"sequence"])
-                self.digests[self.last_sequence] = hashlib.sha256(data[good : source.tell()]).digest()
-                if item.batch.num_rows:
-                    self.last_time = float(item.batch.column(0)[-1].as_py())
-                good = source.tell()
-        except (pa.ArrowInvalid, OSError):
-            pass  # a torn tail: the batches before it stand
-        finally:
-            source.close()
-        if good < self.path.stat().st_size:
+        """Read back what was accepted, verifying every batch's checksum; cut what follows the
+        verified prefix (a batch torn by a crash, or damaged on disk) so appends stay readable."""
+        scan = scan_journal(self.path, self.schema, require_checksums=self.checksummed)
+        data = self.path.read_bytes()[: scan.verified_bytes]
+        ends = [*scan.offsets[1:], scan.verified_bytes][: len(scan.offsets)]
+        for batch, metadata, start, end in zip(scan.batches, scan.metadata, scan.offsets, ends, strict=True):
+            self.last_sequence = int(metadata[b"sequence"])
+            self.digests[self.last_sequence] = hashlib.sha256(data[start:end]).digest()
+            if batch.num_rows:
+                self.last_time = float(batch.column(0)[-1].as_py())
+        cut = scan.cut()
+        if cut is not None:
+            self.cut = cut
+            log.error("journal %s: cut %d bytes after batch %d: %s", self.path, cut["bytes"],
+                      self.last_sequence, cut["reason"])  # fmt: skip
             with open(self.path, "rb+") as handle:
-                handle.truncate(good)
+                handle.truncate(len(data))
                 os.fsync(handle.fileno())
 
     def _sync(self) -> None:
@@ -222,6 +219,7 @@ class _RemoteSession:
                     "station": station,
                     "session": session_id,
                     "flush_interval_s": None,
+                    "journal_checksum": CHECKSUM_NAME,
                 },
             )
         header = json.loads(header_path.read_text())
@@ -234,7 +232,9 @@ class _RemoteSession:
             self.closed_counts = dict(header.get("remote", {}).get("batches", {}))
         else:
             for stream, schema in STREAMS.items():
-                self.journals[stream] = _Journal(directory / JOURNALS[stream], schema)
+                self.journals[stream] = _Journal(
+                    directory / JOURNALS[stream], schema, header.get("journal_checksum") == CHECKSUM_NAME
+                )
 
     def close_files(self) -> None:
         for journal in self.journals.values():
@@ -355,6 +355,8 @@ class IngestStore:
                 f"unknown schema version {header['schema_version']!r}; this server reads {SCHEMA_VERSION}",
             )
         _refuse_non_finite(header, "the session header")
+        if "ring" in header:  # names a local writer's memory: a central recorder never reads one
+            raise RemoteError(422, "the session header's 'ring' is a local recording's own key; leave it out")
         session = self.session(station, session_id)
         with session.lock:
             if session.closed_counts is not None:
@@ -374,6 +376,7 @@ class IngestStore:
                 "station": station,
                 "session": session_id,
                 "received_unix": clock.time(),
+                "journal_checksum": CHECKSUM_NAME,
             }
             write_json_atomically(session.directory / HEADER_FILE, stored)
         return {"header": True}
@@ -419,6 +422,7 @@ class IngestStore:
 
 _SERVER_HEADER_KEYS = frozenset(
     {"schema_version", "status", "station", "session", "received_unix", "flush_interval_s"}
+    | {"journal_checksum"}
 )
 
 

@@ -12,7 +12,8 @@ Bearer <station token>``):
 
 HTTP
     ``PUT /api/sessions/{session}/header`` (JSON object: the session header),
-    ``POST /api/sessions/{session}/{stream}/{sequence}`` (batch bytes),
+    ``POST /api/sessions/{session}/{stream}/{sequence}`` (batch bytes: sequence and checksum
+    in the batch's custom metadata, see ``encode_batch``),
     ``POST /api/sessions/{session}/close`` (JSON ``{"batches": {"samples": n,
     "events": m}, "status": "complete"}``). Answers are JSON: ``{"ack": ...}``
     or ``{"error": "..."}`` with 401, 404, 409, 413 or 422.
@@ -32,6 +33,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
 
+from recorder.integrity import checksum_problem, sealed
 from recorder.schema import EVENT_KINDS, EVENT_SCHEMA, SAMPLE_SCHEMA, SCHEMA_VERSION, RecorderError
 
 MAX_BATCH_BYTES = 8 * 2**20
@@ -60,11 +62,12 @@ class RemoteError(RecorderError):
 
 
 def encode_batch(batch: pa.RecordBatch, sequence: int) -> bytes:
-    """The bytes a station sends: an Arrow IPC stream holding one batch, its sequence number in
-    the batch's custom metadata (the central recorder stores the batch message exactly as sent)."""
+    """The bytes a station sends: an Arrow IPC stream holding one batch, its sequence number and
+    the checksum covering batch and sequence (:mod:`recorder.integrity`) in the batch's custom
+    metadata (the central recorder stores the batch message exactly as sent)."""
     sink = io.BytesIO()
     with ipc.new_stream(sink, batch.schema) as writer:
-        writer.write_batch(batch, custom_metadata={"sequence": str(sequence)})
+        writer.write_batch(batch, custom_metadata=sealed(batch, sequence=str(sequence)))
     return sink.getvalue()
 
 
@@ -107,6 +110,9 @@ def decode_batch(stream: str, sequence: int, body: bytes) -> tuple[pa.RecordBatc
         batch.validate(full=True)
     except pa.ArrowInvalid as error:
         raise RemoteError(422, f"malformed {stream} batch: {error}") from error
+    problem = checksum_problem(batch, item.custom_metadata)
+    if problem is not None:  # damaged on the way, or an old station: nothing unverifiable is stored
+        raise RemoteError(422, f"{stream} batch {sequence} {problem}")
     for index, field in enumerate(schema):
         # Arrow does not hold data to a field's declared nullability; a null stored here would make
         # the session's Parquet unwritable at close, so it never gets in

@@ -220,9 +220,11 @@ def devices(as_json: bool) -> None:
 def recover(session: str, score: bool, as_json: bool) -> None:
     """Recover a session a crash left unfinished: SESSION is its id or its directory.
 
-    Every complete batch of the journal becomes the session's Parquet files; the
-    header is marked recovered with the time up to which data was kept (at most one
-    flush interval, 100 ms by default, was lost). A catalogued session becomes
+    Every batch of the journal that verifies against its checksum becomes the
+    session's Parquet files (reading stops at the first damaged or torn batch, and
+    what was cut is reported); if the recording process died but the machine did
+    not, the samples it recorded after its last flush are taken from its memory
+    (tmpfs) too. The header records the measured loss. A catalogued session becomes
     `recovered`, with its files' checksums, and is scored. Find candidates with
     `vascsim sessions list --status running`.
     """
@@ -238,11 +240,14 @@ def recover(session: str, score: bool, as_json: bool) -> None:
     rows = header["samples"]["rows"]
     until = header.get("recovered_until_s")
     kept = f"up to {until:.3f} s" if until is not None else "no samples"
-    name = uid or session
-    click.echo(
-        f"recovered {name}: {rows} samples kept ({kept}); at most "
-        f"{header.get('lost_at_most_s')} s after that was lost"
-    )
+    click.echo(f"recovered {uid or session}: {rows} samples kept ({kept}); {header['loss_note']}")
+    for stream in ("samples", "events"):
+        cut = header[stream].get("cut")
+        if cut:
+            click.echo(
+                f"  {stream}: {cut['bytes']} damaged or incomplete bytes cut after batch "
+                f"{cut['after_batches']} ({cut['reason']})"
+            )
 
 
 # -- catalog-backed commands ------------------------------------------------------------

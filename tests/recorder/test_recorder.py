@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import duckdb
 import numpy as np
@@ -141,9 +142,60 @@ def test_truncated_journal_recovers_complete_batches(tmp_path):
     writer._sample_sink.close()
     writer._event_sink.close()
     journal = session / "samples.arrows"
-    journal.write_bytes(journal.read_bytes()[:-37])  # power loss tears the last batch
+    journal.write_bytes(journal.read_bytes()[:-37])  # power loss tears the last batch...
+    Path(writer.header["ring"]["file"]).unlink()  # ...and takes the ring (tmpfs) with it
     header = recover(session)
     assert header["samples"]["rows"] == 400 and header["samples"]["torn_tail_cut"]
+    assert header["samples"]["cut"]["after_batches"] == 4 and header["samples"]["cut"]["bytes"] > 0
+    assert header["durable_until_s"] == header["recovered_until_s"] == pytest.approx(0.399)
+    assert header["lost_at_most_s"] is None and "unknown" in header["loss_note"]  # never a constant
+
+
+def test_a_dead_process_loses_nothing_it_recorded(tmp_path):
+    """The journal's torn batch is cut, and every row after the last verified batch comes back from
+    the ring the process left on tmpfs; the header says how long the unflushed stretch was."""
+    session = tmp_path / "s"
+    writer = SessionWriter(session, {}, flush_interval=10.0)
+    for chunk in range(5):
+        for row in rows(100, start=100 * chunk):
+            writer.record(row)
+        if chunk < 3:
+            writer.flush()
+    writer._stop.set()  # a crash: rows 300-499 recorded, never flushed
+    writer._thread.join()
+    writer._sample_sink.close()
+    writer._event_sink.close()
+    ring = Path(writer.header["ring"]["file"])
+    header = recover(session)
+    assert header["samples"]["rows"] == 500 and header["salvaged_samples"] == 200
+    assert header["durable_until_s"] == pytest.approx(0.299)
+    assert header["recovered_until_s"] == pytest.approx(0.499)
+    assert header["unflushed_s"] == pytest.approx(0.2) and header["lost_at_most_s"] == 0.0
+    np.testing.assert_array_equal(
+        open_session(session).samples.column("tool_x").to_numpy(), np.sin(np.arange(500) * 1e-3)
+    )
+    assert not ring.exists()  # released once its rows are in the session
+
+
+def test_a_ring_that_is_not_this_sessions_is_not_used(tmp_path):
+    session = tmp_path / "s"
+    writer = SessionWriter(session, {}, flush_interval=10.0)
+    for row in rows(100):
+        writer.record(row)
+    writer.flush()
+    for row in rows(50, start=100):
+        writer.record(row)
+    writer._stop.set()
+    writer._thread.join()
+    writer._sample_sink.close()
+    writer._event_sink.close()
+    ring = Path(writer.header["ring"]["file"])
+    cells = np.fromfile(ring)
+    cells[99 * len(SAMPLE_COLUMNS) + 1] += 1.0  # its copy of the journal's last row differs
+    cells.tofile(ring)
+    header = recover(session)
+    assert header["samples"]["rows"] == 100 and header["lost_at_most_s"] is None
+    assert "differs" in header["loss_note"]
 
 
 def test_bad_files_are_named_and_do_not_hide_others(tmp_path):
