@@ -212,6 +212,14 @@ def analyse_catalog_study(
             f"{len(stale)} session(s) carry only metrics of an older registry version and are left out "
             f"(e.g. {stale[0]}); rescore them with `vascsim score --study {study_name}`.",
         )
+    unverified = imported_unverified_sessions(catalog, study_name)
+    if unverified:
+        analysis.notes.insert(
+            0,
+            f"{len(unverified)} session(s) carry metric values imported from a bundle and not "
+            f"recomputed here (unverified; e.g. {unverified[0]}); recompute them with "
+            f"`vascsim score --study {study_name}`.",
+        )
     source = (
         "declared analysis v" + str(version) if version is not None else "default analysis (none declared)"
     )
@@ -268,6 +276,28 @@ def stale_sessions(catalog: Catalog, study_name: str) -> list[str]:
         ).all()
     versions = metric_versions(catalog, [r[0] for r in rows])
     return [uid for session_id, uid in rows if versions[session_id].startswith("stale")]
+
+
+def imported_unverified_sessions(catalog: Catalog, study_name: str) -> list[str]:
+    """Sessions of the study whose current-registry metrics were imported, not computed here."""
+    from metrics.registry import REGISTRY_VERSION
+
+    with catalog.session() as orm:
+        study = catalog.study(orm, study_name)
+        return list(
+            orm.scalars(
+                select(Session.uid)
+                .join(Participant, Session.participant_id == Participant.id)
+                .join(MetricResult, MetricResult.session_id == Session.id)
+                .where(
+                    Participant.study_id == study.id,
+                    MetricResult.source == "imported",
+                    MetricResult.registry_version == REGISTRY_VERSION,
+                )
+                .distinct()
+                .order_by(Session.uid)
+            )
+        )
 
 
 def _show(value: Any) -> str:

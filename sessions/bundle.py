@@ -5,18 +5,24 @@ tasks they used, and every session with its files, metric results, ratings and
 annotations) and ``files/<session uid>/<file name>`` for each stream file. Every file's
 SHA-256 is in the manifest and the manifest's own SHA-256 is in ``manifest.sha256``.
 
-``import_bundle`` checks everything before it touches the catalog or the data
-directory: the archive opens, the manifest's checksum matches, every file's checksum
-matches, the study and session ids are not already present. Only then are files
-copied into ``VASCSIM_HOME/sessions`` and rows added in one transaction; a failure at
-that stage removes the copied files again, so a bad bundle changes nothing.
+A checksum anyone can recompute proves nothing against deliberate edits, so
+``import_bundle`` treats the archive as hostile and checks everything before it
+touches the catalog or the data directory: the archive opens, the manifest matches
+its checksum and, when a trusted key is given, its Ed25519 signature
+(:mod:`sessions.signing`); the manifest is valid against its declared schema
+(:mod:`sessions.manifest`: unknown keys, wrong types, closed enumerations, ids and
+account links refused); the archive holds exactly the listed files, each of its
+listed size (checked before reading) and SHA-256; the study and session ids are
+new; every scorable session's metrics can be recomputed from its streams. Only then
+are files moved into ``VASCSIM_HOME/sessions`` and rows added in one transaction; a
+failure at that stage removes the moved files again, so a bad bundle changes nothing.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import re
+import math
 import shutil
 import uuid
 import zipfile
@@ -26,7 +32,14 @@ from typing import Any
 
 from sqlalchemy import select
 
-from sessions.catalog import Catalog, CatalogError
+from sessions.catalog import Catalog, CatalogError, metric_results
+from sessions.manifest import (
+    BUNDLE_FORMAT,
+    BUNDLE_VERSION,
+    MAX_MANIFEST_BYTES,
+    Manifest,
+    parse_manifest,
+)
 from sessions.models import (
     AnalysisDeclaration,
     Annotation,
@@ -38,15 +51,12 @@ from sessions.models import (
     Study,
     Task,
 )
+from sessions.signing import SIGNATURE, sign, trusted_fingerprint
+from sessions.signing import verify as verify_signature
 
-BUNDLE_FORMAT = "vascsim-study-bundle"
-BUNDLE_VERSION = 1
 MANIFEST = "manifest.json"
 MANIFEST_CHECKSUM = "manifest.sha256"
 _CHUNK = 1 << 20
-_SAFE_NAME = re.compile(
-    r"^[A-Za-z0-9][A-Za-z0-9._-]{0,199}$"
-)  # no paths: nothing can leave the data directory
 
 _PARTICIPANT_FIELDS = (
     "code",
@@ -87,10 +97,13 @@ def _session_files(row: Session) -> list[tuple[StreamFile, Path]]:
     return pairs
 
 
-def export_study(catalog: Catalog, study_name: str, out: str | Path, progress=None) -> dict[str, Any]:
+def export_study(
+    catalog: Catalog, study_name: str, out: str | Path, progress=None, sign_key: str | Path | None = None
+) -> dict[str, Any]:
     """Write study ``study_name`` to the archive ``out``; returns a summary (path, sessions, files,
-    bytes). Files are checked against their catalogued SHA-256 as they are copied; a file that
-    changed or vanished since it was recorded stops the export with an error naming it."""
+    bytes, signing key). Files are checked against their catalogued SHA-256 as they are copied; a
+    file that changed or vanished since it was recorded stops the export with an error naming it.
+    ``sign_key``: a site's Ed25519 private key (:mod:`sessions.signing`) signing the manifest."""
     out = Path(out)
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
@@ -173,6 +186,8 @@ def export_study(catalog: Catalog, study_name: str, out: str | Path, progress=No
                 manifest["sessions"].append(entry)
     if not manifest["sessions"]:
         raise CatalogError(f"study {study_name!r} has no sessions to export")
+    text = json.dumps(manifest, indent=1, sort_keys=True).encode()
+    signature = sign(text, sign_key) if sign_key is not None else None  # a bad key fails before writing
     out.parent.mkdir(parents=True, exist_ok=True)
     partial = out.with_name(out.name + ".partial")
     total = 0
@@ -182,13 +197,20 @@ def export_study(catalog: Catalog, study_name: str, out: str | Path, progress=No
                 total += _copy_checked(path, archive, arcname, expected)
                 if progress is not None:
                     progress(arcname)
-            text = json.dumps(manifest, indent=1, sort_keys=True).encode()
             archive.writestr(MANIFEST, text)
             archive.writestr(MANIFEST_CHECKSUM, hashlib.sha256(text).hexdigest() + "\n")
+            if signature is not None:
+                archive.writestr(SIGNATURE, signature)
         partial.replace(out)
     finally:
         partial.unlink(missing_ok=True)
-    return {"bundle": str(out), "sessions": len(manifest["sessions"]), "files": len(copies), "bytes": total}
+    return {
+        "bundle": str(out),
+        "sessions": len(manifest["sessions"]),
+        "files": len(copies),
+        "bytes": total,
+        "signed_by": None if signature is None else json.loads(signature)["key"],
+    }
 
 
 def _copy_checked(path: Path, archive: zipfile.ZipFile, arcname: str, expected: str) -> int:
@@ -210,67 +232,121 @@ def _copy_checked(path: Path, archive: zipfile.ZipFile, arcname: str, expected: 
     return size
 
 
-def read_manifest(bundle: str | Path) -> dict[str, Any]:
-    """The verified manifest of a bundle (archive readable, manifest checksum and format right)."""
+def _read_member(archive: zipfile.ZipFile, name: str, limit: int, bundle: str | Path) -> bytes | None:
+    """A small member's bytes (None when absent), refused above ``limit`` bytes before reading."""
+    try:
+        info = archive.getinfo(name)
+    except KeyError:
+        return None
+    if info.file_size > limit:
+        raise CatalogError(f"bundle {bundle}: {name} is {info.file_size} bytes, over the {limit}-byte limit")
+    with archive.open(info) as member:
+        data = member.read(limit + 1)
+    if len(data) > limit:
+        raise CatalogError(f"bundle {bundle}: {name} is larger than its archive entry says")
+    return data
+
+
+def read_manifest(bundle: str | Path, trust: str | Path | None = None) -> Manifest:
+    """The verified manifest of a bundle: archive readable, manifest checksum right, signed by the
+    trusted key (when ``trust`` names a public key file), and valid against the declared schema."""
     bundle = Path(bundle)
     if not bundle.is_file():
         raise CatalogError(f"bundle {bundle} does not exist")
     try:
         with zipfile.ZipFile(bundle) as archive:
-            text = archive.read(MANIFEST)
-            recorded = archive.read(MANIFEST_CHECKSUM).decode().strip()
-    except (zipfile.BadZipFile, KeyError, OSError, EOFError) as error:
+            text = _read_member(archive, MANIFEST, MAX_MANIFEST_BYTES, bundle)
+            recorded = _read_member(archive, MANIFEST_CHECKSUM, 1024, bundle)
+            signature = _read_member(archive, SIGNATURE, 4096, bundle)
+    except (zipfile.BadZipFile, OSError, EOFError) as error:
         raise CatalogError(f"bundle {bundle} is not a readable vascsim study bundle ({error})") from None
-    if hashlib.sha256(text).hexdigest() != recorded:
+    if text is None or recorded is None:
+        missing = MANIFEST if text is None else MANIFEST_CHECKSUM
+        raise CatalogError(f"bundle {bundle} is not a readable vascsim study bundle (no {missing})")
+    if hashlib.sha256(text).hexdigest() != recorded.decode(errors="replace").strip():
         raise CatalogError(f"bundle {bundle} is corrupted: its manifest does not match its checksum")
-    manifest = json.loads(text)
-    if manifest.get("format") != BUNDLE_FORMAT or manifest.get("version") != BUNDLE_VERSION:
+    if trust is not None:
+        verify_signature(text, signature, trust, bundle)
+    try:
+        found = json.loads(text)
+    except ValueError:
+        found = None
+    stated = (found.get("format"), found.get("version")) if isinstance(found, dict) else None
+    if stated is not None and stated != (BUNDLE_FORMAT, BUNDLE_VERSION):
         raise CatalogError(
-            f"bundle {bundle} has format {manifest.get('format')!r} version {manifest.get('version')!r}; "
+            f"bundle {bundle} has format {found.get('format')!r} version {found.get('version')!r}; "
             f"this vascsim reads {BUNDLE_FORMAT!r} version {BUNDLE_VERSION}"
         )
-    for entry in manifest.get("sessions", []):
-        names = [entry.get("uid", ""), *(record.get("name", "") for record in entry.get("files", []))]
-        for name in names:
-            if not isinstance(name, str) or not _SAFE_NAME.match(name):
-                raise CatalogError(
-                    f"bundle {bundle} names a file or session {name!r} that is not a plain name"
-                )
+    try:
+        manifest = parse_manifest(text)
+    except ValueError as error:
+        raise CatalogError(f"bundle {bundle}: manifest {error}") from None
+    _check_analyses(manifest.analyses, bundle)
     return manifest
 
 
-def verify_bundle(bundle: str | Path, progress=None) -> dict[str, Any]:
-    """Read every file of the bundle and check it against the manifest; returns the manifest."""
-    manifest = read_manifest(bundle)
+def verify_bundle(bundle: str | Path, progress=None, trust: str | Path | None = None) -> Manifest:
+    """Check the archive against the manifest before anything is extracted: it holds exactly the
+    listed files, each of the listed size (within the limits) and SHA-256; returns the manifest."""
+    manifest = read_manifest(bundle, trust)
+    listed = {
+        f"files/{entry.uid}/{record.name}": record for entry in manifest.sessions for record in entry.files
+    }
     try:
         with zipfile.ZipFile(bundle) as archive:
-            for entry in manifest["sessions"]:
-                for record in entry["files"]:
-                    arcname = f"files/{entry['uid']}/{record['name']}"
-                    digest = hashlib.sha256()
-                    with archive.open(arcname) as member:
-                        while chunk := member.read(_CHUNK):
-                            digest.update(chunk)
-                    if digest.hexdigest() != record["sha256"]:
-                        raise CatalogError(
-                            f"bundle {bundle} is corrupted: {arcname} does not match its SHA-256"
-                        )
-                    if progress is not None:
-                        progress(arcname)
-    except (zipfile.BadZipFile, KeyError, OSError, EOFError) as error:
+            members = {info.filename: info for info in archive.infolist() if not info.is_dir()}
+            extra = sorted(set(members) - set(listed) - {MANIFEST, MANIFEST_CHECKSUM, SIGNATURE})
+            if extra:
+                raise CatalogError(f"bundle {bundle} holds {extra[0]}, which its manifest does not list")
+            for arcname, record in listed.items():
+                info = members.get(arcname)
+                if info is None:
+                    raise CatalogError(f"bundle {bundle} is corrupted: {arcname} is missing")
+                if info.file_size != record.bytes:
+                    raise CatalogError(
+                        f"bundle {bundle}: {arcname} is {info.file_size} bytes in the archive; "
+                        f"its manifest says {record.bytes}"
+                    )
+                if _digest(archive, info, record.bytes) != record.sha256:
+                    raise CatalogError(f"bundle {bundle} is corrupted: {arcname} does not match its SHA-256")
+                if progress is not None:
+                    progress(arcname)
+    except (zipfile.BadZipFile, OSError, EOFError) as error:
         raise CatalogError(f"bundle {bundle} is corrupted: {error}") from None
     return manifest
 
 
-def import_bundle(catalog: Catalog, home: Path, bundle: str | Path, progress=None) -> dict[str, Any]:
+def _digest(archive: zipfile.ZipFile, info: zipfile.ZipInfo, size: int) -> str | None:
+    """SHA-256 of a member, reading at most ``size`` + 1 bytes (None: it held more than ``size``)."""
+    digest, seen = hashlib.sha256(), 0
+    with archive.open(info) as member:
+        while chunk := member.read(min(_CHUNK, size + 1 - seen)):
+            seen += len(chunk)
+            if seen > size:
+                return None
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def import_bundle(
+    catalog: Catalog,
+    home: Path,
+    bundle: str | Path,
+    progress=None,
+    trust: str | Path | None = None,
+    recompute: bool = True,
+) -> dict[str, Any]:
     """Add the bundle's study to the catalog, its stream files under ``home/sessions``.
 
-    Refused, with nothing changed, when the bundle is corrupted, when a study of that name
-    exists, or when any of its session ids is already catalogued."""
-    manifest = verify_bundle(bundle, progress)
-    _check_analyses(manifest.get("analyses", []), bundle)
-    name = manifest["study"]["name"]
-    uids = [entry["uid"] for entry in manifest["sessions"]]
+    Refused, with nothing changed, when the bundle is corrupted or does not match its declared
+    schema, when ``trust`` names a public key and the bundle is not signed by it, when a study of
+    that name exists, or when any of its session ids is already catalogued. Metric values of the
+    current registry version are recomputed from the imported streams (``recompute``); values the
+    bundle states that differ are counted and replaced. Without ``recompute`` they are stored as
+    imported, unverified, and every analysis of the study says so."""
+    manifest = verify_bundle(bundle, progress, trust)
+    name = manifest.study.name
+    uids = [entry.uid for entry in manifest.sessions]
     with catalog.session() as orm:
         if orm.scalar(select(Study).where(Study.name == name)) is not None:
             raise CatalogError(f"a study named {name!r} already exists; this bundle was already imported")
@@ -281,8 +357,9 @@ def import_bundle(catalog: Catalog, home: Path, bundle: str | Path, progress=Non
     placed: list[Path] = []
     try:
         _extract(bundle, manifest, staging)
+        computed = _recompute(manifest, staging, home, progress) if recompute else {}
         with catalog.session() as orm:
-            _add_rows(catalog, orm, manifest, home)
+            differing = _add_rows(catalog, orm, manifest, home, computed)
             for uid in uids:
                 target = home / "sessions" / uid
                 if target.exists():
@@ -295,7 +372,40 @@ def import_bundle(catalog: Catalog, home: Path, bundle: str | Path, progress=Non
         raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return {"study": name, "sessions": len(uids), "participants": len(manifest["participants"])}
+    return {
+        "study": name,
+        "sessions": len(uids),
+        "participants": len(manifest.participants),
+        "metrics": "recomputed" if recompute else "imported, unverified",
+        "metrics_recomputed_sessions": len(computed),
+        "metric_values_differing": differing,
+        "signed_by": None if trust is None else trusted_fingerprint(trust),
+    }
+
+
+def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> dict[str, dict[str, float]]:
+    """Every scorable session's metrics computed from its extracted streams; an error names it."""
+    from sessions.runner import compute_metrics
+
+    labels = {p.code: p.group_label for p in manifest.participants}
+    computed = {}
+    for entry in manifest.sessions:
+        if entry.status not in ("complete", "recovered"):
+            continue
+        folder = staging / entry.uid
+        where = folder / entry.files[0].name if entry.single_file else folder
+        try:
+            computed[entry.uid] = compute_metrics(
+                where, entry.device, entry.uid, entry.participant, labels[entry.participant], home
+            )
+        except Exception as error:  # hostile streams: any failure refuses the whole bundle
+            raise CatalogError(
+                f"session {entry.uid} of the bundle cannot be scored from its streams "
+                f"({type(error).__name__}: {error}); nothing was imported"
+            ) from None
+        if progress is not None:
+            progress(f"scored {entry.uid}")
+    return computed
 
 
 def _check_analyses(entries: Any, bundle: str | Path) -> None:
@@ -333,67 +443,83 @@ def _check_analyses(entries: Any, bundle: str | Path) -> None:
         raise CatalogError(f"bundle {bundle}: analysis versions must run 1, 2, ...; got {versions}")
 
 
-def _extract(bundle: str | Path, manifest: dict[str, Any], staging: Path) -> None:
+def _extract(bundle: str | Path, manifest: Manifest, staging: Path) -> None:
     with zipfile.ZipFile(bundle) as archive:
-        for entry in manifest["sessions"]:
-            folder = staging / entry["uid"]
+        for entry in manifest.sessions:
+            folder = staging / entry.uid
             folder.mkdir(parents=True)
-            for record in entry["files"]:
+            for record in entry.files:
                 with (
-                    archive.open(f"files/{entry['uid']}/{record['name']}") as member,
-                    (folder / Path(record["name"]).name).open("wb") as target,
+                    archive.open(f"files/{entry.uid}/{record.name}") as member,
+                    (folder / record.name).open("wb") as target,
                 ):
                     shutil.copyfileobj(member, target, _CHUNK)
 
 
-def _add_rows(catalog: Catalog, orm, manifest: dict[str, Any], home: Path) -> None:
-    info = manifest["study"]
-    study = Study(
-        name=info["name"], description=info["description"], created_at=_parse_when(info["created_at"])
-    )
+def _add_rows(
+    catalog: Catalog, orm, manifest: Manifest, home: Path, computed: dict[str, dict[str, float]]
+) -> int:
+    """The bundle's rows; returns how many stated metric values differ from the recomputed ones.
+
+    Participants come without any account link (accounts are this site's business); database ids
+    are this catalog's own."""
+    from metrics.registry import REGISTRY_VERSION
+
+    info = manifest.study
+    study = Study(name=info.name, description=info.description, created_at=info.created_at)
     orm.add(study)
     orm.flush()
-    for entry in manifest.get("analyses", []):
-        orm.add(
-            AnalysisDeclaration(study_id=study.id, **dict(entry, created_at=_parse_when(entry["created_at"])))
-        )
+    for entry in manifest.analyses:
+        declared = dict(entry, created_at=_parse_when(entry["created_at"]))
+        orm.add(AnalysisDeclaration(study_id=study.id, **declared))
     tasks: dict[str, Task] = {}
-    for task_name, task_info in manifest["tasks"].items():
-        task = catalog.task(orm, task_name, task_info["scenario"], task_info["parameters"])
-        if task.scenario != task_info["scenario"] or task.parameters != task_info["parameters"]:
+    for task_name, task_info in manifest.tasks.items():
+        task = catalog.task(orm, task_name, task_info.scenario, task_info.parameters)
+        if task.scenario != task_info.scenario or task.parameters != task_info.parameters:
             raise CatalogError(
                 f"task {task_name!r} in this catalog differs from the bundle's (scenario or parameters); "
                 "its sessions would not be comparable"
             )
         tasks[task_name] = task
     people: dict[str, Participant] = {}
-    for person in manifest["participants"]:
-        fields = dict(person, created_at=_parse_when(person["created_at"]))
-        people[person["code"]] = Participant(study_id=study.id, **fields)
-        orm.add(people[person["code"]])
+    for person in manifest.participants:
+        people[person.code] = Participant(study_id=study.id, **person.model_dump())
+        orm.add(people[person.code])
     orm.flush()
-    for entry in manifest["sessions"]:
-        folder = home / "sessions" / entry["uid"]
-        directory = folder / entry["files"][0]["name"] if entry["single_file"] else folder
+    differing = 0
+    for entry in manifest.sessions:
+        folder = home / "sessions" / entry.uid
+        directory = folder / entry.files[0].name if entry.single_file else folder
         session = Session(
-            participant_id=people[entry["participant"]].id,
-            task_id=tasks[entry["task"]].id,
+            participant_id=people[entry.participant].id,
+            task_id=tasks[entry.task].id,
             directory=str(directory),
-            **{
-                key: _parse_when(entry[key]) if key in ("started_at", "ended_at") else entry[key]
-                for key in _SESSION_FIELDS
-            },
+            **entry.model_dump(include=set(_SESSION_FIELDS)),
         )
         orm.add(session)
         orm.flush()
-        orm.add_all(StreamFile(session_id=session.id, **record) for record in entry["files"])
-        orm.add_all(MetricResult(session_id=session.id, **m) for m in entry["metrics"])
-        orm.add_all(
-            Rating(session_id=session.id, **dict(r, created_at=_parse_when(r["created_at"])))
-            for r in entry["ratings"]
-        )
-        orm.add_all(
-            Annotation(session_id=session.id, **dict(a, created_at=_parse_when(a["created_at"])))
-            for a in entry["annotations"]
-        )
+        orm.add_all(StreamFile(session_id=session.id, **record.model_dump()) for record in entry.files)
+        fresh = computed.get(entry.uid)
+        stated = [m for m in entry.metrics if fresh is None or m.registry_version != REGISTRY_VERSION]
+        orm.add_all(MetricResult(session_id=session.id, source="imported", **m.model_dump()) for m in stated)
+        if fresh is not None:
+            orm.add_all(metric_results(session.id, fresh))
+            differing += _count_differing(entry, fresh, REGISTRY_VERSION)
+        orm.add_all(Rating(session_id=session.id, **r.model_dump()) for r in entry.ratings)
+        orm.add_all(Annotation(session_id=session.id, **a.model_dump()) for a in entry.annotations)
     orm.flush()
+    return differing
+
+
+def _count_differing(entry, fresh: dict[str, float], version: str) -> int:
+    """Stated values of ``version`` that the recomputation does not reproduce (NaN equals NULL)."""
+    count = 0
+    for metric in entry.metrics:
+        if metric.registry_version != version:
+            continue
+        value = fresh.get(metric.metric, float("nan"))
+        same = (metric.value is None and math.isnan(value)) or (
+            metric.value is not None and math.isclose(metric.value, value, rel_tol=1e-9, abs_tol=1e-12)
+        )
+        count += not same
+    return count

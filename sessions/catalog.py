@@ -7,18 +7,21 @@ schema is created and upgraded by the Alembic migrations in ``sessions/migration
 
 from __future__ import annotations
 
+import fcntl
 import math
+import random
+import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
 from alembic import command
 from alembic.config import Config
-from sqlalchemy import create_engine, event, select
+from sqlalchemy import create_engine, event, func, select, text
 from sqlalchemy.engine import Engine, make_url
-from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
+from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError, OperationalError
 from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
@@ -28,6 +31,8 @@ from sim.errors import VascsimError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
 SQLITE_BUSY_TIMEOUT_MS = 30_000
+TRIAL_ATTEMPTS = 50  # inserts racing for the next trial number: each conflict retries
+MIGRATION_LOCK_KEY = 0x76617363  # "vasc": the PostgreSQL advisory lock every migrating process takes
 
 
 class CatalogError(VascsimError):
@@ -85,6 +90,18 @@ def alembic_config(engine_connection) -> Config:
     return config
 
 
+@contextmanager
+def _sqlite_migration_lock(engine: Engine) -> Iterator[None]:
+    """An exclusive lock on ``<database>.migrate-lock`` while a file-backed SQLite catalog migrates."""
+    database = engine.url.database if engine.dialect.name == "sqlite" else None
+    if not database or database == ":memory:":
+        yield
+        return
+    with open(f"{database}.migrate-lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        yield
+
+
 class Catalog:
     """Open (and migrate to the newest schema) the catalog at ``url``."""
 
@@ -96,8 +113,14 @@ class Catalog:
             self.upgrade()
 
     def upgrade(self) -> None:
+        """Migrate to the newest schema, one process at a time: processes opening a new catalog at
+        once wait for the first, then find it migrated (SQLite: a lock file beside the database;
+        PostgreSQL: an advisory lock held for the migrating transaction)."""
         try:
-            with self.engine.begin() as connection:
+            with _sqlite_migration_lock(self.engine), self.engine.begin() as connection:
+                if self.engine.dialect.name == "postgresql":
+                    lock = text("SELECT pg_advisory_xact_lock(:key)")
+                    connection.execute(lock, {"key": MIGRATION_LOCK_KEY})
                 command.upgrade(alembic_config(connection), "head")
         except OperationalError as error:
             reason = str(error.orig).strip().splitlines()[0] if error.orig else str(error)
@@ -171,6 +194,48 @@ class Catalog:
         orm.flush()
         return participant
 
+    def add_session(
+        self, fields: dict, fill: Callable[[OrmSession, Session], None] | None = None
+    ) -> Session:
+        """Insert a session row in its own transaction; returns it.
+
+        ``fields["trial"]`` None: the next trial number of its participant on its task, allocated
+        inside the inserting transaction (the unique (participant, task, trial) constraint turns a
+        concurrent run's claim of the same number into a retry, never a duplicate). ``fill`` adds
+        the session's other rows in the same transaction. An explicit trial that exists is refused."""
+        allocate = fields.get("trial") is None
+        for attempt in range(TRIAL_ATTEMPTS):
+            try:
+                with self.session() as orm:
+                    values = dict(fields)
+                    if allocate:
+                        values["trial"] = self.next_trial(orm, values["participant_id"], values["task_id"])
+                    row = Session(**values)
+                    orm.add(row)
+                    orm.flush()
+                    if fill is not None:
+                        fill(orm, row)
+                return row
+            except (IntegrityError, OperationalError) as error:
+                if not _lost_a_race(error):
+                    raise
+                if not allocate:
+                    raise CatalogError(
+                        f"trial {fields['trial']} of this participant on this task is already catalogued"
+                    ) from None
+                time.sleep(random.uniform(0.0, 0.01 * (attempt + 1)))
+        raise CatalogError(f"no free trial number after {TRIAL_ATTEMPTS} attempts; too many runs at once")
+
+    @staticmethod
+    def next_trial(orm: OrmSession, participant_id: int, task_id: int) -> int:
+        """One more than the participant's highest trial on the task (1 for the first)."""
+        highest = orm.scalar(
+            select(func.max(Session.trial)).where(
+                Session.participant_id == participant_id, Session.task_id == task_id
+            )
+        )
+        return (highest or 0) + 1
+
     def task(
         self, orm: OrmSession, name: str, scenario: str | None = None, parameters: dict | None = None
     ) -> Task:
@@ -182,6 +247,14 @@ class Catalog:
             orm.add(found)
             orm.flush()
         return found
+
+
+def _lost_a_race(error: IntegrityError | OperationalError) -> bool:
+    """A trial-number conflict with a concurrent insert (or SQLite refusing a stale writer)."""
+    text_ = str(error.orig)
+    if isinstance(error, OperationalError):
+        return "database is locked" in text_
+    return "uq_session_trial" in text_ or "sessions.participant_id, sessions.task_id, sessions.trial" in text_
 
 
 def stream_file(session_id: int, path: Path) -> StreamFile:

@@ -609,23 +609,19 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     the streams are closed and checksummed; Ctrl-C or an error keeps the data and
     marks the session 'failed'; after a crash, `vascsim recover` restores it.
     """
-    from sqlalchemy import func, select
-
-    from sessions.models import Session
     from sessions.runner import SessionPlan, run_session
     from sessions.synthetic import pass_parameters
 
     catalog, home = _catalog()
-    with catalog.session() as orm:
-        person = catalog.participant(orm, catalog.study(orm, study), participant)
-        trial = (
-            orm.scalar(select(func.max(Session.trial)).where(Session.participant_id == person.id)) or 0
-        ) + 1
     clock = "realtime" if realtime or device in ("spacemouse", "openhaptics") else "simulated"
-    plan = SessionPlan(study, participant, task, trial, phase, device, clock)
-    parameters = pass_parameters(skill, seed=trial) if device == "scripted" else None
-    with _stderr_console().status(f"running {participant} trial {trial} on {device}..."):
+    if duration is None and device in ("spacemouse", "openhaptics"):
+        raise click.UsageError(f"--duration is needed with device {device!r} (it runs until stopped)")
+    plan = SessionPlan(study, participant, task, None, phase, device, clock)  # next trial, allocated
+    parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
+    with _stderr_console().status(f"running {participant} on {device}..."):
         uid = run_session(catalog, home, plan, parameters, duration)
+    with catalog.session() as orm:
+        trial = catalog.recorded_session(orm, uid).trial
     values = _session_metrics(catalog, uid)
     if as_json:
         _json({"session": uid, "trial": trial, "metrics": values})
@@ -983,26 +979,57 @@ def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json)
     default=None,
     help="Archive to write (default: STUDY.vascsim.zip in the current directory).",
 )
+@click.option(
+    "--sign",
+    "sign_key",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Sign the bundle with this site's Ed25519 private key (make one with `vascsim keys new`).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @user_errors
-def export_bundle(study: str, out: str | None, as_json: bool) -> None:
+def export_bundle(study: str, out: str | None, sign_key: str | None, as_json: bool) -> None:
     """Write a study as one self-contained archive (catalog rows + stream files + checksums).
 
     The archive moves a study between machines or catalogs (SQLite <-> PostgreSQL);
     `vascsim import-bundle` reads it back. Every file is checked against its
-    recorded SHA-256 on the way out.
+    recorded SHA-256 on the way out. A checksum proves only that nothing was damaged
+    by accident; --sign adds an Ed25519 signature, so a site holding your public key
+    can verify that the study comes from you unchanged (`import-bundle --trust`).
     """
     from sessions.bundle import export_study
 
     catalog, _ = _catalog()
     target = out or f"{study}.vascsim.zip"
-    summary = _per_file("exporting", lambda advance: export_study(catalog, study, target, advance))
+    summary = _per_file("exporting", lambda advance: export_study(catalog, study, target, advance, sign_key))
+    signed = f", signed by key {summary['signed_by']}" if summary["signed_by"] else ""
     _summary(
         summary,
         as_json,
         f"exported study {study}: {summary['sessions']} session(s), {summary['files']} file(s) "
-        f"-> {summary['bundle']}",
+        f"-> {summary['bundle']}{signed}",
     )
+
+
+@main.group()
+def keys() -> None:
+    """Signing keys for study bundles (Ed25519)."""
+
+
+@keys.command("new")
+@click.argument("path", type=click.Path(dir_okay=False))
+@user_errors
+def keys_new(path: str) -> None:
+    """Make a site key pair: PATH (private, readable by you only) and PATH.pub (hand this out).
+
+    Sign exports with `vascsim export --sign PATH`; a receiving site verifies them with
+    `vascsim import-bundle --trust PATH.pub`.
+    """
+    from sessions.signing import new_key_pair, trusted_fingerprint
+
+    private, public = new_key_pair(path)
+    key = trusted_fingerprint(public)
+    click.echo(f"private key {private} (keep it safe), public key {public}: key {key}")
 
 
 def _per_file(description: str, work):
@@ -1021,23 +1048,48 @@ def _summary(summary: dict, as_json: bool, text: str) -> None:
 
 @main.command("import-bundle")
 @click.argument("bundle", type=click.Path(dir_okay=False))
+@click.option(
+    "--trust",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Accept the bundle only if it is signed by this public key (PATH.pub of `vascsim keys new`).",
+)
+@click.option(
+    "--keep-imported-metrics",
+    is_flag=True,
+    help="Store the bundle's metric values as they are (marked imported, unverified) instead of "
+    "recomputing them from the streams.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @user_errors
-def import_bundle_command(bundle: str, as_json: bool) -> None:
+def import_bundle_command(bundle: str, trust: str | None, keep_imported_metrics: bool, as_json: bool) -> None:
     """Add a study exported by `vascsim export` to this catalog.
 
-    Every checksum is verified first; a corrupted bundle, a study name already in
-    use, or a session id already catalogued is refused and nothing is changed.
+    The bundle is checked completely first: its declared schema, every file's size
+    and checksum, the signature when --trust is given. Metric values are recomputed
+    from the imported streams (values the bundle states differently are counted and
+    replaced). A bad bundle, a study name already in use, or a session id already
+    catalogued is refused and nothing is changed. Participants arrive without any
+    account link: link trainee accounts here with `vascsim users`.
     """
     from sessions.bundle import import_bundle
 
     catalog, home = _catalog()
-    summary = _per_file("verifying", lambda advance: import_bundle(catalog, home, bundle, advance))
+    summary = _per_file(
+        "verifying",
+        lambda advance: import_bundle(catalog, home, bundle, advance, trust, not keep_imported_metrics),
+    )
+    if keep_imported_metrics:
+        metrics = "metrics imported as stated, unverified"
+    else:
+        differing = summary["metric_values_differing"]
+        metrics = f"metrics recomputed from the streams ({differing} stated value(s) differed, replaced)"
+    signed = f"; signed by trusted key {summary['signed_by']}" if summary["signed_by"] else ""
     _summary(
         summary,
         as_json,
         f"imported study {summary['study']}: {summary['participants']} participant(s), "
-        f"{summary['sessions']} session(s)",
+        f"{summary['sessions']} session(s); {metrics}{signed}",
     )
 
 

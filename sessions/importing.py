@@ -128,25 +128,25 @@ def import_bench_video(
             study = catalog.study(orm, study_name)
             person = catalog.participant(orm, study, participant_code)
             task = catalog.task(orm, "bench-suture", "bench", {"source": "video", "marker": repr(marker)})
-            trials = [s.trial for s in person.sessions]
-            session = Session(
-                uid=uid,
-                participant_id=person.id,
-                task_id=task.id,
-                device=BENCH_DEVICE,
-                clock="recorded",
-                trial=max(trials, default=0) + 1,
-                phase="practice",
-                status="complete",
-                started_at=now(),
-                ended_at=now(),
-                directory=str(folder),
-                error="",
-            )
-            orm.add(session)
-            orm.flush()
+            fields = {"participant_id": person.id, "task_id": task.id}
+
+        def files_and_metrics(orm, session: Session) -> None:
             orm.add_all(stream_file(session.id, file) for file in sorted(folder.iterdir()))
             orm.add_all(metric_results(session.id, values))
+
+        fields.update(
+            uid=uid,
+            device=BENCH_DEVICE,
+            clock="recorded",
+            trial=None,  # the participant's next bench trial
+            phase="practice",
+            status="complete",
+            started_at=now(),
+            ended_at=now(),
+            directory=str(folder),
+            error="",
+        )
+        catalog.add_session(fields, files_and_metrics)
     except BaseException:
         import shutil
 

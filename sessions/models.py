@@ -94,6 +94,7 @@ class Session(Base):
     """One attempt: who, what, when, how, and where its streams are."""
 
     __tablename__ = "sessions"
+    __table_args__ = (UniqueConstraint("participant_id", "task_id", "trial", name="uq_session_trial"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     uid: Mapped[str] = mapped_column(String(64), unique=True)
     participant_id: Mapped[int] = mapped_column(ForeignKey("participants.id", ondelete="CASCADE"), index=True)
@@ -133,6 +134,8 @@ class MetricResult(Base):
     metric: Mapped[str] = mapped_column(String(100))
     value: Mapped[float | None] = mapped_column(Float, nullable=True)
     registry_version: Mapped[str] = mapped_column(String(16))
+    # "computed" here from the session's streams, or "imported" from a bundle and not recomputed
+    source: Mapped[str] = mapped_column(String(16), default="computed", server_default="computed")
 
 
 class Rating(Base):

@@ -9,7 +9,8 @@ row ``failed`` with the reason; a hard crash leaves ``running`` plus a journal t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pandas as pd
@@ -34,20 +35,20 @@ class SessionPlan:
     study: str
     participant: str
     task: str
-    trial: int
+    trial: int | None  # None: the participant's next trial on the task, allocated as the row is added
     phase: str = "practice"
     device: str = "scripted"
     clock: str = "simulated"
 
 
-def _header(plan: SessionPlan, uid: str, participant: Participant) -> dict:
+def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool) -> dict:
     return {
         "session_id": uid,
-        "participant_id": participant.code,
-        "label": participant.group_label,
+        "participant_id": code,
+        "label": label,
         "trial": plan.trial,
         "phase": plan.phase,
-        "synthetic": participant.synthetic,
+        "synthetic": synthetic,
         "task": plan.task,
         "device": plan.device,
         "clock": plan.clock,
@@ -94,15 +95,15 @@ def run_session(
     catalog: Catalog,
     home: Path,
     plan: SessionPlan,
-    parameters: SuturingPassParameters | None = None,
+    parameters: SuturingPassParameters | Callable[[int], SuturingPassParameters] | None = None,
     duration: float | None = None,
     score: bool = True,
 ) -> str:
-    """Run, record and catalogue one session; returns its uid."""
-    device, natural = open_device(plan.device, plan, catalog, parameters)
-    duration = duration if duration is not None else natural
-    if duration is None:
-        raise CatalogError(f"--duration is needed with device {plan.device!r}")
+    """Run, record and catalogue one session; returns its uid.
+
+    The row is added first (with the next trial number when ``plan.trial`` is None);
+    ``parameters`` may be a function of that trial number (a scripted pass seeded by it).
+    If the device cannot be opened, nothing was recorded and the row is removed again."""
     spec = task_spec(plan.task)
     uid = new_uid()
     directory = home / "sessions" / uid
@@ -110,10 +111,12 @@ def run_session(
         study = catalog.study(orm, plan.study)
         participant = catalog.participant(orm, study, plan.participant)
         task = catalog.task(orm, spec.name, spec.scenario, spec.parameters)
-        row = Session(
+        fields = {"participant_id": participant.id, "task_id": task.id}
+        code, label, synthetic = participant.code, participant.group_label, participant.synthetic
+    row = catalog.add_session(
+        dict(
+            fields,
             uid=uid,
-            participant_id=participant.id,
-            task_id=task.id,
             device=plan.device,
             clock=plan.clock,
             trial=plan.trial,
@@ -122,9 +125,20 @@ def run_session(
             started_at=now(),
             directory=str(directory),
         )
-        orm.add(row)
-        header = _header(plan, uid, participant)
-    writer = SessionWriter(directory, header, flush_interval=0.1)
+    )
+    plan = replace(plan, trial=row.trial)
+    if callable(parameters):
+        parameters = parameters(row.trial)
+    try:
+        device, natural = open_device(plan.device, plan, catalog, parameters)
+        duration = duration if duration is not None else natural
+        if duration is None:
+            raise CatalogError(f"device {plan.device!r} runs until stopped; give the session a duration")
+    except BaseException:
+        with catalog.session() as orm:
+            orm.delete(catalog.recorded_session(orm, uid))
+        raise
+    writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
     tissue = tissue_for(plan.task, home / "cache")
     forces = task_preset(plan.task).forces
     simulation = RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device, forces=forces))
@@ -182,11 +196,32 @@ def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
     return uid, header
 
 
-def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[str, float]:
-    """Compute every registered metric of a stored session and store it with the registry version.
+def compute_metrics(
+    directory: Path, device: str, uid: str, code: str, label: str, home: Path | None = None
+) -> dict[str, float]:
+    """Every registered metric of the session stored in ``directory`` (read, never changed).
 
     Simulator sessions get their tissue streams derived with the task's model (cached
-    under ``home/cache``; ``home`` defaults to VASCSIM_HOME)."""
+    under ``home/cache``; ``home`` defaults to VASCSIM_HOME); a bench video's tracked path is
+    the session's data; a JIGSAWS trial's is its kinematics file."""
+    if device == "bench-video":
+        from metrics.bench.tracking import TRACK_FILE, load_track
+
+        return metrics_of(load_track(directory / TRACK_FILE).to_streams(uid, code, label))
+    if device == "jigsaws":  # one kinematics file; labels come from the catalog, not the file
+        from metrics.datasets.jigsaws import Trial, read_kinematics
+
+        samples = read_kinematics(directory)
+        trial = Trial(directory.stem, "", code, 0, label, "", float("nan"), {}, samples)
+        return metrics_of(trial.to_streams())
+    streams = from_recorded(open_session(directory))
+    model = session_tissue(streams, (home or data_home()) / "cache")
+    return metrics_of(with_tissue_fields(streams, model) if model is not None else streams)
+
+
+def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[str, float]:
+    """Compute every registered metric of a stored session (:func:`compute_metrics`) and store it
+    with the registry version, replacing what that version had (computed or imported)."""
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         if row.status not in ("complete", "recovered"):
@@ -195,14 +230,7 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
             )
         directory, device = row.directory, row.device
         code, label = row.participant.code, row.participant.group_label
-    if device == "bench-video":  # a tracked video: the path is the session's data
-        from metrics.bench.tracking import TRACK_FILE, load_track
-
-        values = metrics_of(load_track(Path(directory) / TRACK_FILE).to_streams(uid, code, label))
-    else:
-        streams = from_recorded(open_session(directory))
-        model = session_tissue(streams, (home or data_home()) / "cache")
-        values = metrics_of(with_tissue_fields(streams, model) if model is not None else streams)
+    values = compute_metrics(Path(directory), device, uid, code, label, home)
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         orm.execute(

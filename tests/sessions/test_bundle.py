@@ -1,6 +1,7 @@
 """Study bundles: export then import reproduces identical metrics; bad bundles change nothing."""
 
 import json
+import re
 import zipfile
 from pathlib import Path
 
@@ -53,7 +54,15 @@ def test_export_then_import_elsewhere_reproduces_identical_metrics(small_study, 
     # a second machine: another data directory, always an embedded SQLite catalog
     other_home = tmp_path / "other"
     target = open_catalog(f"sqlite:///{tmp_path / 'other.sqlite'}")
-    assert import_bundle(target, other_home, bundle) == {"study": "course", "sessions": 3, "participants": 2}
+    assert import_bundle(target, other_home, bundle) == {
+        "study": "course",
+        "sessions": 3,
+        "participants": 2,
+        "metrics": "recomputed",
+        "metrics_recomputed_sessions": 3,
+        "metric_values_differing": 0,  # the streams give exactly the stated values
+        "signed_by": None,
+    }
     after = study_table(target, "course")
     pd.testing.assert_frame_equal(before, after)
     # the imported stream files give exactly the stored metrics again
@@ -186,3 +195,227 @@ def test_the_declared_analysis_travels_with_the_bundle_and_is_checked(small_stud
     import_bundle(target, tmp_path / "other", bundle)
     assert declared_settings(target, "course")[:2] == declared_settings(source, "course")[:2]
     assert analysis_history(target, "course") == analysis_history(source, "course")
+
+
+def _first_session(manifest):
+    return manifest["sessions"][0]
+
+
+HOSTILE_EDITS = {  # issue 23 part 2, each as the probe found it: (edit, what the one-line error says)
+    "account link": (
+        lambda m: m["participants"][0].update(user_id=1),
+        r"participants\[0\]\.user_id: Extra inputs",
+    ),
+    "primary key": (lambda m: _first_session(m).update(id=7), r"sessions\[0\]\.id: Extra inputs"),
+    "bogus status": (
+        lambda m: _first_session(m).update(status="bogus"),
+        r"sessions\[0\]\.status: Input should be",
+    ),
+    "running status": (lambda m: _first_session(m).update(status="running"), r"sessions\[0\]\.status"),
+    "string trial": (
+        lambda m: _first_session(m).update(trial="2"),
+        r"sessions\[0\]\.trial: Input should be a valid integer",
+    ),
+    "bool trial": (lambda m: _first_session(m).update(trial=True), r"sessions\[0\]\.trial"),
+    "wrong bytes": (
+        lambda m: _first_session(m)["files"][0].update(bytes=_first_session(m)["files"][0]["bytes"] + 1),
+        r"bytes in the archive; its manifest says",
+    ),
+    "unknown key": (lambda m: m.update(comment="hi"), r"comment: Extra inputs are not permitted"),
+    "missing key": (lambda m: m.pop("tasks"), r"tasks: Field required"),
+    "unknown participant": (
+        lambda m: _first_session(m).update(participant="ZZ9"),
+        r"names unknown participant 'ZZ9'",
+    ),
+    "duplicate session": (
+        lambda m: m["sessions"].append(dict(_first_session(m), trial=99)),
+        r"session 'S-[0-9a-f]+' is listed twice",
+    ),
+    "duplicate participant": (
+        lambda m: m["participants"].append(dict(m["participants"][0])),
+        r"participant 'E1' is listed twice",
+    ),
+    "missing registry_version": (
+        lambda m: _first_session(m)["metrics"][0].pop("registry_version"),
+        r"sessions\[0\]\.metrics\[0\]\.registry_version: Field required",
+    ),
+    "extra field in a file record": (
+        lambda m: _first_session(m)["files"][0].update(mode="0777"),
+        r"sessions\[0\]\.files\[0\]\.mode: Extra inputs",
+    ),
+    "bad date": (lambda m: _first_session(m).update(started_at="yesterday"), r"sessions\[0\]\.started_at"),
+    "NaN metric": (lambda m: _first_session(m)["metrics"][0].update(value=float("nan")), r"finite"),
+}
+
+
+def _rehashed_raw(bundle: Path, out: Path, raw: bytes) -> None:
+    import hashlib
+
+    def change(name, data):
+        if name == "manifest.json":
+            return raw
+        return hashlib.sha256(raw).hexdigest().encode() if name == "manifest.sha256" else data
+
+    _rewrite(bundle, out, change)
+
+
+@pytest.mark.slow
+def test_a_manifest_is_validated_against_its_schema_before_anything_is_stored(small_study, tmp_path):
+    bundle = tmp_path / "course.zip"
+    assert invoke("export", "--study", "course", "-o", str(bundle)).exit_code == 0
+    invoke("studies", "add", "elsewhere")  # the import must not collide on the study name alone
+    listed = invoke("sessions", "list", "--json").stdout
+    on_disk = _sessions_on_disk(small_study)
+
+    def refused(path, message):
+        result = CliRunner().invoke(main, ["import-bundle", str(path)])
+        assert result.exit_code == 1, (message, result.output)
+        assert re.search(message, result.output) and "Traceback" not in result.output, (
+            message,
+            result.output,
+        )
+        assert result.output.count("\n") == 1, result.output
+        assert invoke("sessions", "list", "--json").stdout == listed
+        assert _sessions_on_disk(small_study) == on_disk
+
+    for name, (edit, message) in HOSTILE_EDITS.items():
+        hostile = tmp_path / f"{name.replace(' ', '-')}.zip"
+        _rehashed(bundle, hostile, lambda m, edit=edit: (m["study"].update(name="copy"), edit(m)))
+        refused(hostile, message)
+    for raw, message in (
+        (b"not json", r"Invalid JSON"),
+        (b"[1, 2]", r"the manifest: Input should be an object"),
+    ):
+        hostile = tmp_path / "raw.zip"
+        _rehashed_raw(bundle, hostile, raw)
+        refused(hostile, message)
+
+
+@pytest.mark.slow
+def test_sizes_are_checked_against_the_archive_before_extraction(small_study, tmp_path):
+    """The probe's case: a 512 MiB member of zeros whose SHA-256 the manifest was given, while its
+    size stayed the recorded one; and a member the manifest does not list."""
+    import hashlib
+
+    bundle = tmp_path / "course.zip"
+    assert invoke("export", "--study", "course", "-o", str(bundle)).exit_code == 0
+    with zipfile.ZipFile(bundle) as archive:
+        manifest = json.loads(archive.read("manifest.json"))
+    zeros = bytes(512 * 2**20)
+    record = manifest["sessions"][0]["files"][0]
+    target = f"files/{manifest['sessions'][0]['uid']}/{record['name']}"
+    record["sha256"] = hashlib.sha256(zeros).hexdigest()
+    manifest["study"]["name"] = "copy"
+    raw = json.dumps(manifest).encode()
+    hostile = tmp_path / "zeros.zip"
+    with (
+        zipfile.ZipFile(bundle) as source,
+        zipfile.ZipFile(hostile, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as out,
+    ):
+        for info in source.infolist():
+            if info.filename == target:
+                out.writestr(target, zeros)
+            elif info.filename == "manifest.json":
+                out.writestr("manifest.json", raw)
+            elif info.filename == "manifest.sha256":
+                out.writestr("manifest.sha256", hashlib.sha256(raw).hexdigest())
+            else:
+                out.writestr(info, source.read(info))
+    del zeros
+    result = CliRunner().invoke(main, ["import-bundle", str(hostile)])
+    assert result.exit_code == 1 and "its manifest says" in result.output, result.output
+    assert f"is {512 * 2**20} bytes in the archive" in result.output
+    smuggled = tmp_path / "smuggled.zip"
+    _rewrite(bundle, smuggled, lambda name, data: data)
+    with zipfile.ZipFile(smuggled, "a") as out:
+        out.writestr("files/extra/payload.sh", b"#!/bin/sh\n")
+    result = CliRunner().invoke(main, ["import-bundle", str(smuggled)])
+    assert (
+        result.exit_code == 1
+        and "holds files/extra/payload.sh, which its manifest does not list" in result.output
+    )
+
+
+@pytest.mark.slow
+def test_imported_metric_values_are_recomputed_or_marked_unverified(small_study, tmp_path, monkeypatch):
+    from sqlalchemy import select
+
+    from sessions.analysis import analyse_catalog_study
+    from sessions.catalog import Catalog
+    from sessions.models import MetricResult
+
+    bundle = tmp_path / "course.zip"
+    assert invoke("export", "--study", "course", "-o", str(bundle)).exit_code == 0
+    edited, kept = tmp_path / "edited.zip", tmp_path / "kept.zip"
+
+    def flatter(manifest):
+        for session in manifest["sessions"]:
+            for metric in session["metrics"]:
+                if metric["metric"] == "task_time":
+                    metric["value"] = 0.5  # every session suddenly fast
+        return manifest
+
+    _rehashed(bundle, edited, flatter)
+    _rehashed(bundle, kept, flatter)
+    for name in ("recomputed", "kept"):  # each into a site of its own
+        monkeypatch.setenv("VASCSIM_HOME", str(tmp_path / name))
+        monkeypatch.setenv("VASCSIM_DATABASE_URL", f"sqlite:///{tmp_path / name / 'catalog.sqlite'}")
+        if name == "recomputed":
+            result = invoke("import-bundle", str(edited), "--json")
+            assert result.exit_code == 0, result.output
+            summary = json.loads(result.stdout)
+            assert summary["metrics"] == "recomputed" and summary["metric_values_differing"] == 3
+        else:
+            result = invoke("import-bundle", str(kept), "--keep-imported-metrics")
+            assert "metrics imported as stated, unverified" in result.output, result.output
+        catalog = Catalog(f"sqlite:///{tmp_path / name / 'catalog.sqlite'}")
+        with catalog.session() as orm:
+            values = orm.scalars(select(MetricResult).where(MetricResult.metric == "task_time")).all()
+            if name == "recomputed":
+                assert all(m.value != 0.5 and m.source == "computed" for m in values)
+            else:
+                assert all(m.value == 0.5 and m.source == "imported" for m in values)
+        analysis, _ = analyse_catalog_study(catalog, "course")
+        said = any("3 session(s) carry metric values imported from a bundle" in n for n in analysis.notes)
+        assert said == (name == "kept")
+        catalog.close()
+    report = invoke("report", "--study", "course", "--out", str(tmp_path / "report"))
+    assert report.exit_code == 0, report.output
+    assert "imported from a bundle and not recomputed" in (tmp_path / "report" / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_signed_bundles_verify_against_the_trusted_key_only(small_study, tmp_path):
+    key, other = tmp_path / "site.key", tmp_path / "other.key"
+    made = invoke("keys", "new", str(key))
+    assert made.exit_code == 0 and (tmp_path / "site.key.pub").exists(), made.output
+    assert oct(key.stat().st_mode & 0o777) == "0o600"
+    assert invoke("keys", "new", str(other)).exit_code == 0
+    signed, unsigned = tmp_path / "signed.zip", tmp_path / "unsigned.zip"
+    exported = invoke("export", "--study", "course", "-o", str(signed), "--sign", str(key), "--json")
+    fingerprint = json.loads(exported.stdout)["signed_by"]
+    assert invoke("export", "--study", "course", "-o", str(unsigned)).exit_code == 0
+    edited = tmp_path / "edited.zip"
+    _rehashed(signed, edited, lambda m: m["participants"][0].update(level="expert-edited"))
+    public, other_public = f"{key}.pub", f"{other}.pub"
+    for bundle, trust, message in (
+        (unsigned, public, f"is not signed; the trusted key {fingerprint} requires a signature"),
+        (signed, other_public, f"is signed by key '{fingerprint}', not by the trusted key"),
+        (edited, public, "was changed after it was signed"),
+        (signed, str(key), "cannot be read as a PEM public key"),
+    ):
+        result = CliRunner().invoke(main, ["import-bundle", str(bundle), "--trust", trust])
+        assert result.exit_code == 1 and message in result.output, result.output
+        assert result.output.count("\n") == 1
+    for listed in json.loads(invoke("sessions", "list", "--json").stdout):  # make room for the study
+        assert invoke("sessions", "delete", "--yes", listed["session"]).exit_code == 0
+    from sessions.catalog import Catalog
+    from sessions.config import database_url
+    from sessions.models import Study
+
+    catalog = Catalog(database_url(small_study))
+    with catalog.session() as orm:
+        orm.delete(orm.query(Study).filter_by(name="course").one())
+    catalog.close()
+    result = invoke("import-bundle", str(signed), "--trust", public)
+    assert result.exit_code == 0 and f"signed by trusted key {fingerprint}" in result.output, result.output
