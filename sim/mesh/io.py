@@ -8,7 +8,7 @@ import numpy as np
 
 from sim.errors import MeshError
 from sim.mesh.generators import orient_positive
-from sim.mesh.tetmesh import TetMesh
+from sim.mesh.tetmesh import TetMesh, validate_mesh
 
 REGION_KEYS = ("region", "gmsh:physical", "CellEntityIds", "medit:ref")
 NODE_SET_PREFIX = "set:"
@@ -63,6 +63,7 @@ def load_mesh(path: str | Path, reorient: bool = False) -> TetMesh:
     if reorient:
         tets = orient_positive(points, tets)
     try:
+        validate_mesh(points, tets, regions, node_ids=used)  # messages in the file's own node ids
         return TetMesh(points, tets, regions, node_sets=node_sets)
     except MeshError as error:
         raise MeshError(f"mesh file {path}: {error}") from error

@@ -155,14 +155,23 @@ def triangle_normals(points: NDArray[np.float64], triangles: NDArray[np.int64]) 
     return np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
 
 
-def validate_mesh(points: NDArray[np.float64], tets: NDArray[np.int64], regions: NDArray[np.int32]) -> None:
-    """Raise :class:`MeshError` naming the first offending element, node or face."""
+def validate_mesh(
+    points: NDArray[np.float64],
+    tets: NDArray[np.int64],
+    regions: NDArray[np.int32],
+    node_ids: NDArray[np.int64] | None = None,
+) -> None:
+    """Raise :class:`MeshError` naming the first offending element, node or face.
+
+    ``node_ids``: the id each node has where the mesh came from (a file's numbering before its
+    unused nodes were dropped), so messages name nodes as the file does."""
     _check_shapes(points, tets, regions)
-    _check_finite(points)
+    ids = np.arange(len(points)) if node_ids is None else np.asarray(node_ids)
+    _check_finite(points, ids)
     _check_indices(tets, len(points))
     _check_unused(tets, len(points))
-    _check_volumes(points, tets)
-    _check_faces_and_surface(tets)
+    _check_volumes(points, tets, ids[tets])
+    _check_faces_and_surface(ids[tets])
 
 
 def _check_shapes(points: NDArray, tets: NDArray, regions: NDArray) -> None:
@@ -178,10 +187,10 @@ def _check_shapes(points: NDArray, tets: NDArray, regions: NDArray) -> None:
         )
 
 
-def _check_finite(points: NDArray) -> None:
+def _check_finite(points: NDArray, ids: NDArray) -> None:
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if bad.size:
-        raise MeshError(f"mesh point {bad[0]} is not finite: {tuple(points[bad[0]].tolist())}")
+        raise MeshError(f"mesh point {ids[bad[0]]} is not finite: {tuple(points[bad[0]].tolist())}")
 
 
 def _check_indices(tets: NDArray, n_points: int) -> None:
@@ -203,20 +212,21 @@ def _check_unused(tets: NDArray, n_points: int) -> None:
         raise MeshError(f"mesh node {unused[0]} is not used by any element{more}")
 
 
-def _check_volumes(points: NDArray, tets: NDArray) -> None:
+def _check_volumes(points: NDArray, tets: NDArray, labelled: NDArray) -> None:
+    """``labelled``: the elements' nodes by the ids messages name."""
     volumes = signed_volumes(points, tets)
     diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
     tolerance = ZERO_VOLUME_TOLERANCE * diagonal**3
     flat = np.flatnonzero(np.abs(volumes) <= tolerance)
     if flat.size:
         e = flat[0]
-        raise MeshError(f"mesh element {e} has zero volume (nodes {_nodes(tets[e])})")
+        raise MeshError(f"mesh element {e} has zero volume (nodes {_nodes(labelled[e])})")
     inverted = np.flatnonzero(volumes < 0)
     if inverted.size:
         e = inverted[0]
         raise MeshError(
-            f"mesh element {e} is inverted (signed volume {volumes[e]:.3g} m^3; nodes {_nodes(tets[e])}): "
-            "swap two of its nodes, or load with reorient=True"
+            f"mesh element {e} is inverted (signed volume {volumes[e]:.3g} m^3; "
+            f"nodes {_nodes(labelled[e])}): swap two of its nodes, or load with reorient=True"
         )
 
 

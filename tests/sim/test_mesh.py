@@ -168,6 +168,16 @@ def test_load_mesh_errors(tmp_path):
             MeshError, match=rf"tetrahedron 0 refers to node {index}, but the file has nodes 0..3"
         ):
             load_mesh(outside)
+    # issue 23 (7): messages quote the file's node ids, not those left after unused nodes are dropped
+    spare = np.vstack([[[9.0, 9.0, 9.0]] * 5, UNIT_TET, [[0.5, 0.5, 0.0]]])  # nodes 0-4 unused
+    flat = tmp_path / "flat.vtu"
+    meshio.write(flat, meshio.Mesh(spare, [("tetra", np.array([[5, 6, 7, 8], [5, 6, 7, 9]]))]))
+    with pytest.raises(MeshError, match=r"flat.vtu: mesh element 1 has zero volume \(nodes 5, 6, 7, 9\)"):
+        load_mesh(flat)
+    mirrored = tmp_path / "mirrored.vtu"
+    meshio.write(mirrored, meshio.Mesh(spare, [("tetra", np.array([[5, 7, 6, 8]]))]))
+    with pytest.raises(MeshError, match=r"mesh element 0 is inverted .*nodes 5, 7, 6, 8\)"):
+        load_mesh(mirrored)
     garbage = tmp_path / "garbage.vtu"
     garbage.write_bytes(b"\x00not a mesh")
     with pytest.raises(MeshError, match="could not be read"):
