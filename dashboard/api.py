@@ -15,7 +15,7 @@ from sqlalchemy import select
 
 from dashboard import access, queries
 from dashboard.auth import COOKIE, STAFF, LoginRateLimiter, Viewer, current_viewer, limiter_key, require
-from dashboard.errors import ERROR_RESPONSES, DashboardError, not_found
+from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from sessions import accounts
@@ -36,9 +36,13 @@ class Credentials(BaseModel):
     password: str = Field(min_length=1, max_length=1024)
 
 
+# the rules sessions.accounts enforces, declared here so the OpenAPI document states them
+Password = Annotated[str, Field(min_length=accounts.MIN_PASSWORD_LENGTH, max_length=1024)]
+
+
 class NewUser(BaseModel):
-    username: str = Field(min_length=2, max_length=64)
-    password: str = Field(min_length=1, max_length=1024)
+    username: str = Field(min_length=2, max_length=64, pattern=accounts.USERNAME_PATTERN.pattern)
+    password: Password
     role: Literal["admin", "supervisor", "researcher", "trainee"]
     participant_ids: list[Annotated[int, Field(ge=1, le=2_147_483_647)]] = Field(
         default_factory=list, max_length=100
@@ -48,11 +52,11 @@ class NewUser(BaseModel):
 class UserChange(BaseModel):
     role: Literal["admin", "supervisor", "researcher", "trainee"] | None = None
     active: bool | None = None
-    password: str | None = Field(default=None, min_length=1, max_length=1024)
+    password: Password | None = None
 
 
 class NewStation(BaseModel):
-    station: str = Field(min_length=1, max_length=64)
+    station: str = Field(min_length=1, max_length=64, pattern=accounts.STATION_PATTERN.pattern)
 
 
 class NewStudy(BaseModel):
@@ -134,13 +138,18 @@ def study(request: Request, study_id: Id, viewer: Staff) -> dict:
     return queries.study_overview(state.catalog, state.analyses, viewer, study_id)
 
 
-@router.get("/studies/{study_id}/validity", summary="Construct-validity report")
+@router.get("/studies/{study_id}/validity", summary="Construct-validity report", responses=CONFLICT)
 def validity(request: Request, study_id: Id, viewer: Staff) -> dict:
     state = _state(request)
     return queries.validity_report(state.catalog, state.analyses, viewer, study_id)
 
 
-@router.get("/studies/{study_id}/validity.csv", response_class=Response, summary="Validity table as CSV")
+@router.get(
+    "/studies/{study_id}/validity.csv",
+    response_class=Response,
+    summary="Validity table as CSV",
+    responses=CONFLICT,
+)
 def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
     from metrics.report import summary_table
 
@@ -278,7 +287,10 @@ def _event_stream(request: Request, directory: Path, still_running) -> Streaming
 
 
 @router.get(
-    "/live/sessions/{uid}", response_class=StreamingResponse, summary="Server-sent events of a session"
+    "/live/sessions/{uid}",
+    response_class=StreamingResponse,
+    summary="Server-sent events of a session",
+    responses=CONFLICT,
 )
 def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingResponse:
     catalog = _state(request).catalog
@@ -336,7 +348,7 @@ def users(request: Request, viewer: Admin) -> list[dict]:
         ]
 
 
-@router.post("/users", status_code=201, summary="Create an account (admin)")
+@router.post("/users", status_code=201, summary="Create an account (admin)", responses=CONFLICT)
 def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
     with _state(request).catalog.session() as orm:
         user = accounts.create_user(orm, body.username, body.password, body.role)
@@ -349,7 +361,9 @@ def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
         return _user_record(user, _linked(orm, user.id))
 
 
-@router.patch("/users/{user_id}", summary="Change an account's role, state or password (admin)")
+@router.patch(
+    "/users/{user_id}", summary="Change an account's role, state or password (admin)", responses=CONFLICT
+)
 def change_user(request: Request, user_id: Id, body: UserChange, viewer: Admin) -> dict:
     with _state(request).catalog.session() as orm:
         user = orm.get(User, user_id)
@@ -376,7 +390,12 @@ def stations(request: Request, viewer: Admin) -> list[dict]:
         ]
 
 
-@router.post("/stations", status_code=201, summary="Issue a station's ingest token (admin); shown once")
+@router.post(
+    "/stations",
+    status_code=201,
+    summary="Issue a station's ingest token (admin); shown once",
+    responses=CONFLICT,
+)
 def create_station(request: Request, body: NewStation, viewer: Admin) -> dict:
     with _state(request).catalog.session() as orm:
         row, token = accounts.create_station_token(orm, body.station)
@@ -390,7 +409,7 @@ def revoke_station(request: Request, token_id: Id, viewer: Admin) -> dict:
         return {"id": row.id, "station": row.station, "revoked_at": row.revoked_at}
 
 
-@router.post("/studies", status_code=201, summary="Create a study (admin)")
+@router.post("/studies", status_code=201, summary="Create a study (admin)", responses=CONFLICT)
 def create_study(request: Request, body: NewStudy, viewer: Admin) -> dict:
     catalog = _state(request).catalog
     with catalog.session() as orm:

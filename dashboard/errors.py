@@ -11,6 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse, Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from sessions.catalog import AlreadyExists, WrongState
 from sim.errors import VascsimError
 
 
@@ -55,6 +56,8 @@ ERROR_SCHEMA = {
     },
 }
 ERROR_RESPONSES = {status: ERROR_SCHEMA for status in (400, 401, 403, 404, 422, 429)}
+CONFLICT = {409: ERROR_SCHEMA}
+"""Documented on the routes that answer 409: what they would create exists, or the state forbids it."""
 
 
 def _answer(request: Request, status: int, message: str, headers: dict | None = None) -> Response:
@@ -75,6 +78,8 @@ def install_error_handlers(app) -> None:
 
     async def vascsim_error(request: Request, error: VascsimError) -> Response:
         message = str(error)
+        if isinstance(error, AlreadyExists | WrongState):
+            return _answer(request, 409, message)
         return _answer(request, 404 if message.startswith("no ") else 400, message)
 
     async def http_error(request: Request, error: StarletteHTTPException) -> Response:

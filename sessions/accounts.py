@@ -17,7 +17,7 @@ from argon2.exceptions import InvalidHashError, VerificationError
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session as OrmSession
 
-from sessions.catalog import CatalogError, now
+from sessions.catalog import AlreadyExists, CatalogError, now
 from sessions.models import ROLES, LoginSession, Participant, StationToken, User
 
 MIN_PASSWORD_LENGTH = 10
@@ -30,6 +30,10 @@ _DUMMY_HASH = _HASHER.hash(secrets.token_hex(16))
 
 class AccountError(CatalogError):
     """An account or token request that cannot be carried out (bad name, weak password, unknown user)."""
+
+
+class AccountConflict(AccountError, AlreadyExists):
+    """An account, link or station token that already exists."""
 
 
 def token_digest(token: str) -> str:
@@ -57,7 +61,7 @@ def create_user(orm: OrmSession, username: str, password: str, role: str) -> Use
     check_role(role)
     check_password(password)
     if orm.scalar(select(User.id).where(User.username == username)) is not None:
-        raise AccountError(f"user {username!r} already exists")
+        raise AccountConflict(f"user {username!r} already exists")
     user = User(
         username=username, password_hash=_HASHER.hash(password), role=role, active=True, created_at=now()
     )
@@ -107,7 +111,7 @@ def link_participant(orm: OrmSession, user: User, participant: Participant) -> N
             f"only trainee accounts are linked to participants; {user.username!r} is {user.role}"
         )
     if participant.user_id not in (None, user.id):
-        raise AccountError(f"participant {participant.code!r} is already linked to another account")
+        raise AccountConflict(f"participant {participant.code!r} is already linked to another account")
     participant.user_id = user.id
 
 
@@ -155,7 +159,7 @@ def create_station_token(orm: OrmSession, station: str) -> tuple[StationToken, s
     token = secrets.token_urlsafe(32)
     if existing is not None:
         if existing.revoked_at is None:
-            raise AccountError(f"station {station!r} already has a token; revoke it first")
+            raise AccountConflict(f"station {station!r} already has a token; revoke it first")
         orm.delete(existing)
         orm.flush()
     row = StationToken(station=station, token_sha256=token_digest(token), created_at=now())

@@ -32,7 +32,7 @@ from typing import Any
 
 from sqlalchemy import select
 
-from sessions.catalog import Catalog, CatalogError, metric_results
+from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
 from sessions.manifest import (
     BUNDLE_FORMAT,
     BUNDLE_VERSION,
@@ -349,10 +349,10 @@ def import_bundle(
     uids = [entry.uid for entry in manifest.sessions]
     with catalog.session() as orm:
         if orm.scalar(select(Study).where(Study.name == name)) is not None:
-            raise CatalogError(f"a study named {name!r} already exists; this bundle was already imported")
+            raise AlreadyExists(f"a study named {name!r} already exists; this bundle was already imported")
         clash = orm.scalar(select(Session.uid).where(Session.uid.in_(uids)))
         if clash is not None:
-            raise CatalogError(f"session {clash} from the bundle is already in the catalog")
+            raise AlreadyExists(f"session {clash} from the bundle is already in the catalog")
     staging = home / "sessions" / f".import-{uuid.uuid4().hex[:8]}"
     placed: list[Path] = []
     try:

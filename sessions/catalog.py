@@ -39,6 +39,14 @@ class CatalogError(VascsimError):
     """The catalog cannot be opened, or a request names something it does not hold."""
 
 
+class AlreadyExists(CatalogError):
+    """What a request would create is already there (HTTP 409)."""
+
+
+class WrongState(CatalogError):
+    """The request is well formed but what it names is not in a state that allows it (HTTP 409)."""
+
+
 def now() -> datetime:
     return datetime.now(UTC).replace(tzinfo=None)
 
@@ -179,7 +187,7 @@ class Catalog:
         synthetic: bool = False,
     ) -> Participant:
         if orm.scalar(select(Participant).where(Participant.study_id == study.id, Participant.code == code)):
-            raise CatalogError(f"participant {code!r} already exists in study {study.name!r}")
+            raise AlreadyExists(f"participant {code!r} already exists in study {study.name!r}")
         participant = Participant(
             study_id=study.id,
             code=code,
@@ -220,7 +228,7 @@ class Catalog:
                 if not _lost_a_race(error):
                     raise
                 if not allocate:
-                    raise CatalogError(
+                    raise AlreadyExists(
                         f"trial {fields['trial']} of this participant on this task is already catalogued"
                     ) from None
                 time.sleep(random.uniform(0.0, 0.01 * (attempt + 1)))

@@ -20,7 +20,7 @@ from metrics import REGISTRY_VERSION, from_recorded, metrics_of
 from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
+from sessions.catalog import Catalog, CatalogError, WrongState, metric_results, new_uid, now, stream_file
 from sessions.config import data_home
 from sessions.models import MetricResult, Participant, Session, StreamFile, Study
 from sessions.tasks import session_tissue, task_preset, task_spec, tissue_for
@@ -297,7 +297,7 @@ def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
     columns = ["session_id", "participant_id", "label", "trial", "phase", "synthetic", "metric", "value"]
     long = pd.DataFrame(rows, columns=columns)
     if long.empty:
-        raise CatalogError(f"study {study_name!r} has no scored sessions; run `vascsim score` first")
+        raise WrongState(f"study {study_name!r} has no scored sessions; run `vascsim score` first")
     ids = columns[:6]
     wide = long.set_index([*ids, "metric"])["value"].unstack("metric").reset_index()
     wide.columns.name = None

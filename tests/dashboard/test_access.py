@@ -129,7 +129,7 @@ def test_admin_manages_users_tokens_and_studies(seeded, client_for):
     weak = client.post(
         "/api/users", json={"username": "weak", "password": "short", "role": "trainee"}, headers=headers
     )
-    assert weak.status_code == 400 and "at least 10 characters" in error_of(weak)["message"]
+    assert weak.status_code == 422 and "at least 10 characters" in error_of(weak)["message"]
     me = client.get("/api/me").json()
     users = {u["username"]: u["id"] for u in client.get("/api/users").json()}
     refused = client.patch(f"/api/users/{users[me['username']]}", json={"active": False}, headers=headers)
