@@ -115,3 +115,26 @@ def test_routing_errors_use_the_json_error_shape(client):
     assert set(wrong_method.json()) == {"error"}
     missing = http.get("/api/nothing-here", headers=AUTH)
     assert missing.status_code == 404 and set(missing.json()) == {"error"}
+
+
+def test_a_damaged_central_journal_is_cut_at_the_damage_on_restart(tmp_path):
+    """Issue 23 (3) on the central recorder: a batch damaged on disk while the server was down is cut
+    with everything after it; the station re-sends from there and the session closes clean."""
+    store = IngestStore(tmp_path, TOKENS)
+    http = TestClient(create_app(store))
+    for sequence in range(3):
+        assert post(http, sequence, encode_batch(batch(100 * sequence), sequence)).status_code == 200
+    store.close()
+    journal = tmp_path / "station-a" / "s1" / "samples.arrows"
+    data = bytearray(journal.read_bytes())
+    data[len(data) * 3 // 5] ^= 0x10  # inside the second of three batches
+    journal.write_bytes(bytes(data))
+    store = IngestStore(tmp_path, TOKENS)
+    http = TestClient(create_app(store))
+    resent = [post(http, s, encode_batch(batch(100 * s), s)).json() for s in range(3)]
+    assert resent[0]["duplicate"] is True and all(not r.get("duplicate") for r in resent[1:]), resent
+    close = {"batches": {"samples": 3, "events": 0}, "status": "complete"}
+    assert http.post("/api/sessions/s1/close", json=close, headers=AUTH).status_code == 200
+    xs = open_session(tmp_path / "station-a" / "s1").samples.column("tool_x").to_numpy()
+    np.testing.assert_array_equal(xs, np.arange(300))
+    store.close()
