@@ -46,6 +46,9 @@ from recorder.writer import EVENTS_JOURNAL, HEADER_FILE, SAMPLES_JOURNAL, finali
 log = logging.getLogger("vascsim.ingest")
 JOURNALS = {"samples": SAMPLES_JOURNAL, "events": EVENTS_JOURNAL}
 CLOSING_STATUSES = ("complete", "failed")
+BATCH_DIGESTS = "batch-digests.json"
+"""Written at close: each stored batch's SHA-256 per stream, so a batch re-sent to a closed session
+is checked against what was stored, also after a restart (the journals are gone by then)."""
 _NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
@@ -203,6 +206,19 @@ def _resolve(results: list) -> None:
             future.set_exception(RemoteError(503, f"journal could not be made durable: {error}"))
 
 
+def _write_digests(path: Path, digests: dict[str, dict[int, bytes]]) -> None:
+    listed = {stream: [digests[stream][k].hex() for k in sorted(digests[stream])] for stream in digests}
+    write_json_atomically(path, listed)
+
+
+def _read_digests(path: Path) -> dict[str, dict[int, bytes]]:
+    """The stored batches' digests of a closed session (empty for one closed before they were kept)."""
+    if not path.exists():
+        return {}
+    listed = json.loads(path.read_text())
+    return {stream: {k: bytes.fromhex(d) for k, d in enumerate(values)} for stream, values in listed.items()}
+
+
 class _RemoteSession:
     """Server-side state of one station's session: its journals, or, once closed, its batch counts."""
 
@@ -224,12 +240,12 @@ class _RemoteSession:
             )
         header = json.loads(header_path.read_text())
         self.closed_counts: dict[str, int] | None = None
-        # after a close in this process: what each stored batch was (a closed session's journals are
-        # gone after a restart, and a resent batch is then answered as a duplicate unchecked)
+        # what each stored batch was, once closed (kept beside the session: the journals are gone)
         self.closed_digests: dict[str, dict[int, bytes]] = {}
         self.journals: dict[str, _Journal] = {}
         if header.get("status") != "recording":
             self.closed_counts = dict(header.get("remote", {}).get("batches", {}))
+            self.closed_digests = _read_digests(directory / BATCH_DIGESTS)
         else:
             for stream, schema in STREAMS.items():
                 self.journals[stream] = _Journal(
@@ -410,8 +426,9 @@ class IngestStore:
                 )
                 raise RemoteError(409, f"session {session_id} cannot close yet ({detail})")
             session.close_files()
-            header = finalize(session.directory, status, {"remote": {"batches": counts}})
             session.closed_digests = {stream: journal.digests for stream, journal in session.journals.items()}
+            _write_digests(session.directory / BATCH_DIGESTS, session.closed_digests)
+            header = finalize(session.directory, status, {"remote": {"batches": counts}})
             session.journals, session.closed_counts = {}, dict(counts)
         return {
             "closed": True,

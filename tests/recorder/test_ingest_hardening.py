@@ -80,6 +80,11 @@ def test_a_resent_sequence_with_other_content_is_a_conflict_also_after_a_restart
     assert post(http, 0, encode_batch(batch(0), 0)).json()["duplicate"] is True
     assert http.post("/api/sessions/s1/close", json=CLOSE, headers=AUTH).status_code == 200
     assert post(http, 0, encode_batch(batch(7), 0)).status_code == 409  # after the close too
+    store.close()
+    store = IngestStore(tmp_path, TOKENS)  # and after a restart of the closed session (journals gone)
+    http = TestClient(create_app(store))
+    assert post(http, 0, encode_batch(batch(7), 0)).status_code == 409
+    assert post(http, 0, encode_batch(batch(0), 0)).json()["duplicate"] is True
     xs = open_session(tmp_path / "station-a" / "s1").samples.column("tool_x").to_numpy()
     np.testing.assert_array_equal(xs, np.arange(100))
     store.close()
