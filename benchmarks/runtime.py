@@ -47,6 +47,7 @@ from sim.runtime.cpu import stolen_seconds
 from sim.scenarios import practice_passes, scenario
 from sim.tissue_presets import tissue_preset
 
+LIVE_STRESS = RuntimeSettings().live_stress_in_real_time  # --live-stress / --no-live-stress
 ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 
 STEAL_SAMPLER = """
@@ -283,6 +284,12 @@ def main() -> None:
     )
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--no-render", action="store_true")
+    parser.add_argument(
+        "--live-stress",
+        action=argparse.BooleanOptionalAction,
+        default=RuntimeSettings().live_stress_in_real_time,
+        help="stream the local stress in real time (its operator is built at each contact change)",
+    )
     parser.add_argument("--size", default="640x480")
     parser.add_argument(
         "--only", choices=["simulated", "cube", "artery", "artery-on-demand"], help="run one part only"
@@ -299,6 +306,8 @@ def main() -> None:
     )
     parser.add_argument("--passes", type=int, default=None, help=argparse.SUPPRESS)  # under valgrind
     args = parser.parse_args()
+    global LIVE_STRESS
+    LIVE_STRESS = args.live_stress
     if args.passes is not None:
         simulated_passes(args.passes)
         return
@@ -395,7 +404,7 @@ def instructions_per_stitch() -> None:
 def realtime_cube(cube, needle, seconds, size, render, kernel_trace) -> None:
     trajectory, total = sequence_of_passes(practice_passes(scenario("paper_cube"), needle, 20))
     duration = min(seconds, total)
-    settings = RuntimeSettings(fem_rate=500.0)
+    settings = RuntimeSettings(fem_rate=500.0, live_stress_in_real_time=LIVE_STRESS)
     simulation = Simulation(
         cube, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(cube, size, render)
     )
@@ -410,7 +419,7 @@ def realtime_artery(needle, seconds, size, render, precomputed, kernel_trace) ->
         artery.precompute(use_cache=False)
     trajectory, total = sequence_of_passes(practice_passes(case, needle, 20))
     duration = min(seconds, total)
-    settings = RuntimeSettings(fem_rate=500.0)
+    settings = RuntimeSettings(fem_rate=500.0, live_stress_in_real_time=LIVE_STRESS)
     simulation = Simulation(
         artery, needle, ScriptedDevice(trajectory), settings, renderer=renderer_for(artery, size, render)
     )

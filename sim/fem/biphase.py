@@ -168,6 +168,11 @@ class BiphaseTissue:
         return self.soft.needs_solve(node) or self.stiff.needs_solve(node)
 
     @property
+    def spot_solved(self) -> list[int]:
+        """Nodes whose columns a contact had to solve when it needed them (either phase)."""
+        return self.soft.spot_solved + self.stiff.spot_solved
+
+    @property
     def evicted_columns(self) -> set[int]:
         """Nodes whose cached columns either phase dropped for its memory budget."""
         return self.soft.evicted_columns | self.stiff.evicted_columns

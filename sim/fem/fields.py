@@ -261,15 +261,13 @@ class LocalStress:
         mesh = model.mesh
         ids = np.asarray(nodes, dtype=np.int64).ravel()
         force_map = np.asarray(force_map, dtype=np.float64).reshape(3 * len(ids), -1)
-        centroids = _centroids(model)
-        points = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
-        distance = np.min(np.linalg.norm(centroids[:, None, :] - points[None], axis=2), axis=1)
-        near = np.flatnonzero(distance <= radius)
-        self.elements = near if near.size else np.array([int(np.argmin(distance))])
-        rhs = np.zeros((3 * mesh.n_nodes, force_map.shape[1]), order="F")
-        rhs[(3 * ids[:, None] + np.arange(3)).ravel()] = force_map
-        columns = model._factor(rhs).reshape(mesh.n_nodes, 3, -1)  # displacement per unit force
-        tets = mesh.tets[self.elements]
+        self.elements = model.elements_near(centres, radius)
+        # displacement per unit generalised force, at the local elements' nodes only: rows of the
+        # load nodes' K0^-1 columns (cached, or solved by the column worker), never a whole solve
+        local, tets = np.unique(mesh.tets[self.elements], return_inverse=True)
+        dofs = (3 * local[:, None] + np.arange(3)).ravel()
+        columns = (model.columns_at(ids, dofs) @ force_map).reshape(len(local), 3, -1)
+        tets = tets.reshape(-1, 4)
         grad = np.einsum("maiq,maj->mijq", columns[tets], model._gradients[self.elements])
         strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
         lam, mu = (values[self.elements] for values in model.lame)
@@ -283,17 +281,10 @@ class LocalStress:
         # von Mises = sqrt(3/2 s:s): six independent components, off-diagonals weighted by sqrt 2
         rows = [stress[:, 0, 0], stress[:, 1, 1], stress[:, 2, 2]]
         rows += [np.sqrt(2.0) * stress[:, i, j] for i, j in ((0, 1), (0, 2), (1, 2))]
-        self._operator = np.ascontiguousarray(np.sqrt(1.5) * np.stack(rows, axis=1).reshape(-1, rhs.shape[1]))
+        von_mises = np.sqrt(1.5) * np.stack(rows, axis=1).reshape(-1, force_map.shape[1])
+        self._operator = np.ascontiguousarray(von_mises)
 
     def maximum(self, forces: NDArray[np.float64]) -> float:
         """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""
         values = self._operator.dot(forces).reshape(-1, 6)
         return float(np.sqrt(np.einsum("ij,ij->i", values, values).max()))
-
-
-def _centroids(model: TissueModel) -> NDArray[np.float64]:
-    """Element centroids (m), cached on the model."""
-    cached = model.__dict__.get("_centroids")
-    if cached is None:
-        cached = model.__dict__["_centroids"] = model.mesh.points[model.mesh.tets].mean(axis=1)
-    return cached

@@ -119,6 +119,8 @@ class TissueModel:
         self._precomputed: Precomputation | None = None
         self._columns: OrderedDict[int, _CachedColumns] = OrderedDict()
         self.evicted_columns: set[int] = set()
+        self.spot_solved: list[int] = []
+        """Nodes whose columns a contact had to solve when it needed them (not solved ahead)."""
         """Nodes whose cached columns were dropped for the memory budget (telemetry: a contact
         that must solve one of these again was prefetched, then evicted before it was used)."""
         self._column_budget = column_cache_bytes
@@ -198,11 +200,13 @@ class TissueModel:
         """(base, s) when this model takes K0^-1 as base's divided by s (:meth:`share_inverse_with`)."""
         return self._inverse_of
 
-    def needs_solve(self, node: int) -> bool:
-        """Whether a contact on ``node`` would need its columns solved (not precomputed, not cached)."""
+    def needs_solve(self, node: int, full: bool = False) -> bool:
+        """Whether a contact on ``node`` would need its columns solved (not precomputed, not cached).
+        ``full``: whether its whole (3N) columns would (what the local-stress operator reads: the
+        precomputed matrix holds only the candidates' rows)."""
         if self._inverse_of is not None:
-            return self._inverse_of[0].needs_solve(node)
-        precomputed = self._precomputed is not None and self._candidate_row[node] >= 0
+            return self._inverse_of[0].needs_solve(node, full)
+        precomputed = not full and self._precomputed is not None and self._candidate_row[node] >= 0
         return not precomputed and node not in self._columns
 
     def _stiffness_scale_of(self, base: TissueModel) -> float | None:
@@ -332,21 +336,29 @@ class TissueModel:
 
     # -- columns -------------------------------------------------------------------
     def _nodes_columns(
-        self, nodes: NDArray[np.int64], rows: NDArray[np.int64] | None = None, *, at_candidates: bool = False
+        self,
+        nodes: NDArray[np.int64],
+        rows: NDArray[np.int64] | None = None,
+        *,
+        at_candidates: bool = False,
+        ahead: bool = False,
     ) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs, only their ``rows`` (dof ids), or only the
         candidates' dofs (kept beside each cached column, cut when it was solved): cached ones
         reused, the rest solved together in one multi-right-hand-side solve (on-demand mode).
-        A contact change so copies (3n, 3k) rows, never whole (3N, 3k) blocks."""
+        A contact change so copies (3n, 3k) rows, never whole (3N, 3k) blocks. Nodes solved for
+        a contact (not ``ahead`` of it, as prefetching does) are logged in :attr:`spot_solved`."""
         if self._inverse_of is not None:
             base, scale = self._inverse_of
-            return base._nodes_columns(nodes, rows, at_candidates=at_candidates) / scale
+            return base._nodes_columns(nodes, rows, at_candidates=at_candidates, ahead=ahead) / scale
         with self._column_lock:
             known = {int(n): self._columns[int(n)] for n in nodes if int(n) in self._columns}
             for n in known:
                 self._columns.move_to_end(n)
         missing = [int(n) for n in nodes if int(n) not in known]
         if missing:
+            if not ahead:
+                self.spot_solved.extend(missing)
             solve = self.column_solver or self.solve_columns
             solved = solve(np.array(missing, dtype=np.int64))
             with self._column_lock:
@@ -375,14 +387,24 @@ class TissueModel:
             used -= dropped.nbytes
             self.evicted_columns.add(node)
 
-    def prefetch(self, nodes: ArrayLike) -> None:
+    def prefetch(self, nodes: ArrayLike, full: bool = False) -> None:
         """Solve and cache the on-demand columns of ``nodes`` ahead of contact (in precomputed
-        mode only those of nodes outside the precomputed candidates are needed)."""
+        mode only those of nodes outside the precomputed candidates are needed, unless ``full``:
+        the whole columns the local-stress operator reads)."""
         ids = _node_ids(nodes, self.mesh.n_nodes, "nodes")
-        if self._precomputed is not None:
+        if self._precomputed is not None and not full:
             ids = ids[self._candidate_row[ids] < 0]
         if ids.size:
-            self._nodes_columns(ids)
+            self._nodes_columns(ids, ahead=True)
+
+    def columns_at(self, nodes: ArrayLike, rows: ArrayLike) -> NDArray[np.float64]:
+        """(len(rows), 3k) rows (dof ids) of K0^-1's columns at the nodes' dofs, in the order given:
+        the displacement of those dofs per unit force on each node (m/N). Cached columns are
+        reused; the rest are solved (by the column worker when one is attached) and cached."""
+        ids, dofs = np.asarray(nodes).ravel(), np.asarray(rows).ravel()
+        _node_ids(ids, self.mesh.n_nodes, "nodes")  # checked; the order given is the columns' order
+        _ids(dofs, 3 * self.mesh.n_nodes, "rows")
+        return self._nodes_columns(ids.astype(np.int64), dofs.astype(np.int64))
 
     @cached_property
     def _candidate_dofs(self) -> NDArray[np.int64]:
@@ -528,6 +550,22 @@ class TissueModel:
         tissue-depth cast), so the first contact of a run does not pay for it (a few ms at 10k nodes)."""
         self._vertex_normals  # noqa: B018 - the cached properties do the work
         self._surface_spheres  # noqa: B018
+        self._element_centre_tree  # noqa: B018
+
+    def elements_near(self, points: ArrayLike, radius: float) -> NDArray[np.int64]:
+        """Sorted ids of the elements whose centroid lies within ``radius`` (m) of any of ``points``
+        ((P, 3), m); the element nearest the first point when none does."""
+        tree = self._element_centre_tree
+        centres = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        found = tree.query_ball_point(centres, radius)
+        near = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+        return near if near.size else np.array([int(tree.query(centres[0])[1])], dtype=np.int64)
+
+    @cached_property
+    def _element_centre_tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.mesh.points[self.mesh.tets].mean(axis=1))
 
     @cached_property
     def _surface_spheres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

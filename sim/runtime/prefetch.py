@@ -151,9 +151,21 @@ def _own_inverse_models(tissue: TissueModel | BiphaseTissue) -> list[TissueModel
 class Prefetcher:
     """A background thread asking column workers for the nodes the needle approaches."""
 
-    def __init__(self, tissue: TissueModel | BiphaseTissue, collision: CollisionMesh | None = None) -> None:
+    def __init__(
+        self,
+        tissue: TissueModel | BiphaseTissue,
+        collision: CollisionMesh | None = None,
+        full_columns: bool = False,
+        load_radius: float = 0.0,
+    ) -> None:
+        """``full_columns``: cache whole K0^-1 columns also for precomputed candidates (the live
+        local-stress operator reads them; the precomputed matrix holds only candidate rows).
+        ``load_radius`` (m): a predicted crossing asks for every surface node this close to it (a
+        force kernel's nodes), not only the nearest few."""
         self.models = _own_inverse_models(tissue)
-        self.on_demand = any(model.precomputation is None for model in self.models)
+        self.full_columns = full_columns
+        self.load_radius = load_radius
+        self.on_demand = full_columns or any(model.precomputation is None for model in self.models)
         self.workers = [ColumnWorker(model) for model in self.models]
         for model, worker in zip(self.models, self.workers, strict=True):
             model.column_solver = worker.solve
@@ -209,7 +221,9 @@ class Prefetcher:
         heading: list[int] = []
         for triangle, point in zip(hits.triangle[order], points, strict=True):
             squared = np.einsum("ij,ij->i", self._points - point, self._points - point)
-            around = self._nodes[np.argpartition(squared, AHEAD_NODES)[:AHEAD_NODES]]
+            count = min(len(squared), max(AHEAD_NODES, int(np.count_nonzero(squared <= self.load_radius**2))))
+            closest = np.argpartition(squared, count - 1)[:count]
+            around = self._nodes[closest[np.argsort(squared[closest])]]
             heading += [*map(int, self._triangles[triangle]), *map(int, around)]
         # columns or depth missing, even if a sphere request already holds them further back
         waiting = [
@@ -247,7 +261,7 @@ class Prefetcher:
         return None
 
     def _needs_columns(self, node: int) -> bool:
-        return any(model.needs_solve(node) for model in self.models)
+        return any(model.needs_solve(node, self.full_columns) for model in self.models)
 
     def _raise_if_failed(self) -> None:
         """The worker thread's failure, raised in the asking (graphics) layer."""
@@ -263,7 +277,7 @@ class Prefetcher:
                 # costs 29 ms where three of one cost 53 (10k nodes)
                 while not self._closed and (chunk := self._next_chunk()) is not None:
                     for model in self.models:
-                        model.prefetch(np.array(chunk))
+                        model.prefetch(np.array(chunk), full=self.full_columns)
                     # a contact needs their depth too (~0.1 ms a node at 10k nodes)
                     self._depth_model.cast_depths(chunk)
                     with self._queues_lock:

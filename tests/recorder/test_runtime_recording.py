@@ -44,6 +44,10 @@ def test_every_tick_and_event_is_recorded(tmp_path, setup, clock):
     assert "contact_start" in kinds and "pierce" in kinds
     contact_rows = samples.filter(samples.column("contact_triangle").to_numpy() >= 0)
     assert contact_rows.num_rows > 0
+    # issue 21 (6): local stress and stretch streamed in real time too, never NaN in the tissue
+    touching = states > 0
+    for column in ("local_stress", "stretch"):
+        assert np.all(np.isfinite(samples.column(column).to_numpy()[touching])), column
 
 
 def test_quaternion_of_round_trips():

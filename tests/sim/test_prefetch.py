@@ -235,3 +235,73 @@ def test_a_needle_still_in_the_air_already_asks_for_its_exit_face(small_box):
     finally:
         simulation._prefetcher = None
         prefetcher.close()
+
+
+def test_columns_at_are_rows_of_the_penalised_inverse_in_the_order_asked(model, tmp_path):
+    import scipy.sparse.linalg as sla
+
+    model.precompute(tmp_path)
+    nodes, rows = np.array([17, 3, 40]), np.array([9, 0, 120, 5])
+    stiffness = model.penalised_stiffness().tocsc()
+    rhs = np.zeros((stiffness.shape[0], 9))
+    rhs[(3 * nodes[:, None] + np.arange(3)).ravel(), np.arange(9)] = 1.0
+    expected = sla.spsolve(stiffness, rhs)[rows]  # SciPy's SuperLU, not our CHOLMOD factor
+    np.testing.assert_allclose(
+        model.columns_at(nodes, rows), expected, rtol=1e-9, atol=1e-12 * abs(expected).max()
+    )
+
+
+def test_live_stress_prefetches_whole_columns_so_its_operator_needs_no_solve(small_box, tmp_path):
+    """Issue 21: the local-stress operator reads rows of the load nodes' whole K0^-1 columns. With
+    live stress the prefetcher caches them for precomputed candidates too (the precomputed matrix
+    holds only candidate rows), and building the operator at contact then solves nothing."""
+    from sim.fem.fields import LocalStress
+
+    tissue = BiphaseTissue.build(small_box, small_box.node_sets["z0"])
+    tissue.precompute(tmp_path)
+    top = small_box.node_sets["z1"]
+    nodes = top[
+        np.argsort(np.linalg.norm(small_box.points[top] - small_box.points[top].mean(axis=0), axis=1))[:3]
+    ]
+    assert not tissue.soft.needs_solve(int(nodes[0])) and tissue.soft.needs_solve(int(nodes[0]), full=True)
+    direct = LocalStress(tissue, nodes, np.eye(9), [small_box.points[nodes].mean(axis=0)])  # solves here
+    fresh = BiphaseTissue.build(small_box, small_box.node_sets["z0"])
+    fresh.precompute(tmp_path)
+    prefetcher = Prefetcher(fresh, full_columns=True)
+    try:
+        assert prefetcher.on_demand  # the sphere around the tip is asked for even when precomputed
+        prefetcher.near(small_box.points[nodes].mean(axis=0), radius=0.0015)
+        deadline = time.monotonic() + 30
+        while any(fresh.soft.needs_solve(int(n), full=True) for n in nodes) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert prefetcher.error is None
+        solved = []
+        fresh.soft.column_solver = lambda ids: solved.append(ids) or fresh.soft.solve_columns(ids)
+        operator = LocalStress(fresh, nodes, np.eye(9), [small_box.points[nodes].mean(axis=0)])
+        assert solved == []
+        forces = np.random.default_rng(3).normal(size=9)
+        assert operator.maximum(forces) == pytest.approx(direct.maximum(forces), rel=1e-12)
+    finally:
+        prefetcher.close()
+
+
+def test_a_live_stress_run_starts_a_worker_for_a_precomputed_model(small_box, tmp_path):
+    from sim.devices import ScriptedDevice
+    from sim.needle import Needle, Pose
+    from sim.runtime import RuntimeSettings, Simulation
+
+    tissue = BiphaseTissue.build(small_box, small_box.node_sets["z0"])
+    tissue.precompute(tmp_path)  # every free surface node a candidate: no worker without live stress
+    for live, expected in ((False, False), (True, True)):
+        device = ScriptedDevice(lambda t: (Pose(np.array([0.0, 0.0, 0.05]), np.eye(3)), False))
+        simulation = Simulation(
+            tissue, Needle.curved(), device, RuntimeSettings(live_stress_in_real_time=live)
+        )
+        simulation.interaction.live_stress = live
+        try:
+            simulation._start_prefetching()
+            assert (simulation._prefetcher is not None) == expected
+            if expected:
+                assert simulation._prefetcher.full_columns
+        finally:
+            simulation.close()
