@@ -79,6 +79,26 @@ class SessionContext:
         return result
 
     @cached_property
+    def placement(self):
+        """Each stitch's placement against the task's targets (:class:`metrics.placement.StitchPlacement`),
+        or None without stitch points or targets."""
+        from metrics.placement import PlacementTargets, StitchPlacement
+
+        targets = PlacementTargets.from_attributes(dict(self.streams.attributes))
+        stitches = self.streams.stitches
+        if targets is None or stitches is None or stitches.empty:
+            return None
+        return StitchPlacement.of(stitches, targets)
+
+    @cached_property
+    def placement_target_bite(self) -> float:
+        """The task's target bite (m), from the session's placement targets."""
+        from metrics.placement import PlacementTargets
+
+        targets = PlacementTargets.from_attributes(dict(self.streams.attributes))
+        return math.nan if targets is None else targets.target_bite
+
+    @cached_property
     def insertion_point(self) -> NDArray[np.float64] | None:
         """Where the needle first pierced (m): the session's attribute, else the tip at the first pierce."""
         given = self.streams.attributes.get("insertion_point")

@@ -18,7 +18,7 @@ from metrics.streams import MetricsError
 if TYPE_CHECKING:
     from metrics.context import SessionContext
 
-REGISTRY_VERSION = "4"
+REGISTRY_VERSION = "5"
 
 LOWER, HIGHER = "lower", "higher"
 

@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-import metrics.definitions  # noqa: F401  (registers the metrics)
+import metrics.definitions
+import metrics.placement_metrics  # noqa: F401  (registers the stitch-placement metrics)
 from metrics.context import SessionContext
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.streams import MetricsError, SessionStreams, from_recorded

@@ -55,7 +55,9 @@ class SessionStreams:
     subordinate_displacement (n, 3) m from the subordinate hand's start; grip (n,)
     1 closed. events: DataFrame with at least time and kind. stress_field: optional
     table of the tissue surface at the moment of insertion (columns x, y, z, area,
-    von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known.
+    von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known. stitches:
+    optional table of each stitch's entry and exit points on the tissue surface
+    (:func:`metrics.placement.stitch_points`, derived with the tissue mesh).
     """
 
     session_id: str
@@ -77,6 +79,7 @@ class SessionStreams:
     tip_speed: NDArray[np.float64] | None = None
     force_limit: float | None = None
     attributes: Mapping[str, Any] = field(default_factory=dict)
+    stitches: pd.DataFrame | None = None
 
     def __post_init__(self) -> None:
         time = np.ascontiguousarray(self.time, dtype=np.float64)

@@ -84,11 +84,16 @@ class _Contact:
 def with_tissue_fields(
     streams: SessionStreams, tissue: Tissue, forces: NeedleForces | None = None
 ) -> SessionStreams:
-    """The streams with ``stretch``, ``local_stress`` and ``stress_field`` derived (see the module).
+    """The streams with ``stretch``, ``local_stress``, ``stress_field`` and ``stitches`` (each bite's
+    entry and exit points, :func:`metrics.placement.stitch_points`) derived (see the module).
 
     forces: the needle-force law the session ran under (default: :func:`session_forces`). Per-tick
     streams the runtime recorded are kept; only what is missing is derived. Streams that lack what
     is needed (needle state, tip, contact triangle and weights, tip speed) are returned unchanged."""
+    if streams.stitches is None and len(streams.events):  # where each bite went, on this mesh
+        from metrics.placement import stitch_points
+
+        streams = dataclasses.replace(streams, stitches=stitch_points(streams.events, tissue.mesh))
     needed = ("needle_state", "tip_position", "contact_triangle", "contact_barycentric", "tip_speed")
     if any(getattr(streams, name) is None for name in needed):
         return streams

@@ -55,6 +55,7 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
         "tissue_preset": task_preset(plan.task).name,
         "needle_forces": task_preset(plan.task).forces.as_dict(),
         "haptic_scale": 1.0,  # the device is sent the tissue's force, clamped to its rating
+        "placement": task_spec(plan.task).placement,  # the wound edge and targets bites are scored against
     }
 
 

@@ -20,6 +20,9 @@ class TaskSpec:
     normal: tuple[float, float, float]
     bite_direction: tuple[float, float, float]
     parameters: dict
+    placement: dict | None = None
+    """The wound edge and target marks placement metrics score against (SI units; see
+    :class:`metrics.placement.PlacementTargets`); recorded in each session's header."""
 
 
 TASKS = {
@@ -39,6 +42,15 @@ TASKS = {
             "fixed": ["x0", "y0", "y1"],
             "model": "biphase",
             "tissue": "porcine-artery",
+        },
+        placement={
+            # the free x1 edge is the wound: its plane x = 12 mm, normal pointing into the gap
+            "wound_point": [0.012, 0.0, 0.0015],
+            "wound_normal": [1.0, 0.0, 0.0],
+            "target_bite_m": 0.0015,
+            "entry_targets": [[0.0105, 0.0051, 0.0015]],  # on the adventitia, 1.5 mm from the edge
+            "exit_targets": [[0.0105, 0.0051, 0.0]],  # straight through: on the intima beneath
+            "far_normal": [0.0, 0.0, -1.0],  # the luminal (intimal) surface faces -z
         },
     )
 }

@@ -28,6 +28,7 @@ def record(folder, tissue, parameters, forces=FORCES):
         "label": "x",
         "task": "wall-stitch",
         "needle_forces": forces.as_dict(),
+        "placement": spec.placement,  # as sessions.runner records it
     }
     writer = SessionWriter(folder, header, flush_interval=0.1)
     simulation = Simulation(tissue, Needle.curved(), ScriptedDevice(suturing.pose_and_grip), forces=forces)

@@ -1,0 +1,181 @@
+"""Where each bite went: stitch-placement metrics against the task's wound edge and target marks.
+
+A stitch starts at a ``pierce`` event; its entry point is the pierced surface point (the event's
+triangle and barycentric weights on the tissue mesh, exact, where the tip itself is already some
+way into the wall when the puncture force is reached). Its exit point is the ``exit`` event that
+follows before the next pierce, if any: the surface point where the tip came out. An exit whose
+surface faces the task's far (luminal) side is a full-thickness bite; one through another face
+(the wound's cut edge) missed the intima: a partial-thickness bite.
+
+The task's geometry comes with the session (header ``placement``, written from the task library
+when the session was recorded): a point on the wound edge and the unit normal of the wound plane
+pointing from the tissue into the wound gap, the target bite (distance from the edge, m), the
+target entry and exit marks, and the outward normal of the far surface. The bite distance of a
+point p is its distance from the wound plane, (e - p) . n_wound.
+
+Scoring entry and exit points against marked targets follows the AMBF surgical robotics
+challenge's needle entry/exit scoring against hole centres (Munawar et al. 2022, IEEE RA-L);
+bite distance and full thickness are what vascular technique teaches and OSATS raters judge
+under "respect for tissue" (Martin et al. 1997, Br J Surg 84:273).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from metrics.streams import MetricsError
+
+FAR_SURFACE_COSINE = 0.7
+"""An exit face whose outward normal is within 45 deg of the far surface's counts as full thickness."""
+
+STITCH_COLUMNS = (
+    "stitch",
+    "pierce_time",
+    "entry_x",
+    "entry_y",
+    "entry_z",
+    "exit_x",
+    "exit_y",
+    "exit_z",
+    "exit_nx",
+    "exit_ny",
+    "exit_nz",
+)
+
+
+@dataclass(frozen=True)
+class PlacementTargets:
+    """A task's wound edge and target marks (SI units); see the module docstring."""
+
+    wound_point: NDArray[np.float64]
+    wound_normal: NDArray[np.float64]
+    target_bite: float
+    entry_targets: NDArray[np.float64]
+    exit_targets: NDArray[np.float64]
+    far_normal: NDArray[np.float64]
+
+    @classmethod
+    def from_attributes(cls, attributes: dict[str, Any]) -> PlacementTargets | None:
+        """The session's targets from its header's ``placement`` (None when it has none); a
+        malformed one is a MetricsError naming the field."""
+        given = attributes.get("placement")
+        if given is None:
+            return None
+        if not isinstance(given, dict):
+            raise MetricsError("the session's placement must be an object")
+
+        def vector(name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
+            try:
+                value = np.asarray(given[name], dtype=np.float64)
+            except (KeyError, TypeError, ValueError):
+                raise MetricsError(f"the session's placement lacks a numeric {name!r}") from None
+            if value.shape[-len(shape) :] != shape or not np.all(np.isfinite(value)):
+                raise MetricsError(f"placement {name!r} must be finite with shape (..., {shape[-1]})")
+            return value
+
+        normals = [vector(name, (3,)) for name in ("wound_normal", "far_normal")]
+        for name, normal in zip(("wound_normal", "far_normal"), normals, strict=True):
+            if not math.isclose(float(np.linalg.norm(normal)), 1.0, rel_tol=1e-6):
+                raise MetricsError(f"placement {name!r} must be a unit vector")
+        try:
+            bite = float(given["target_bite_m"])
+        except (KeyError, TypeError, ValueError):
+            bite = math.nan
+        if not (math.isfinite(bite) and bite > 0):
+            raise MetricsError("placement 'target_bite_m' must be a positive distance (m)")
+        return cls(
+            vector("wound_point", (3,)),
+            normals[0],
+            bite,
+            vector("entry_targets", (3,)).reshape(-1, 3),
+            vector("exit_targets", (3,)).reshape(-1, 3),
+            normals[1],
+        )
+
+    def bite_distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance (m) of points from the wound plane, positive on the tissue's side."""
+        return (self.wound_point - np.asarray(points, dtype=np.float64)) @ self.wound_normal
+
+
+def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
+    """One row per stitch (columns :data:`STITCH_COLUMNS`): the entry point of each pierce, and the
+    exit point and exit face's outward normal of the exit that follows it (NaN without one)."""
+    rows = []
+    current: dict[str, float] | None = None
+    for event in events.itertuples(index=False):
+        if event.kind not in ("pierce", "exit"):
+            continue
+        weights = np.array([getattr(event, f"bary_{k}", np.nan) for k in range(3)], dtype=np.float64)
+        triangle = int(event.triangle)
+        if not (0 <= triangle < len(mesh.surface_triangles)) or not np.all(np.isfinite(weights)):
+            continue  # a recording without the point (older schema or a foreign source)
+        point = weights @ mesh.points[mesh.surface_triangles[triangle]]
+        if event.kind == "pierce":
+            current = {"stitch": len(rows), "pierce_time": float(event.time)}
+            current.update(zip(("entry_x", "entry_y", "entry_z"), point.tolist(), strict=True))
+            current.update({c: math.nan for c in STITCH_COLUMNS[5:]})
+            rows.append(current)
+        elif current is not None and math.isnan(current["exit_x"]):
+            current.update(zip(("exit_x", "exit_y", "exit_z"), point.tolist(), strict=True))
+            normal = mesh.surface_normals[triangle]
+            current.update(zip(("exit_nx", "exit_ny", "exit_nz"), normal.tolist(), strict=True))
+    return pd.DataFrame(rows, columns=list(STITCH_COLUMNS))
+
+
+@dataclass(frozen=True)
+class StitchPlacement:
+    """Per-stitch placement against the targets (m; NaN where the stitch has no exit)."""
+
+    entry_bite: NDArray[np.float64]
+    exit_bite: NDArray[np.float64]
+    entry_to_target: NDArray[np.float64]
+    exit_to_target: NDArray[np.float64]
+    full_thickness: NDArray[np.float64]  # 1 through the far surface, 0 another face, NaN no exit
+
+    @classmethod
+    def of(cls, stitches: pd.DataFrame, targets: PlacementTargets) -> StitchPlacement:
+        entry = stitches[["entry_x", "entry_y", "entry_z"]].to_numpy(dtype=np.float64)
+        exit_ = stitches[["exit_x", "exit_y", "exit_z"]].to_numpy(dtype=np.float64)
+        normals = stitches[["exit_nx", "exit_ny", "exit_nz"]].to_numpy(dtype=np.float64)
+        facing = (normals @ targets.far_normal >= FAR_SURFACE_COSINE).astype(float)
+        through = np.where(np.isnan(normals[:, 0]), np.nan, facing)
+        return cls(
+            targets.bite_distance(entry),
+            targets.bite_distance(exit_),
+            _nearest(entry, targets.entry_targets),
+            _nearest(exit_, targets.exit_targets),
+            through,
+        )
+
+    def table(self) -> pd.DataFrame:
+        """Per-stitch values in display units (mm), for reports and pages."""
+        return pd.DataFrame(
+            {
+                "stitch": np.arange(1, self.entry_bite.size + 1),
+                "entry_bite_mm": 1e3 * self.entry_bite,
+                "exit_bite_mm": 1e3 * self.exit_bite,
+                "entry_to_target_mm": 1e3 * self.entry_to_target,
+                "exit_to_target_mm": 1e3 * self.exit_to_target,
+                "full_thickness": self.full_thickness,
+            }
+        )
+
+
+def _nearest(points: NDArray[np.float64], marks: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distance (m) from each point to its nearest mark (NaN for a NaN point or no marks)."""
+    if not len(marks):
+        return np.full(len(points), np.nan)
+    distances = np.linalg.norm(points[:, None, :] - marks[None, :, :], axis=2)
+    return distances.min(axis=1)
+
+
+def mean_or_nan(values: NDArray[np.float64]) -> float:
+    """Mean of the finite values (NaN when there are none)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.mean()) if finite.size else math.nan

@@ -1,0 +1,113 @@
+"""The registered stitch-placement metrics (:mod:`metrics.placement`); importing fills the registry.
+
+Each is the mean over the session's stitches (NaN when the session has no stitch points or its
+task declares no targets). Distances are in m, errors never negative.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from metrics.context import SessionContext
+from metrics.placement import mean_or_nan
+from metrics.registry import HIGHER, LOWER, metric
+
+NAN = math.nan
+TARGETS_REF = (
+    "the task's target marks, as a course's template draws them; "
+    "AMBF suturing challenge scoring (Munawar et al. 2022)"
+)
+OSATS_REF = "Martin et al. 1997, Br J Surg 84:273 (OSATS: respect for tissue)"
+
+
+@metric(
+    "bite_error_entry",
+    unit="m",
+    definition="Mean over stitches of |entry point's distance from the wound edge - the task's target bite|.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=TARGETS_REF,
+    group="placement",
+)
+def bite_error_entry(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else mean_or_nan(np.abs(placed.entry_bite - context.placement_target_bite))
+
+
+@metric(
+    "bite_error_exit",
+    unit="m",
+    definition="Mean over stitches of |exit point's distance from the wound edge - the task's target bite|.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=TARGETS_REF,
+    group="placement",
+)
+def bite_error_exit(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else mean_or_nan(np.abs(placed.exit_bite - context.placement_target_bite))
+
+
+@metric(
+    "entry_to_target",
+    unit="m",
+    definition="Mean over stitches of the distance from the entry point to the nearest target entry mark.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=TARGETS_REF,
+    group="placement",
+)
+def entry_to_target(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else mean_or_nan(placed.entry_to_target)
+
+
+@metric(
+    "exit_to_target",
+    unit="m",
+    definition="Mean over stitches of the distance from the exit point to the nearest target exit mark.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=TARGETS_REF,
+    group="placement",
+)
+def exit_to_target(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else mean_or_nan(placed.exit_to_target)
+
+
+@metric(
+    "bite_asymmetry",
+    unit="m",
+    definition="Mean over stitches of |entry distance - exit distance| from the wound edge (a symmetric "
+    "bite takes as much tissue on the way in as on the way out).",
+    streams=("stitches",),
+    better=LOWER,
+    reference=OSATS_REF,
+    group="placement",
+)
+def bite_asymmetry(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else mean_or_nan(np.abs(placed.entry_bite - placed.exit_bite))
+
+
+@metric(
+    "full_thickness_fraction",
+    unit="1",
+    definition="Fraction of stitches whose needle came out through the far (luminal) surface, i.e. "
+    "through every wall layer; a stitch out through the cut edge missed the intima, one without an "
+    "exit is incomplete.",
+    streams=("stitches",),
+    better=HIGHER,
+    reference=OSATS_REF,
+    group="placement",
+    bounds=(0.0, 1.0),
+)
+def full_thickness_fraction(context: SessionContext) -> float:
+    placed = context.placement
+    if placed is None:
+        return NAN
+    through = np.nan_to_num(placed.full_thickness, nan=0.0)  # no exit: not a full-thickness bite
+    return float(through.mean())

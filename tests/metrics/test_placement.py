@@ -1,0 +1,173 @@
+"""Stitch placement (issue 22): known answers on constructed bites, properties, a recorded stitch."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from metrics import MetricsError, SessionStreams, metrics_of
+from metrics.placement import PlacementTargets, stitch_points
+from sim.mesh import box_mesh
+
+PLACEMENT = ("bite_error_entry", "bite_error_exit", "entry_to_target", "exit_to_target", "bite_asymmetry")
+WALL = box_mesh((0.012, 0.01, 0.0015), (12, 10, 3))  # 1 mm cells across, 0.5 mm through the wall
+TARGETS = {
+    "wound_point": [0.012, 0.0, 0.0015],
+    "wound_normal": [1.0, 0.0, 0.0],
+    "target_bite_m": 0.0015,
+    "entry_targets": [[0.0105, 0.005, 0.0015]],
+    "exit_targets": [[0.0105, 0.005, 0.0]],
+    "far_normal": [0.0, 0.0, -1.0],
+}
+
+
+def at_node(mesh, point, normal):
+    """(triangle, barycentric weights) putting a surface point exactly on the node at ``point``, on a
+    triangle facing ``normal``."""
+    node = int(np.argmin(np.linalg.norm(mesh.points - np.asarray(point), axis=1)))
+    facing = mesh.surface_normals @ np.asarray(normal, dtype=float) > 0.99
+    triangle = int(np.flatnonzero(facing & np.any(mesh.surface_triangles == node, axis=1))[0])
+    weights = (mesh.surface_triangles[triangle] == node).astype(float)
+    return triangle, weights
+
+
+def event(time, kind, triangle, weights):
+    return {
+        "time": time,
+        "kind": kind,
+        "triangle": triangle,
+        "bary_0": weights[0],
+        "bary_1": weights[1],
+        "bary_2": weights[2],
+        "entry_angle_deg": 0.0,
+        "tip_speed": 0.004,
+    }
+
+
+def streams_of(events, mesh=WALL, targets=TARGETS):
+    frame = pd.DataFrame(events)
+    time = np.linspace(0.0, 5.0, 51)
+    streams = SessionStreams(
+        "s", time, np.zeros((time.size, 3)), events=frame, attributes={"placement": targets}
+    )
+    import dataclasses
+
+    return dataclasses.replace(streams, stitches=stitch_points(streams.events, mesh))
+
+
+def bite(entry, exit_=None, exit_normal=(0.0, 0.0, -1.0), mesh=WALL):
+    events = [event(1.0, "pierce", *at_node(mesh, entry, (0, 0, 1)))]
+    if exit_ is not None:
+        events.append(event(1.5, "exit", *at_node(mesh, exit_, exit_normal)))
+    return events
+
+
+def test_a_perpendicular_bite_one_mm_short_of_its_target_by_hand():
+    """Entry on the adventitia at x = 10 mm (2 mm from the edge: 0.5 mm more than the 1.5 mm target),
+    exit on the intima at x = 11 mm (1 mm from the edge, 0.5 mm short)."""
+    values = metrics_of(streams_of(bite((0.010, 0.005, 0.0015), (0.011, 0.005, 0.0))))
+    assert values["bite_error_entry"] == pytest.approx(0.0005, abs=1e-12)
+    assert values["bite_error_exit"] == pytest.approx(0.0005, abs=1e-12)
+    assert values["entry_to_target"] == pytest.approx(0.0005, abs=1e-12)
+    assert values["exit_to_target"] == pytest.approx(0.0005, abs=1e-12)
+    assert values["bite_asymmetry"] == pytest.approx(0.001, abs=1e-12)
+    assert values["full_thickness_fraction"] == 1.0
+
+
+def test_out_through_the_cut_edge_is_a_partial_thickness_bite_and_no_exit_is_incomplete():
+    cut_edge = bite((0.010, 0.005, 0.0015), (0.012, 0.005, 0.0005), exit_normal=(1.0, 0.0, 0.0))
+    values = metrics_of(streams_of(cut_edge))
+    assert values["full_thickness_fraction"] == 0.0 and values["bite_error_exit"] == pytest.approx(0.0015)
+    values = metrics_of(streams_of(bite((0.010, 0.005, 0.0015))))
+    assert values["full_thickness_fraction"] == 0.0
+    assert math.isnan(values["bite_error_exit"]) and values["bite_error_entry"] == pytest.approx(0.0005)
+
+
+def test_two_stitches_are_averaged_each_exit_with_its_own_pierce():
+    first = bite((0.010, 0.005, 0.0015), (0.011, 0.005, 0.0))
+    second = [dict(e, time=e["time"] + 2.0) for e in bite((0.011, 0.002, 0.0015), (0.011, 0.002, 0.0))]
+    stream = streams_of(first + second)
+    assert len(stream.stitches) == 2
+    values = metrics_of(stream)
+    assert values["bite_error_entry"] == pytest.approx((0.0005 + 0.0005) / 2)
+    assert values["bite_asymmetry"] == pytest.approx((0.001 + 0.0) / 2)
+    assert values["entry_to_target"] == pytest.approx((0.0005 + math.hypot(0.0005, 0.003)) / 2)
+
+
+def test_without_targets_or_stitch_points_placement_is_nan_never_guessed():
+    no_targets = streams_of(bite((0.010, 0.005, 0.0015), (0.011, 0.005, 0.0)), targets=None)
+    assert all(math.isnan(metrics_of(no_targets)[name]) for name in PLACEMENT)
+    time = np.linspace(0, 1, 11)
+    bare = SessionStreams("s", time, np.zeros((11, 3)), attributes={"placement": TARGETS})
+    assert all(math.isnan(metrics_of(bare)[name]) for name in (*PLACEMENT, "full_thickness_fraction"))
+
+
+def test_malformed_targets_are_named():
+    for change, message in (
+        ({"wound_normal": [2.0, 0.0, 0.0]}, "wound_normal' must be a unit vector"),
+        ({"target_bite_m": -1}, "target_bite_m' must be a positive distance"),
+        ({"entry_targets": [[0.0, float("nan"), 0.0]]}, "entry_targets' must be finite"),
+    ):
+        with pytest.raises(MetricsError, match=message):
+            PlacementTargets.from_attributes({"placement": {**TARGETS, **change}})
+
+
+def _moved(points, shift, mirror):
+    out = np.array(points, dtype=float) + shift
+    if mirror:
+        out[..., 0] *= -1.0
+    return out
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    shift_y=st.floats(-0.02, 0.02),
+    shift_z=st.floats(-0.01, 0.01),
+    mirror=st.booleans(),
+)
+def test_placement_is_unchanged_along_the_wound_and_in_the_mirror(shift_y, shift_z, mirror):
+    """Moving the whole task along the wound edge (or off in z), or mirroring it across the wound's
+    perpendicular plane, changes no placement value."""
+    reference = metrics_of(streams_of(bite((0.010, 0.004, 0.0015), (0.011, 0.006, 0.0))))
+    shift = np.array([0.0, shift_y, shift_z])
+    from sim.mesh.tetmesh import TetMesh
+
+    order = [0, 2, 1, 3] if mirror else [0, 1, 2, 3]  # a reflection turns elements inside out: flip back
+    mesh = TetMesh(_moved(WALL.points, shift, mirror), WALL.tets[:, order], WALL.regions)
+    targets = {
+        **TARGETS,
+        "wound_point": _moved(TARGETS["wound_point"], shift, mirror).tolist(),
+        "wound_normal": [-1.0 if mirror else 1.0, 0.0, 0.0],
+        "entry_targets": _moved(TARGETS["entry_targets"], shift, mirror).tolist(),
+        "exit_targets": _moved(TARGETS["exit_targets"], shift, mirror).tolist(),
+    }
+    entry = _moved((0.010, 0.004, 0.0015), shift, mirror)
+    exit_ = _moved((0.011, 0.006, 0.0), shift, mirror)
+    moved = metrics_of(streams_of(bite(entry, exit_, mesh=mesh), mesh=mesh, targets=targets))
+    for name in (*PLACEMENT, "full_thickness_fraction"):
+        assert moved[name] == pytest.approx(reference[name], rel=1e-9, abs=1e-12), name
+
+
+@pytest.mark.slow
+def test_recorded_stitches_expert_on_target_trainee_off(tmp_path):
+    """Scripted wall-stitch passes through the simulator: the expert's bite lands within 0.4 mm of
+    its marks and through the intima; a first-day trainee's levering pass lands further off."""
+    from metrics.tissue import with_tissue_fields
+    from sessions.synthetic import pass_parameters
+    from sessions.tasks import tissue_for
+    from tests.metrics.test_live_tissue_streams import record
+
+    wall = tissue_for("wall-stitch", None)
+    values = {}
+    for name, skill in (("expert", 1.0), ("trainee", 0.2)):
+        streams = with_tissue_fields(record(tmp_path / name, wall, pass_parameters(skill, seed=2)), wall)
+        assert len(streams.stitches) == 1
+        values[name] = metrics_of(streams)
+    expert, trainee = values["expert"], values["trainee"]
+    assert expert["full_thickness_fraction"] == 1.0
+    assert expert["entry_to_target"] < 0.0004 and expert["exit_to_target"] < 0.0004, expert
+    assert trainee["exit_to_target"] > expert["exit_to_target"] + 0.0002, (expert, trainee)
+    assert trainee["bite_asymmetry"] > expert["bite_asymmetry"], (expert, trainee)
