@@ -91,14 +91,6 @@ class SessionContext:
         return StitchPlacement.of(stitches, targets)
 
     @cached_property
-    def placement_target_bite(self) -> float:
-        """The task's target bite (m), from the session's placement targets."""
-        from metrics.placement import PlacementTargets
-
-        targets = PlacementTargets.from_attributes(dict(self.streams.attributes))
-        return math.nan if targets is None else targets.target_bite
-
-    @cached_property
     def insertion_point(self) -> NDArray[np.float64] | None:
         """Where the needle first pierced (m): the session's attribute, else the tip at the first pierce."""
         given = self.streams.attributes.get("insertion_point")

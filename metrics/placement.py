@@ -137,6 +137,7 @@ class StitchPlacement:
     entry_to_target: NDArray[np.float64]
     exit_to_target: NDArray[np.float64]
     full_thickness: NDArray[np.float64]  # 1 through the far surface, 0 another face, NaN no exit
+    target_bite: float
 
     @classmethod
     def of(cls, stitches: pd.DataFrame, targets: PlacementTargets) -> StitchPlacement:
@@ -151,6 +152,7 @@ class StitchPlacement:
             _nearest(entry, targets.entry_targets),
             _nearest(exit_, targets.exit_targets),
             through,
+            targets.target_bite,
         )
 
     def table(self) -> pd.DataFrame:

@@ -33,7 +33,7 @@ OSATS_REF = "Martin et al. 1997, Br J Surg 84:273 (OSATS: respect for tissue)"
 )
 def bite_error_entry(context: SessionContext) -> float:
     placed = context.placement
-    return NAN if placed is None else mean_or_nan(np.abs(placed.entry_bite - context.placement_target_bite))
+    return NAN if placed is None else mean_or_nan(np.abs(placed.entry_bite - placed.target_bite))
 
 
 @metric(
@@ -47,7 +47,7 @@ def bite_error_entry(context: SessionContext) -> float:
 )
 def bite_error_exit(context: SessionContext) -> float:
     placed = context.placement
-    return NAN if placed is None else mean_or_nan(np.abs(placed.exit_bite - context.placement_target_bite))
+    return NAN if placed is None else mean_or_nan(np.abs(placed.exit_bite - placed.target_bite))
 
 
 @metric(
