@@ -128,6 +128,10 @@ def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(STITCH_COLUMNS))
 
 
+STITCH_QUANTITIES = ("entry_bite", "exit_bite", "entry_to_target", "exit_to_target", "full_thickness")
+"""What is kept per stitch: bite distances and distances to target (m), full thickness (1 or 0)."""
+
+
 @dataclass(frozen=True)
 class StitchPlacement:
     """Per-stitch placement against the targets (m; NaN where the stitch has no exit)."""
@@ -156,17 +160,22 @@ class StitchPlacement:
         )
 
     def table(self) -> pd.DataFrame:
-        """Per-stitch values in display units (mm), for reports and pages."""
+        """One row per stitch (1, 2, ...), one column per :data:`STITCH_QUANTITIES` (SI units)."""
         return pd.DataFrame(
             {
                 "stitch": np.arange(1, self.entry_bite.size + 1),
-                "entry_bite_mm": 1e3 * self.entry_bite,
-                "exit_bite_mm": 1e3 * self.exit_bite,
-                "entry_to_target_mm": 1e3 * self.entry_to_target,
-                "exit_to_target_mm": 1e3 * self.exit_to_target,
-                "full_thickness": self.full_thickness,
+                **{name: getattr(self, name) for name in STITCH_QUANTITIES},
             }
         )
+
+
+def stitch_table(streams) -> pd.DataFrame | None:
+    """The session's per-stitch placement (:meth:`StitchPlacement.table`), or None when it has no
+    stitch points or its task declares no targets."""
+    targets = PlacementTargets.from_attributes(dict(streams.attributes))
+    if targets is None or streams.stitches is None or streams.stitches.empty:
+        return None
+    return StitchPlacement.of(streams.stitches, targets).table()
 
 
 def _nearest(points: NDArray[np.float64], marks: NDArray[np.float64]) -> NDArray[np.float64]:

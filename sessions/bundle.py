@@ -383,9 +383,12 @@ def import_bundle(
     }
 
 
-def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> dict[str, dict[str, float]]:
-    """Every scorable session's metrics computed from its extracted streams; an error names it."""
-    from sessions.runner import compute_metrics
+def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> dict[str, tuple]:
+    """Every scorable session's metrics and per-stitch placement computed from its extracted streams;
+    an error names the session."""
+    from metrics import metrics_of
+    from metrics.placement import stitch_table
+    from sessions.runner import scored_streams
 
     labels = {p.code: p.group_label for p in manifest.participants}
     computed = {}
@@ -395,9 +398,10 @@ def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> 
         folder = staging / entry.uid
         where = folder / entry.files[0].name if entry.single_file else folder
         try:
-            computed[entry.uid] = compute_metrics(
+            streams = scored_streams(
                 where, entry.device, entry.uid, entry.participant, labels[entry.participant], home
             )
+            computed[entry.uid] = (metrics_of(streams), stitch_table(streams))
         except Exception as error:  # hostile streams: any failure refuses the whole bundle
             raise CatalogError(
                 f"session {entry.uid} of the bundle cannot be scored from its streams "
@@ -456,14 +460,13 @@ def _extract(bundle: str | Path, manifest: Manifest, staging: Path) -> None:
                     shutil.copyfileobj(member, target, _CHUNK)
 
 
-def _add_rows(
-    catalog: Catalog, orm, manifest: Manifest, home: Path, computed: dict[str, dict[str, float]]
-) -> int:
+def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: dict[str, tuple]) -> int:
     """The bundle's rows; returns how many stated metric values differ from the recomputed ones.
 
     Participants come without any account link (accounts are this site's business); database ids
     are this catalog's own."""
     from metrics.registry import REGISTRY_VERSION
+    from sessions.runner import stitch_results
 
     info = manifest.study
     study = Study(name=info.name, description=info.description, created_at=info.created_at)
@@ -499,11 +502,12 @@ def _add_rows(
         orm.add(session)
         orm.flush()
         orm.add_all(StreamFile(session_id=session.id, **record.model_dump()) for record in entry.files)
-        fresh = computed.get(entry.uid)
+        fresh, stitches = computed.get(entry.uid, (None, None))
         stated = [m for m in entry.metrics if fresh is None or m.registry_version != REGISTRY_VERSION]
         orm.add_all(MetricResult(session_id=session.id, source="imported", **m.model_dump()) for m in stated)
         if fresh is not None:
             orm.add_all(metric_results(session.id, fresh))
+            orm.add_all(stitch_results(session.id, stitches))
             differing += _count_differing(entry, fresh, REGISTRY_VERSION)
         orm.add_all(Rating(session_id=session.id, **r.model_dump()) for r in entry.ratings)
         orm.add_all(Annotation(session_id=session.id, **a.model_dump()) for a in entry.annotations)

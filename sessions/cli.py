@@ -727,11 +727,12 @@ def sessions_show(uid: str, as_json: bool) -> None:
             "error": row.error,
             "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
         }
-    from sessions.review import session_against_experts
+    from sessions.review import session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)
     data["metrics"] = {r["metric"]: r["value"] for r in rows}
     data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
+    data["stitches"] = session_stitches(catalog, uid)
     if as_json:
         _json(data)
         return
@@ -748,8 +749,29 @@ def sessions_show(uid: str, as_json: bool) -> None:
                 click.echo(f"  {r['metric']:28s} {_cell(r['value']):>12s} {r['unit']:8s} {versus}")
         elif key == "versus_experts":
             continue
+        elif key == "stitches":
+            _show_stitches(value)
         else:
             click.echo(f"{key:12s} {value}")
+
+
+def _show_stitches(stitches: list[dict]) -> None:
+    """Where each bite went, in mm (fits 80 columns)."""
+    if not stitches:
+        click.echo("stitches     none scored against placement targets (older sessions: `vascsim score`)")
+        return
+    click.echo("stitches     where each bite went, in mm (from the wound edge; from the marks)")
+    click.echo("  stitch  entry bite  exit bite  entry to mark  exit to mark  through intima")
+
+    def mm(value) -> str:
+        return "-" if value is None else f"{1e3 * value:.2f}"
+
+    for s in stitches:
+        through = {None: "no exit", 1.0: "yes", 0.0: "no (cut edge)"}.get(s.get("full_thickness"), "?")
+        click.echo(
+            f"  {s['stitch']:>6d}  {mm(s.get('entry_bite')):>10s}  {mm(s.get('exit_bite')):>9s}  "
+            f"{mm(s.get('entry_to_target')):>13s}  {mm(s.get('exit_to_target')):>12s}  {through}"
+        )
 
 
 @sessions.command("delete")

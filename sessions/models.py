@@ -112,6 +112,7 @@ class Session(Base):
     task: Mapped[Task] = relationship()
     files: Mapped[list[StreamFile]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
     metrics: Mapped[list[MetricResult]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
+    stitches: Mapped[list[StitchResult]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
     ratings: Mapped[list[Rating]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
     annotations: Mapped[list[Annotation]] = relationship(cascade="all, delete-orphan", passive_deletes=True)
 
@@ -136,6 +137,21 @@ class MetricResult(Base):
     registry_version: Mapped[str] = mapped_column(String(16))
     # "computed" here from the session's streams, or "imported" from a bundle and not recomputed
     source: Mapped[str] = mapped_column(String(16), default="computed", server_default="computed")
+
+
+class StitchResult(Base):
+    """One stitch's placement in a session (SI units), computed with the session's metrics."""
+
+    __tablename__ = "stitch_results"
+    __table_args__ = (
+        UniqueConstraint("session_id", "stitch", "quantity", "registry_version", name="uq_stitch_result"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"), index=True)
+    stitch: Mapped[int] = mapped_column(Integer)  # 1, 2, ... in the order the bites were made
+    quantity: Mapped[str] = mapped_column(String(32))
+    value: Mapped[float | None] = mapped_column(Float, nullable=True)
+    registry_version: Mapped[str] = mapped_column(String(16))
 
 
 class Rating(Base):

@@ -14,7 +14,7 @@ from sqlalchemy import select
 from metrics.proficiency import band_position
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from sessions.catalog import Catalog
-from sessions.models import MetricResult, Participant, Session
+from sessions.models import MetricResult, Participant, Session, StitchResult
 
 EXPERT_GROUP = "expert"
 
@@ -86,3 +86,19 @@ def session_against_experts(catalog: Catalog, uid: str) -> list[dict]:
         }
         study_id, task_id = row.participant.study_id, row.task_id
     return against_band(values, expert_band(catalog, study_id, task_id))
+
+
+def session_stitches(catalog: Catalog, uid: str) -> list[dict]:
+    """A session's stitches (current registry), one dict each: ``stitch`` and each stored quantity
+    (:data:`metrics.placement.STITCH_QUANTITIES`, SI units; None where it does not apply)."""
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        results = orm.execute(
+            select(StitchResult.stitch, StitchResult.quantity, StitchResult.value)
+            .where(StitchResult.session_id == row.id, StitchResult.registry_version == REGISTRY_VERSION)
+            .order_by(StitchResult.stitch)
+        ).all()
+    stitches: dict[int, dict] = {}
+    for stitch, quantity, value in results:
+        stitches.setdefault(stitch, {"stitch": stitch})[quantity] = value
+    return list(stitches.values())

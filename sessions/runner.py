@@ -9,6 +9,7 @@ row ``failed`` with the reason; a hard crash leaves ``running`` plus a journal t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -16,13 +17,14 @@ from pathlib import Path
 import pandas as pd
 from sqlalchemy import delete, select
 
-from metrics import REGISTRY_VERSION, from_recorded, metrics_of
+from metrics import REGISTRY_VERSION, SessionStreams, from_recorded, metrics_of
+from metrics.placement import STITCH_QUANTITIES, stitch_table
 from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from sessions.catalog import Catalog, CatalogError, WrongState, metric_results, new_uid, now, stream_file
 from sessions.config import data_home
-from sessions.models import MetricResult, Participant, Session, StreamFile, Study
+from sessions.models import MetricResult, Participant, Session, StitchResult, StreamFile, Study
 from sessions.tasks import session_tissue, task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
@@ -197,27 +199,33 @@ def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
     return uid, header
 
 
-def compute_metrics(
+def scored_streams(
     directory: Path, device: str, uid: str, code: str, label: str, home: Path | None = None
-) -> dict[str, float]:
-    """Every registered metric of the session stored in ``directory`` (read, never changed).
+) -> SessionStreams:
+    """The streams of the session stored in ``directory`` as metrics read them (read, never changed).
 
-    Simulator sessions get their tissue streams derived with the task's model (cached
-    under ``home/cache``; ``home`` defaults to VASCSIM_HOME); a bench video's tracked path is
-    the session's data; a JIGSAWS trial's is its kinematics file."""
+    Simulator sessions get their tissue streams and stitch points derived with the task's model
+    (cached under ``home/cache``; ``home`` defaults to VASCSIM_HOME); a bench video's tracked
+    path is the session's data; a JIGSAWS trial's is its kinematics file."""
     if device == "bench-video":
         from metrics.bench.tracking import TRACK_FILE, load_track
 
-        return metrics_of(load_track(directory / TRACK_FILE).to_streams(uid, code, label))
+        return load_track(directory / TRACK_FILE).to_streams(uid, code, label)
     if device == "jigsaws":  # one kinematics file; labels come from the catalog, not the file
         from metrics.datasets.jigsaws import Trial, read_kinematics
 
         samples = read_kinematics(directory)
-        trial = Trial(directory.stem, "", code, 0, label, "", float("nan"), {}, samples)
-        return metrics_of(trial.to_streams())
+        return Trial(directory.stem, "", code, 0, label, "", float("nan"), {}, samples).to_streams()
     streams = from_recorded(open_session(directory))
     model = session_tissue(streams, (home or data_home()) / "cache")
-    return metrics_of(with_tissue_fields(streams, model) if model is not None else streams)
+    return with_tissue_fields(streams, model) if model is not None else streams
+
+
+def compute_metrics(
+    directory: Path, device: str, uid: str, code: str, label: str, home: Path | None = None
+) -> dict[str, float]:
+    """Every registered metric of the session stored in ``directory`` (:func:`scored_streams`)."""
+    return metrics_of(scored_streams(directory, device, uid, code, label, home))
 
 
 def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[str, float]:
@@ -231,16 +239,35 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
             )
         directory, device = row.directory, row.device
         code, label = row.participant.code, row.participant.group_label
-    values = compute_metrics(Path(directory), device, uid, code, label, home)
+    streams = scored_streams(Path(directory), device, uid, code, label, home)
+    values = metrics_of(streams)
+    stitches = stitch_table(streams)
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
-        orm.execute(
-            delete(MetricResult).where(
-                MetricResult.session_id == row.id, MetricResult.registry_version == REGISTRY_VERSION
+        for table in (MetricResult, StitchResult):
+            orm.execute(
+                delete(table).where(table.session_id == row.id, table.registry_version == REGISTRY_VERSION)
             )
-        )
         orm.add_all(metric_results(row.id, values))
+        orm.add_all(stitch_results(row.id, stitches))
     return values
+
+
+def stitch_results(session_id: int, stitches: pd.DataFrame | None) -> list[StitchResult]:
+    """Catalog rows of a session's per-stitch placement (NaN stored as NULL)."""
+    if stitches is None:
+        return []
+    return [
+        StitchResult(
+            session_id=session_id,
+            stitch=int(row["stitch"]),
+            quantity=name,
+            value=None if math.isnan(row[name]) else float(row[name]),
+            registry_version=REGISTRY_VERSION,
+        )
+        for _, row in stitches.iterrows()
+        for name in STITCH_QUANTITIES
+    ]
 
 
 def _with_ratings(catalog: Catalog, study_name: str, wide: pd.DataFrame) -> pd.DataFrame:

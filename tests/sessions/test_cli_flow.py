@@ -29,6 +29,14 @@ def test_enrol_run_show_score_delete(home):
     shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
     assert {f["name"] for f in shown["files"]} >= {"samples.parquet", "events.parquet", "header.json"}
     assert shown["metrics"] == ran["metrics"]
+    # issue 22: where the bite went, stored per stitch and shown in mm at 80 columns
+    (stitch,) = shown["stitches"]
+    assert stitch["stitch"] == 1 and stitch["full_thickness"] == 1.0
+    assert stitch["entry_to_target"] == pytest.approx(ran["metrics"]["entry_to_target"])
+    text = invoke("sessions", "show", uid).stdout
+    table = text[text.index("stitches") :].splitlines()[:3]
+    assert "through intima" in table[1] and max(len(line) for line in table) <= 80
+    assert f"{1e3 * stitch['entry_bite']:.2f}" in text
     rescored = json.loads(invoke("score", uid, "--json").stdout)
     assert rescored[uid]["path_length"] == ran["metrics"]["path_length"]
     directory = Path(shown["directory"])
