@@ -220,6 +220,9 @@ class SuturingPassParameters:
     regrab_time (s): jaws travel from the grip to the needle's tip and close on it.
     pull_arc_deg: the needle is then turned on along its own curve, so its body follows the
         tip's path through the wall, until this much further.
+    entry_offset (m): where the hand actually enters, off the intended entry point along the
+        bite direction (positive: towards the exit, i.e. a smaller bite from a wound edge there);
+        lateral_offset (m): off it across the bite direction.
     seed: for the tremor's phases (a pass is reproducible).
     """
 
@@ -235,6 +238,8 @@ class SuturingPassParameters:
     approach_distance: float = 0.004
     regrab_time: float = 0.6
     pull_arc_deg: float = 170.0
+    entry_offset: float = 0.0
+    lateral_offset: float = 0.0
     seed: int = 0
 
 
@@ -277,7 +282,8 @@ class SuturingPass:
         world = np.column_stack([to_centre, tangent, self.axis])
         self._rest = world @ local.T
         self._centre_local = centre_local
-        self.entry = np.asarray(entry, dtype=np.float64)
+        offset = self.p.entry_offset * s + self.p.lateral_offset * np.cross(n, s)
+        self.entry = np.asarray(entry, dtype=np.float64) + offset
         self.centre = self.entry + self.radius * to_centre
         at_entry = Pose.unchecked(self.centre - self._rest @ centre_local, self._rest)
         self._turn = TurnAbout(self.axis, self.centre, at_entry)  # the holder, turned from entry
