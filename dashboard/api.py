@@ -20,6 +20,7 @@ from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from sessions import accounts
 from sessions.models import Participant, Session, StationToken, Study, User
+from sessions.status import SessionStatus
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 Staff = Annotated[Viewer, Depends(require(*STAFF))]
@@ -260,7 +261,7 @@ def live(request: Request, viewer: Watcher) -> dict:
         running = orm.execute(
             select(Session.uid, Participant.code, Session.started_at)
             .join(Participant, Session.participant_id == Participant.id)
-            .where(Session.status == "running")
+            .where(Session.status == SessionStatus.RUNNING)
             .order_by(Session.started_at.desc())
         ).all()
     stations = []
@@ -296,13 +297,13 @@ def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingRespon
     catalog = _state(request).catalog
     with catalog.session() as orm:
         row = access.owned_session(orm, viewer, uid)
-        if row.status != "running":
+        if row.status != SessionStatus.RUNNING:
             raise DashboardError(409, f"session {uid!r} is {row.status}, not recording")
         directory = inside(_state(request).settings.home, Path(row.directory))
 
     def still_running() -> bool:
         with catalog.session() as orm:
-            return orm.scalar(select(Session.status).where(Session.uid == uid)) == "running"
+            return orm.scalar(select(Session.status).where(Session.uid == uid)) == SessionStatus.RUNNING
 
     return _event_stream(request, directory, still_running)
 

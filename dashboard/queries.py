@@ -20,6 +20,7 @@ from metrics.study import practice_mask
 from sessions.catalog import Catalog
 from sessions.models import Annotation, Participant, Session, Study, User
 from sessions.review import against_band, expert_band
+from sessions.status import SCORABLE
 
 ATTENTION_AFTER_TRIALS = 5
 """A trainee not yet proficient after this many practice sessions needs a supervisor's look."""
@@ -95,7 +96,7 @@ def study_overview(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, st
         )
         info = {"id": study.id, "name": study.name, "description": study.description}
     overview = {"study": info, "sessions_by_status": statuses, "participants": participants}
-    scored = sum(statuses.get(s, 0) for s in ("complete", "recovered"))
+    scored = sum(statuses.get(s, 0) for s in SCORABLE)
     if not scored:
         overview.update(benchmarks=[], attention=[], synthetic=False)
         return overview
@@ -170,7 +171,7 @@ def participant_progress(
         "benchmarks": [],
         "trainee": None,
     }
-    if not any(s["status"] in ("complete", "recovered") for s in progress["sessions"]):
+    if not any(s["status"] in SCORABLE for s in progress["sessions"]):
         return progress
     analysis = analyses.get(study_id).analysis
     mine = analysis.sessions["participant_id"] == info["code"]

@@ -22,6 +22,7 @@ from metrics.study import StudyAnalysis, StudySettings, analyse_study
 from sessions.catalog import Catalog, CatalogError, now
 from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
 from sessions.runner import study_table
+from sessions.status import SCORABLE
 
 DECLARABLE = (
     "group_col",
@@ -272,7 +273,7 @@ def stale_sessions(catalog: Catalog, study_name: str) -> list[str]:
         rows = orm.execute(
             select(Session.id, Session.uid)
             .join(Participant, Session.participant_id == Participant.id)
-            .where(Participant.study_id == study.id, Session.status.in_(("complete", "recovered")))
+            .where(Participant.study_id == study.id, Session.status.in_(SCORABLE))
         ).all()
     versions = metric_versions(catalog, [r[0] for r in rows])
     return [uid for session_id, uid in rows if versions[session_id].startswith("stale")]

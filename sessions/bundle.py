@@ -53,6 +53,7 @@ from sessions.models import (
 )
 from sessions.signing import SIGNATURE, sign, trusted_fingerprint
 from sessions.signing import verify as verify_signature
+from sessions.status import SCORABLE, SessionStatus
 
 MANIFEST = "manifest.json"
 MANIFEST_CHECKSUM = "manifest.sha256"
@@ -138,7 +139,7 @@ def export_study(
         copies: list[tuple[str, Path, str]] = []
         for person in participants:
             for row in sorted(person.sessions, key=lambda s: (s.trial, s.uid)):
-                if row.status == "running":
+                if row.status == SessionStatus.RUNNING:
                     raise CatalogError(
                         f"session {row.uid} of study {study_name!r} is still running; finish it or "
                         f"`vascsim recover {row.uid}` before exporting"
@@ -393,7 +394,7 @@ def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> 
     labels = {p.code: p.group_label for p in manifest.participants}
     computed = {}
     for entry in manifest.sessions:
-        if entry.status not in ("complete", "recovered"):
+        if entry.status not in SCORABLE:
             continue
         folder = staging / entry.uid
         where = folder / entry.files[0].name if entry.single_file else folder

@@ -17,6 +17,7 @@ import click
 import numpy as np
 import pandas as pd
 
+from sessions.status import SCORABLE, SESSION_STATUSES
 from sim.errors import VascsimError
 
 
@@ -651,7 +652,7 @@ def sessions() -> None:
 
 @sessions.command("list")
 @click.option("--study", default=None, help="Only this study.")
-@click.option("--status", type=click.Choice(["running", "complete", "recovered", "failed"]), default=None)
+@click.option("--status", type=click.Choice(SESSION_STATUSES), default=None)
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @user_errors
 def sessions_list(study, status, as_json) -> None:
@@ -825,7 +826,7 @@ def score(uids, study, as_json) -> None:
                     .join(Study, Participant.study_id == Study.id)
                     .where(
                         Study.name == study,
-                        Session.status.in_(("complete", "recovered")),
+                        Session.status.in_(SCORABLE),
                         Session.device != "jigsaws",
                     )
                 )

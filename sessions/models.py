@@ -17,7 +17,6 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
-SESSION_STATUSES = ("running", "complete", "recovered", "failed")
 ROLES = ("admin", "supervisor", "researcher", "trainee")
 
 

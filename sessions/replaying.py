@@ -9,9 +9,10 @@ from sqlalchemy import select
 from recorder import open_session
 from sessions.catalog import Catalog, CatalogError
 from sessions.models import Participant, Session
+from sessions.status import SCORABLE
 from sessions.tasks import TASKS, tissue_for
 
-REPLAYABLE = ("complete", "recovered")
+REPLAYABLE = SCORABLE
 
 
 def _replayable(row: Session) -> None:

@@ -15,6 +15,7 @@ from metrics.proficiency import band_position
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from sessions.catalog import Catalog
 from sessions.models import MetricResult, Participant, Session, StitchResult
+from sessions.status import SCORABLE
 
 EXPERT_GROUP = "expert"
 
@@ -30,7 +31,7 @@ def expert_band(catalog: Catalog, study_id: int, task_id: int) -> dict[str, dict
                 Participant.study_id == study_id,
                 Participant.group_label == EXPERT_GROUP,
                 Session.task_id == task_id,
-                Session.status.in_(("complete", "recovered")),
+                Session.status.in_(SCORABLE),
                 MetricResult.registry_version == REGISTRY_VERSION,
                 MetricResult.value.is_not(None),
             )

@@ -24,7 +24,15 @@ from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from sessions.catalog import Catalog, CatalogError, WrongState, metric_results, new_uid, now, stream_file
 from sessions.config import data_home
-from sessions.models import MetricResult, Participant, Session, StitchResult, StreamFile, Study
+from sessions.models import (
+    MetricResult,
+    Participant,
+    Session,
+    StitchResult,
+    StreamFile,
+    Study,
+)
+from sessions.status import SCORABLE, SessionStatus
 from sessions.tasks import session_tissue, task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
@@ -124,7 +132,7 @@ def run_session(
             clock=plan.clock,
             trial=plan.trial,
             phase=plan.phase,
-            status="running",
+            status=SessionStatus.RUNNING,
             started_at=now(),
             directory=str(directory),
         )
@@ -188,7 +196,7 @@ def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
         else:
             row = catalog.recorded_session(orm, target)
             folder = Path(row.directory)
-        if row is not None and row.status != "running":
+        if row is not None and row.status != SessionStatus.RUNNING:
             raise CatalogError(
                 f"session {row.uid} is {row.status}; only sessions left running by a crash are recovered"
             )
@@ -233,7 +241,7 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
     with the registry version, replacing what that version had (computed or imported)."""
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
-        if row.status not in ("complete", "recovered"):
+        if row.status not in SCORABLE:
             raise CatalogError(
                 f"session {uid} is {row.status}; only complete or recovered sessions are scored"
             )
@@ -318,7 +326,7 @@ def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
             .join(MetricResult, MetricResult.session_id == Session.id)
             .where(
                 Participant.study_id == study.id,
-                Session.status.in_(("complete", "recovered")),
+                Session.status.in_(SCORABLE),
                 MetricResult.registry_version == REGISTRY_VERSION,
             )
         ).all()
