@@ -19,7 +19,7 @@ from metrics.report import composite_summary, participant_medians, summary_table
 from metrics.study import practice_mask
 from sessions.catalog import Catalog
 from sessions.models import Annotation, Participant, Session, Study, User
-from sessions.review import against_band, expert_band
+from sessions.review import against_band, expert_band, session_stitches
 from sessions.status import SCORABLE
 
 ATTENTION_AFTER_TRIALS = 5
@@ -237,7 +237,17 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
         study_id, f"expert-band-{task_id}", lambda: expert_band(catalog, study_id, task_id)
     )
     detail["metrics"] = against_band(values, band)
+    detail["stitches"] = session_stitches(catalog, uid)
+    detail["target_bite_m"] = target_bite(detail["task"])
     return detail
+
+
+def target_bite(task: str) -> float | None:
+    """The task's target bite from the wound edge (m), if the task library declares one."""
+    from sessions.tasks import TASKS
+
+    placement = TASKS[task].placement if task in TASKS else None
+    return None if placement is None else float(placement["target_bite_m"])
 
 
 def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:

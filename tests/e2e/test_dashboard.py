@@ -86,6 +86,10 @@ def test_supervisor_reviews_a_session(demo_site):
         assert page.locator("#signals .signal-plot").count() >= 2
         assert _plot_has_data(page, "#signals .signal-plot")
         assert page.locator("#metrics tbody tr").count() > 10
+        # issue 22: where the bite went, per stitch, in mm
+        stitch = page.locator("#stitches tbody tr").first.locator("td")
+        assert stitch.nth(0).inner_text() == "1" and float(stitch.nth(1).inner_text()) > 0
+        assert stitch.nth(5).inner_text() in ("yes", "no exit", "no: out through the cut edge")
         # playing the video moves the cursor on the plots
         page.evaluate("() => document.getElementById('replay').play()")
         page.wait_for_function("() => document.getElementById('replay').currentTime > 0.6", timeout=30_000)
