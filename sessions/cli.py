@@ -399,6 +399,61 @@ def demo(small: bool, as_json: bool) -> None:
 
 
 @main.group()
+def tasks() -> None:
+    """The suturing tasks a session can run (the task library)."""
+
+
+@tasks.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print the tasks as JSON.")
+def tasks_list(as_json: bool) -> None:
+    """List the tasks: name, tissue preset, and what the trainee is asked to do."""
+    from sessions.tasks import TASKS
+
+    rows = [
+        {"task": t.name, "tissue": t.parameters.get("tissue", ""), "description": t.description}
+        for t in TASKS.values()
+    ]
+    if as_json:
+        _json(rows)
+        return
+    for row in rows:
+        click.echo(f"{row['task']}  ({row['tissue']})")
+        click.echo(click.wrap_text(row["description"], 78, initial_indent="  ", subsequent_indent="  "))
+
+
+@tasks.command("show")
+@click.argument("name")
+@click.option("--json", "as_json", is_flag=True, help="Print the task as JSON (SI units).")
+@user_errors
+def tasks_show(name: str, as_json: bool) -> None:
+    """Show one task: geometry, tissue, where the stitch goes and the marks it is scored against."""
+    from dataclasses import asdict
+
+    from sessions.tasks import task_spec
+
+    spec = task_spec(name)
+    if as_json:
+        _json(asdict(spec))
+        return
+    text = f"{spec.name}: {spec.description}"
+    click.echo(click.wrap_text(text, 78, initial_indent="task         ", subsequent_indent=" " * 13))
+    click.echo(f"tissue       {spec.parameters.get('tissue', '')} ({spec.parameters.get('model', '')} model)")
+    size = " x ".join(f"{1e3 * v:g}" for v in spec.parameters.get("size_m", []))
+    if size:
+        click.echo(f"geometry     {size} mm, held on {', '.join(spec.parameters.get('fixed', []))}")
+    entry = ", ".join(f"{1e3 * v:.1f}" for v in spec.entry)
+    click.echo(f"entry        ({entry}) mm, the scripted passes' aim")
+    placement = spec.placement
+    if placement is None:
+        click.echo("placement    no target marks: placement metrics are not scored")
+        return
+    click.echo(f"target bite  {1e3 * placement['target_bite_m']:.1f} mm from the wound edge")
+    for kind in ("entry", "exit"):
+        for mark in placement[f"{kind}_targets"]:
+            click.echo(f"{kind} mark   ".ljust(13) + "(" + ", ".join(f"{1e3 * v:.1f}" for v in mark) + ") mm")
+
+
+@main.group()
 def studies() -> None:
     """Studies and courses in the catalog."""
 
