@@ -59,6 +59,9 @@ class PlacementTargets:
     entry_targets: NDArray[np.float64]
     exit_targets: NDArray[np.float64]
     far_normal: NDArray[np.float64]
+    target_exit_bite: float
+    """The exit's target distance from the edge (m): the entry's unless the task states its own
+    (through a curved wall a straight bite ends nearer the edge on the inside)."""
 
     @classmethod
     def from_attributes(cls, attributes: dict[str, Any]) -> PlacementTargets | None:
@@ -83,12 +86,8 @@ class PlacementTargets:
         for name, normal in zip(("wound_normal", "far_normal"), normals, strict=True):
             if not math.isclose(float(np.linalg.norm(normal)), 1.0, rel_tol=1e-6):
                 raise MetricsError(f"placement {name!r} must be a unit vector")
-        try:
-            bite = float(given["target_bite_m"])
-        except (KeyError, TypeError, ValueError):
-            bite = math.nan
-        if not (math.isfinite(bite) and bite > 0):
-            raise MetricsError("placement 'target_bite_m' must be a positive distance (m)")
+        bite = _distance(given, "target_bite_m")
+        exit_bite = _distance(given, "target_exit_bite_m") if "target_exit_bite_m" in given else bite
         return cls(
             vector("wound_point", (3,)),
             normals[0],
@@ -96,11 +95,22 @@ class PlacementTargets:
             vector("entry_targets", (3,)).reshape(-1, 3),
             vector("exit_targets", (3,)).reshape(-1, 3),
             normals[1],
+            exit_bite,
         )
 
     def bite_distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance (m) of points from the wound plane, positive on the tissue's side."""
         return (self.wound_point - np.asarray(points, dtype=np.float64)) @ self.wound_normal
+
+
+def _distance(given: dict[str, Any], name: str) -> float:
+    try:
+        value = float(given[name])
+    except (KeyError, TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise MetricsError(f"placement {name!r} must be a positive distance (m)")
+    return value
 
 
 def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
@@ -142,6 +152,7 @@ class StitchPlacement:
     exit_to_target: NDArray[np.float64]
     full_thickness: NDArray[np.float64]  # 1 through the far surface, 0 another face, NaN no exit
     target_bite: float
+    target_exit_bite: float
 
     @classmethod
     def of(cls, stitches: pd.DataFrame, targets: PlacementTargets) -> StitchPlacement:
@@ -157,6 +168,7 @@ class StitchPlacement:
             _nearest(exit_, targets.exit_targets),
             through,
             targets.target_bite,
+            targets.target_exit_bite,
         )
 
     def table(self) -> pd.DataFrame:

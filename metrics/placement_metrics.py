@@ -39,7 +39,8 @@ def bite_error_entry(context: SessionContext) -> float:
 @metric(
     "bite_error_exit",
     unit="m",
-    definition="Mean over stitches of |exit point's distance from the wound edge - the task's target bite|.",
+    definition="Mean over stitches of |exit point's distance from the wound edge - the task's target "
+    "exit bite| (the entry's target unless the task states one).",
     streams=("stitches",),
     better=LOWER,
     reference=TARGETS_REF,
@@ -47,7 +48,7 @@ def bite_error_entry(context: SessionContext) -> float:
 )
 def bite_error_exit(context: SessionContext) -> float:
     placed = context.placement
-    return NAN if placed is None else mean_or_nan(np.abs(placed.exit_bite - placed.target_bite))
+    return NAN if placed is None else mean_or_nan(np.abs(placed.exit_bite - placed.target_exit_bite))
 
 
 @metric(

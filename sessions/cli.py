@@ -438,9 +438,17 @@ def tasks_show(name: str, as_json: bool) -> None:
     text = f"{spec.name}: {spec.description}"
     click.echo(click.wrap_text(text, 78, initial_indent="task         ", subsequent_indent=" " * 13))
     click.echo(f"tissue       {spec.parameters.get('tissue', '')} ({spec.parameters.get('model', '')} model)")
-    size = " x ".join(f"{1e3 * v:g}" for v in spec.parameters.get("size_m", []))
-    if size:
-        click.echo(f"geometry     {size} mm, held on {', '.join(spec.parameters.get('fixed', []))}")
+    p, held = spec.parameters, ", ".join(spec.parameters.get("fixed", []))
+    geometry = ""
+    if "size_m" in p:
+        geometry = f"{' x '.join(f'{1e3 * v:g}' for v in p['size_m'])} mm patch, held on {held}"
+    elif "inner_radius_m" in p:
+        geometry = (
+            f"artery r {1e3 * p['inner_radius_m']:g} mm, wall {1e3 * p['wall_m']:g} mm, "
+            f"{1e3 * p['length_m']:g} mm long, {p['arc_deg']:g} deg patch, held on {held}"
+        )
+    if geometry:
+        click.echo(click.wrap_text(geometry, 78, initial_indent="geometry     ", subsequent_indent=" " * 13))
     entry = ", ".join(f"{1e3 * v:.1f}" for v in spec.entry)
     click.echo(f"entry        ({entry}) mm, the scripted passes' aim")
     placement = spec.placement
@@ -448,6 +456,9 @@ def tasks_show(name: str, as_json: bool) -> None:
         click.echo("placement    no target marks: placement metrics are not scored")
         return
     click.echo(f"target bite  {1e3 * placement['target_bite_m']:.1f} mm from the wound edge")
+    if "target_exit_bite_m" in placement:
+        exit_bite = 1e3 * placement["target_exit_bite_m"]
+        click.echo(f"  on exit    {exit_bite:.2f} mm (straight through the curved wall)")
     for kind in ("entry", "exit"):
         for mark in placement[f"{kind}_targets"]:
             click.echo(f"{kind} mark   ".ljust(13) + "(" + ", ".join(f"{1e3 * v:.1f}" for v in mark) + ") mm")

@@ -56,6 +56,64 @@ TASKS = {
 }
 
 
+# The interrupted stitch: a 90 deg patch of a porcine artery (inner radius 4 mm, wall 1.5 mm,
+# 10 mm long) held on its four cut sides, with a 6 mm arteriotomy along the axis at angle 0 that
+# gapes 0.15 mm at mid-length. One bite through the wound's b edge (positive angles) at mid-length:
+# in through the adventitia 1.5 mm from the edge, radially through the wall, out through the intima.
+_VESSEL = {"inner": 0.004, "wall": 0.0015, "length": 0.01, "arc_deg": 90.0, "gap": 1.5e-4}
+_OUTER = _VESSEL["inner"] + _VESSEL["wall"]
+_EDGE = 0.5 * _VESSEL["gap"] / _OUTER  # the b edge's angle on the adventitia at mid-length (rad)
+_BITE = 0.0015
+_ENTRY_ANGLE = _EDGE + float(np.arcsin(_BITE / _OUTER))  # 1.5 mm from the edge's plane
+
+
+def _on_cylinder(radius: float, angle: float, z: float) -> list[float]:
+    return [radius * float(np.cos(angle)), radius * float(np.sin(angle)), z]
+
+
+def _interrupted_stitch() -> TaskSpec:
+    z = 0.5 * _VESSEL["length"]
+    radial = (float(np.cos(_ENTRY_ANGLE)), float(np.sin(_ENTRY_ANGLE)), 0.0)
+    towards_wound = (float(np.sin(_ENTRY_ANGLE)), -float(np.cos(_ENTRY_ANGLE)), 0.0)
+    entry = _on_cylinder(_OUTER, _ENTRY_ANGLE, z)
+    return TaskSpec(
+        "interrupted-stitch",
+        "vessel_patch",
+        "One bite through an arteriotomy's edge on a porcine artery (inner radius 4 mm, wall 1.5 mm): "
+        "in through the adventitia 1.5 mm from the wound edge, out through the intima; a 90 deg patch "
+        "of the vessel held on its cut sides, 0.3 mm cells.",
+        tuple(entry),
+        radial,
+        towards_wound,
+        {
+            "inner_radius_m": _VESSEL["inner"],
+            "wall_m": _VESSEL["wall"],
+            "length_m": _VESSEL["length"],
+            "arc_deg": _VESSEL["arc_deg"],
+            "divisions": [30, 5, 34],  # circumferential, radial, axial: <= 0.3 mm cells
+            "wound": {"angle_deg": 0.0, "z_m": [0.002, 0.008], "gap_m": _VESSEL["gap"]},
+            "stitch_region": {"angle_deg": [0.0, 35.0], "z_m": [0.003, 0.007]},
+            "fixed": ["end0", "end1", "side0", "side1"],
+            "model": "biphase",
+            "tissue": "porcine-artery",
+        },
+        placement={
+            # the b edge's plane through the axis; its normal points from the tissue into the gap
+            "wound_point": _on_cylinder(_OUTER, _EDGE, z),
+            "wound_normal": [float(np.sin(_EDGE)), -float(np.cos(_EDGE)), 0.0],
+            "target_bite_m": _BITE,
+            # straight through the wall: on the intima the same bite is 4/5.5 of it from the edge
+            "target_exit_bite_m": _VESSEL["inner"] * float(np.sin(_ENTRY_ANGLE - _EDGE)),
+            "entry_targets": [entry],
+            "exit_targets": [_on_cylinder(_VESSEL["inner"], _ENTRY_ANGLE, z)],
+            "far_normal": [-radial[0], -radial[1], 0.0],  # the lumen faces the axis
+        },
+    )
+
+
+TASKS["interrupted-stitch"] = _interrupted_stitch()
+
+
 def task_spec(name: str) -> TaskSpec:
     if name not in TASKS:
         raise VascsimError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
@@ -63,11 +121,24 @@ def task_spec(name: str) -> TaskSpec:
 
 
 def task_mesh(spec: TaskSpec):
-    """The task's patch mesh: ``stitch_cell_m`` cells over the stitch region (x and y) and through
-    the wall, graded to ``cell_m`` elsewhere, so the needle's force kernel spans 3 cells."""
-    from sim.mesh import grid_box_mesh, refined_coordinates
+    """The task's mesh: for a patch, ``stitch_cell_m`` cells over the stitch region (x and y) and
+    through the wall, graded to ``cell_m`` elsewhere, so the needle's force kernel spans 3 cells;
+    for a vessel patch, a wall segment with its arteriotomy at uniform divisions."""
+    from sim.mesh import Wound, grid_box_mesh, refined_coordinates, vessel_mesh
 
     p = spec.parameters
+    if spec.scenario == "vessel_patch":
+        wound = p["wound"]
+        return vessel_mesh(
+            inner_radius=p["inner_radius_m"],
+            wall_thickness=p["wall_m"],
+            length=p["length_m"],
+            arc_deg=p["arc_deg"],
+            circumferential_divisions=p["divisions"][0],
+            radial_divisions=p["divisions"][1],
+            axial_divisions=p["divisions"][2],
+            wound=Wound(wound["angle_deg"], *wound["z_m"], gap=wound["gap_m"]),
+        )
     (length, width, thickness), coarse, fine = p["size_m"], p["cell_m"], p["stitch_cell_m"]
     (x0, x1), (y0, y1) = p["stitch_region_m"]
     return grid_box_mesh(
@@ -78,9 +149,17 @@ def task_mesh(spec: TaskSpec):
 
 
 def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
-    """Surface nodes in the task's stitch region (x, y box; every depth): the contact candidates."""
-    (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
+    """Surface nodes in the task's stitch region (a patch: an x, y box at every depth; a vessel
+    patch: an angle and z range of the adventitia): the contact candidates."""
     points = mesh.points[mesh.surface_nodes]
+    if spec.scenario == "vessel_patch":
+        region = spec.parameters["stitch_region"]
+        angle = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
+        (a0, a1), (z0, z1) = region["angle_deg"], region["z_m"]
+        inside = (angle >= a0) & (angle <= a1) & (points[:, 2] >= z0 - 1e-9) & (points[:, 2] <= z1 + 1e-9)
+        outer = np.isin(mesh.surface_nodes, mesh.node_sets["outer"])
+        return mesh.surface_nodes[inside & outer]
+    (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
     inside = (points[:, 0] >= x0 - 1e-9) & (points[:, 0] <= x1 + 1e-9)
     inside &= (points[:, 1] >= y0 - 1e-9) & (points[:, 1] <= y1 + 1e-9)
     return mesh.surface_nodes[inside]

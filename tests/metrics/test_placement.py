@@ -171,3 +171,49 @@ def test_recorded_stitches_expert_on_target_trainee_off(tmp_path):
     assert expert["entry_to_target"] < 0.0004 and expert["exit_to_target"] < 0.0004, expert
     assert trainee["exit_to_target"] > expert["exit_to_target"] + 0.0002, (expert, trainee)
     assert trainee["bite_asymmetry"] > expert["bite_asymmetry"], (expert, trainee)
+
+
+@pytest.mark.slow
+def test_the_interrupted_stitch_on_an_artery_scores_where_each_bite_went(tmp_path):
+    """Issue 22's first vessel task: a bite through an arteriotomy's edge on a curved artery wall.
+    The expert's lands within 0.35 mm of its marks and through the intima, at a credible puncture
+    force; a clumsier hand's lands further off."""
+    from metrics import from_recorded
+    from metrics.tissue import with_tissue_fields
+    from recorder import SessionWriter, open_session
+    from recorder.runtime import RuntimeRecorder
+    from sessions.synthetic import pass_parameters
+    from sessions.tasks import task_preset, task_spec, tissue_for
+    from sim.devices import ScriptedDevice, SuturingPass
+    from sim.needle import Needle
+    from sim.runtime import Simulation
+
+    task = "interrupted-stitch"
+    spec, wall, forces = task_spec(task), tissue_for(task, None), task_preset(task).forces
+    assert "wound_a" in wall.mesh.node_sets and wall.mesh.n_nodes > 5000  # a real vessel wall with its wound
+    values = {}
+    for skill in (1.0, 0.6):
+        passing = SuturingPass(
+            Needle.curved(), spec.entry, spec.normal, spec.bite_direction, pass_parameters(skill, 1)
+        )
+        header = {
+            "session_id": "s",
+            "task": task,
+            "placement": spec.placement,
+            "needle_forces": forces.as_dict(),
+        }
+        writer = SessionWriter(tmp_path / str(skill), header, flush_interval=0.1)
+        simulation = Simulation(wall, Needle.curved(), ScriptedDevice(passing.pose_and_grip), forces=forces)
+        RuntimeRecorder(writer).attach(simulation).run_simulated(passing.duration)
+        writer.close()
+        values[skill] = metrics_of(
+            with_tissue_fields(from_recorded(open_session(tmp_path / str(skill))), wall)
+        )
+    expert, other = values[1.0], values[0.6]
+    assert expert["full_thickness_fraction"] == 1.0
+    assert expert["entry_to_target"] < 0.00035 and expert["exit_to_target"] < 0.00035, expert
+    assert 0.5 < expert["peak_force"] < 1.2  # the calibrated puncture (0.8 N), not mN
+    assert (
+        other["entry_to_target"] > expert["entry_to_target"]
+        and other["exit_to_target"] > expert["exit_to_target"]
+    )

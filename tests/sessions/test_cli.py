@@ -114,11 +114,14 @@ def test_tasks_list_and_show_describe_the_task_library():
     from sessions.cli import main
 
     listed = CliRunner().invoke(main, ["tasks", "list"])
-    assert listed.exit_code == 0 and "wall-stitch" in listed.output
+    assert listed.exit_code == 0 and "wall-stitch" in listed.output and "interrupted-stitch" in listed.output
     shown = CliRunner().invoke(main, ["tasks", "show", "wall-stitch"])
     assert shown.exit_code == 0 and "target bite  1.5 mm from the wound edge" in shown.output
     assert max(len(line) for line in listed.output.splitlines() + shown.output.splitlines()) <= 80
     as_json = json.loads(CliRunner().invoke(main, ["tasks", "show", "wall-stitch", "--json"]).output)
     assert as_json["placement"]["target_bite_m"] == 0.0015
     unknown = CliRunner().invoke(main, ["tasks", "show", "nope"])
-    assert unknown.exit_code == 1 and "unknown task 'nope'; known tasks: wall-stitch" in unknown.output
+    assert (
+        unknown.exit_code == 1
+        and "unknown task 'nope'; known tasks: wall-stitch, interrupted-stitch" in unknown.output
+    )
