@@ -450,16 +450,16 @@ class Simulation:
         if model.precomputation is not None:
             model.cast_depths(model.contact_nodes)
 
-    def _start_prefetching(self) -> None:
-        """Start solving on-demand columns ahead of contact, if some contact could need them (or the
-        live local stress: whole columns); before any of the run's threads start (the worker is
-        forked)."""
-        live_stress = self.interaction.live_stress  # its operator reads whole columns
-        if self._prefetcher is None and (_on_demand(self._tissue) or live_stress):
+    def _start_prefetching(self, whole_columns: bool = False) -> None:
+        """Start solving on-demand columns ahead of contact, if some contact could need them (with
+        ``whole_columns``, as the live local stress in real time does: whole columns of precomputed
+        candidates too); before any of the run's threads start (the worker is forked). Simulated
+        runs wait for a solve without falling behind a clock, so they ask only for what they lack."""
+        if self._prefetcher is None and (_on_demand(self._tissue) or whole_columns):
             self._prefetcher = Prefetcher(
                 self._tissue,
                 self.interaction.collision,
-                full_columns=live_stress,
+                full_columns=whole_columns,
                 load_radius=1.5 * self.interaction.forces.kernel_radius,  # the kernel's nodes, with margin
             )
 
@@ -522,7 +522,7 @@ class Simulation:
         self.interaction.live_stress = self.settings.live_stress_in_real_time
         with process_prepared():  # before the column worker is forked: it inherits the settings
             self._cast_candidate_depths()
-            self._start_prefetching()
+            self._start_prefetching(whole_columns=self.interaction.live_stress)
             try:
                 return run_realtime(self, duration, pin_cpus)
             finally:

@@ -299,7 +299,7 @@ def test_a_live_stress_run_starts_a_worker_for_a_precomputed_model(small_box, tm
         )
         simulation.interaction.live_stress = live
         try:
-            simulation._start_prefetching()
+            simulation._start_prefetching(whole_columns=live)  # as run_realtime asks
             assert (simulation._prefetcher is not None) == expected
             if expected:
                 assert simulation._prefetcher.full_columns

@@ -1,0 +1,79 @@
+"""Per-task figures of issue 22: precompute, load to first haptic tick, simulated-time throughput.
+
+Run:  .venv/bin/python benchmarks/tasks.py [--repeats 3]
+
+For every task of the library (``sessions.tasks.TASKS``):
+- precompute: mesh, biphase model and condensed inverse over the stitch region, built from
+  nothing (no disk cache);
+- load to first tick: in a fresh cache state only the disk cache remains (what a station does
+  when a session starts): load the model from it, build the simulation, run its first haptic step;
+- simulated time: one scripted expert pass (all layers, no rendering, live local stress), simulated
+  seconds per wall second, median of ``--repeats`` (target >= 20x on the interrupted stitch).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+# This folder holds scripts named like our packages (metrics.py, recorder.py): keep it off the path.
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+
+from sessions.synthetic import pass_parameters  # noqa: E402
+from sessions.tasks import TASKS, task_preset, task_spec, tissue_for  # noqa: E402
+from sim.devices import ScriptedDevice, SuturingPass  # noqa: E402
+from sim.needle import Needle  # noqa: E402
+from sim.runtime import Simulation  # noqa: E402
+
+
+def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
+    spec = task_spec(task)
+    passing = SuturingPass(
+        Needle.curved(), spec.entry, spec.normal, spec.bite_direction, pass_parameters(1.0, seed)
+    )
+    device = ScriptedDevice(passing.pose_and_grip)
+    return Simulation(tissue, Needle.curved(), device, forces=task_preset(task).forces), passing.duration
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    for task in TASKS:
+        with tempfile.TemporaryDirectory() as folder:
+            cache = Path(folder)
+            tissue_for.cache_clear()
+            started = time.perf_counter()
+            tissue = tissue_for(task, cache)
+            precompute = time.perf_counter() - started
+            tissue_for.cache_clear()
+            started = time.perf_counter()
+            loaded = tissue_for(task, cache)
+            simulation, _ = simulation_for(task, loaded, 1)
+            simulation.haptic_step(0.0)
+            first_tick = time.perf_counter() - started
+            simulation.close()
+        ratios = []
+        for seed in range(1, args.repeats + 1):
+            simulation, duration = simulation_for(task, tissue, seed)
+            began = time.perf_counter()
+            simulation.run_simulated(duration)
+            ratios.append(duration / (time.perf_counter() - began))
+        runs = ", ".join(f"{r:.1f}" for r in ratios)
+        print(
+            f"{task}: {tissue.mesh.n_nodes} nodes, {len(tissue.soft.contact_nodes)} candidates; "
+            f"precompute {precompute:.2f} s; load to first tick {first_tick:.2f} s; "
+            f"simulated time median {np.median(ratios):.1f}x real time (runs {runs})",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
