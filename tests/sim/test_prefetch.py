@@ -275,8 +275,16 @@ def test_live_stress_prefetches_whole_columns_so_its_operator_needs_no_solve(sma
         while any(fresh.soft.needs_solve(int(n), full=True) for n in nodes) and time.monotonic() < deadline:
             time.sleep(0.01)
         assert prefetcher.error is None
-        solved = []
-        fresh.soft.column_solver = lambda ids: solved.append(ids) or fresh.soft.solve_columns(ids)
+        import threading
+
+        solved, here, worker_solve = [], threading.current_thread(), fresh.soft.column_solver
+
+        def counting(ids):  # only what building the operator solves (the prefetch thread may go on)
+            if threading.current_thread() is here:
+                solved.append(ids)
+            return worker_solve(ids)
+
+        fresh.soft.column_solver = counting
         operator = LocalStress(fresh, nodes, np.eye(9), [small_box.points[nodes].mean(axis=0)])
         assert solved == []
         forces = np.random.default_rng(3).normal(size=9)
