@@ -263,10 +263,10 @@ class LocalStress:
         force_map = np.asarray(force_map, dtype=np.float64).reshape(3 * len(ids), -1)
         self.elements = model.elements_near(centres, radius)
         # displacement per unit generalised force, at the local elements' nodes only: rows of the
-        # load nodes' K0^-1 columns (cached, or solved by the column worker), never a whole solve
+        # load nodes' cached K0^-1 columns (prefetched in real time), else one q-column solve
         local, tets = np.unique(mesh.tets[self.elements], return_inverse=True)
         dofs = (3 * local[:, None] + np.arange(3)).ravel()
-        columns = (model.columns_at(ids, dofs) @ force_map).reshape(len(local), 3, -1)
+        columns = model.load_response(ids, force_map, dofs).reshape(len(local), 3, -1)
         tets = tets.reshape(-1, 4)
         grad = np.einsum("maiq,maj->mijq", columns[tets], model._gradients[self.elements])
         strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))

@@ -397,6 +397,23 @@ class TissueModel:
         if ids.size:
             self._nodes_columns(ids, ahead=True)
 
+    def load_response(self, nodes: ArrayLike, loads: ArrayLike, rows: ArrayLike) -> NDArray[np.float64]:
+        """(len(rows), q) displacement (m) of the dofs ``rows`` per unit of each of q generalised
+        loads, ``loads`` (3k, q) mapping them to forces (N) on the nodes' dofs.
+
+        From the nodes' whole cached K0^-1 columns when every one is cached (no solve: what the
+        real-time prefetcher arranges), else one q-right-hand-side solve (cheaper than solving
+        3k whole columns that nothing else will read)."""
+        ids, dofs = np.asarray(nodes, dtype=np.int64).ravel(), np.asarray(rows, dtype=np.int64).ravel()
+        loads = np.asarray(loads, dtype=np.float64).reshape(3 * len(ids), -1)
+        if all(not self.needs_solve(int(n), full=True) for n in ids):
+            return self.columns_at(ids, dofs) @ loads
+        _node_ids(ids, self.mesh.n_nodes, "nodes")
+        rhs = np.zeros((3 * self.mesh.n_nodes, loads.shape[1]), order="F")
+        np.add.at(rhs, node_dofs(ids), loads)
+        _ids(dofs, 3 * self.mesh.n_nodes, "rows")
+        return self._factor(rhs)[dofs]
+
     def columns_at(self, nodes: ArrayLike, rows: ArrayLike) -> NDArray[np.float64]:
         """(len(rows), 3k) rows (dof ids) of K0^-1's columns at the nodes' dofs, in the order given:
         the displacement of those dofs per unit force on each node (m/N). Cached columns are
