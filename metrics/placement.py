@@ -62,6 +62,10 @@ class PlacementTargets:
     target_exit_bite: float
     """The exit's target distance from the edge (m): the entry's unless the task states its own
     (through a curved wall a straight bite ends nearer the edge on the inside)."""
+    wound_direction: NDArray[np.float64] | None = None
+    """Unit vector along the wound (a row of stitches progresses along it), if the task states it."""
+    target_spacing: float | None = None
+    """The target distance between successive stitches along the wound (m), if the task asks a row."""
 
     @classmethod
     def from_attributes(cls, attributes: dict[str, Any]) -> PlacementTargets | None:
@@ -88,6 +92,10 @@ class PlacementTargets:
                 raise MetricsError(f"placement {name!r} must be a unit vector")
         bite = _distance(given, "target_bite_m")
         exit_bite = _distance(given, "target_exit_bite_m") if "target_exit_bite_m" in given else bite
+        direction = vector("wound_direction", (3,)) if "wound_direction" in given else None
+        if direction is not None and not math.isclose(float(np.linalg.norm(direction)), 1.0, rel_tol=1e-6):
+            raise MetricsError("placement 'wound_direction' must be a unit vector")
+        spacing = _distance(given, "target_spacing_m") if "target_spacing_m" in given else None
         return cls(
             vector("wound_point", (3,)),
             normals[0],
@@ -96,6 +104,8 @@ class PlacementTargets:
             vector("exit_targets", (3,)).reshape(-1, 3),
             normals[1],
             exit_bite,
+            direction,
+            spacing,
         )
 
     def bite_distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -153,6 +163,10 @@ class StitchPlacement:
     full_thickness: NDArray[np.float64]  # 1 through the far surface, 0 another face, NaN no exit
     target_bite: float
     target_exit_bite: float
+    spacing: NDArray[np.float64]
+    """Distances (m) along the wound between successive stitches' entry points (empty when the task
+    states no wound direction or there is one stitch)."""
+    target_spacing: float | None
 
     @classmethod
     def of(cls, stitches: pd.DataFrame, targets: PlacementTargets) -> StitchPlacement:
@@ -169,6 +183,8 @@ class StitchPlacement:
             through,
             targets.target_bite,
             targets.target_exit_bite,
+            _spacing(entry, targets.wound_direction),
+            targets.target_spacing,
         )
 
     def table(self) -> pd.DataFrame:
@@ -188,6 +204,13 @@ def stitch_table(streams) -> pd.DataFrame | None:
     if targets is None or streams.stitches is None or streams.stitches.empty:
         return None
     return StitchPlacement.of(streams.stitches, targets).table()
+
+
+def _spacing(entries: NDArray[np.float64], direction: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """|Successive differences| of the entry points' positions along the wound, in stitch order."""
+    if direction is None or len(entries) < 2:
+        return np.zeros(0)
+    return np.abs(np.diff(entries @ direction))
 
 
 def _nearest(points: NDArray[np.float64], marks: NDArray[np.float64]) -> NDArray[np.float64]:

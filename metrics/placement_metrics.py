@@ -112,3 +112,37 @@ def full_thickness_fraction(context: SessionContext) -> float:
         return NAN
     through = np.nan_to_num(placed.full_thickness, nan=0.0)  # no exit: not a full-thickness bite
     return float(through.mean())
+
+
+@metric(
+    "spacing_error",
+    unit="m",
+    definition="Mean over successive stitches of |their distance along the wound - the task's target "
+    "spacing| (a row of stitches; NaN for a single stitch or a task without a row).",
+    streams=("stitches",),
+    better=LOWER,
+    reference=TARGETS_REF,
+    group="placement",
+)
+def spacing_error(context: SessionContext) -> float:
+    placed = context.placement
+    if placed is None or placed.target_spacing is None or not placed.spacing.size:
+        return NAN
+    return float(np.mean(np.abs(placed.spacing - placed.target_spacing)))
+
+
+@metric(
+    "spacing_variation",
+    unit="1",
+    definition="Coefficient of variation (standard deviation / mean) of the distances along the wound "
+    "between successive stitches: 0 for an even row (at least three stitches).",
+    streams=("stitches",),
+    better=LOWER,
+    reference=OSATS_REF,
+    group="placement",
+)
+def spacing_variation(context: SessionContext) -> float:
+    placed = context.placement
+    if placed is None or placed.spacing.size < 2 or not placed.spacing.mean() > 0:
+        return NAN
+    return float(placed.spacing.std() / placed.spacing.mean())

@@ -459,6 +459,9 @@ def tasks_show(name: str, as_json: bool) -> None:
     if "target_exit_bite_m" in placement:
         exit_bite = 1e3 * placement["target_exit_bite_m"]
         click.echo(f"  on exit    {exit_bite:.2f} mm (straight through the curved wall)")
+    if "target_spacing_m" in placement:
+        spacing = 1e3 * placement["target_spacing_m"]
+        click.echo(f"spacing      {spacing:.1f} mm between stitches along the wound")
     for kind in ("entry", "exit"):
         for mark in placement[f"{kind}_targets"]:
             click.echo(f"{kind} mark   ".ljust(13) + "(" + ", ".join(f"{1e3 * v:.1f}" for v in mark) + ") mm")

@@ -33,9 +33,10 @@ from sessions.models import (
     Study,
 )
 from sessions.status import SCORABLE, SessionStatus
+from sessions.synthetic import bite_parameters
 from sessions.tasks import session_tissue, task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
-from sim.devices.scripted import SuturingPassParameters
+from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
 from sim.needle import Needle
 from sim.runtime import Simulation
 
@@ -73,8 +74,13 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
     """The device named by ``--device`` and the session's duration (s, None = until stopped)."""
     task = task_spec(plan.task)
     if spec == "scripted":
-        suturing = SuturingPass(Needle.curved(), task.entry, task.normal, task.bite_direction, parameters)
-        return ScriptedDevice(suturing.pose_and_grip), suturing.duration
+        bites = task.bites()
+        each = bite_parameters(parameters or SuturingPassParameters(), len(bites))
+        passes = [SuturingPass(Needle.curved(), *bite, p) for bite, p in zip(bites, each, strict=True)]
+        if len(passes) == 1:
+            return ScriptedDevice(passes[0].pose_and_grip), passes[0].duration
+        trajectory, duration = sequence_of_passes(passes)
+        return ScriptedDevice(trajectory), duration
     if spec.startswith("replay:"):
         from sim.devices import ReplayDevice
 

@@ -9,6 +9,7 @@ hesitations, tremor and how much the wrist turns the needle rather than levering
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -75,6 +76,25 @@ def pass_parameters(skill: float, seed: int) -> SuturingPassParameters:
         lateral_offset=across,
         seed=seed,
     )
+
+
+def bite_parameters(parameters: SuturingPassParameters, count: int) -> list[SuturingPassParameters]:
+    """The parameters of each of ``count`` bites of one session: the first as given; each later one
+    the same hand, its tremor phases re-drawn and its miss of the mark varying around the first
+    bite's (so a steady hand places a row evenly and an unsteady one does not)."""
+    rng = np.random.default_rng(parameters.seed + 7919)
+    result = [parameters]
+    for k in range(1, count):
+        along, across = rng.normal(1.0, 1.0, size=2)
+        result.append(
+            dataclasses.replace(
+                parameters,
+                seed=parameters.seed + k,
+                entry_offset=float(np.clip(parameters.entry_offset * along, -0.5e-3, 0.5e-3)),
+                lateral_offset=float(np.clip(parameters.lateral_offset * across, -1.2e-3, 1.2e-3)),
+            )
+        )
+    return result
 
 
 # (metric, expert typical value, trainee first-day value, relative spread) for metrics-only studies

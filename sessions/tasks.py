@@ -23,6 +23,12 @@ class TaskSpec:
     placement: dict | None = None
     """The wound edge and target marks placement metrics score against (SI units; see
     :class:`metrics.placement.PlacementTargets`); recorded in each session's header."""
+    more_bites: tuple = ()
+    """Further bites after the first, in the order they are made: (entry, normal, bite_direction)."""
+
+    def bites(self) -> list[tuple]:
+        """Every bite of the task, in order: (entry, normal, bite_direction) each (m, unit vectors)."""
+        return [(self.entry, self.normal, self.bite_direction), *self.more_bites]
 
 
 TASKS = {
@@ -112,6 +118,37 @@ def _interrupted_stitch() -> TaskSpec:
 
 
 TASKS["interrupted-stitch"] = _interrupted_stitch()
+
+
+def _closure_row(spacing: float = 0.0015, count: int = 3) -> TaskSpec:
+    """Interrupted stitches in a row along the same arteriotomy edge, ``spacing`` apart at mid-length:
+    each bite as the interrupted stitch's, so spacing and its regularity count too."""
+    single = _interrupted_stitch()
+    middle = 0.5 * _VESSEL["length"]
+    heights = [middle + spacing * (k - (count - 1) / 2) for k in range(count)]
+    entries = [_on_cylinder(_OUTER, _ENTRY_ANGLE, z) for z in heights]
+    exits = [_on_cylinder(_VESSEL["inner"], _ENTRY_ANGLE, z) for z in heights]
+    bites = tuple((tuple(e), single.normal, single.bite_direction) for e in entries)
+    return TaskSpec(
+        "arteriotomy-closure",
+        "vessel_patch",
+        f"A row of {count} interrupted stitches {1e3 * spacing:g} mm apart along an arteriotomy's edge on a "
+        "porcine artery (the interrupted stitch's vessel): each bite in 1.5 mm from the edge and out "
+        "through the intima; spacing and its regularity are scored.",
+        *bites[0],
+        dict(single.parameters),
+        placement={
+            **single.placement,
+            "entry_targets": entries,
+            "exit_targets": exits,
+            "wound_direction": [0.0, 0.0, 1.0],
+            "target_spacing_m": spacing,
+        },
+        more_bites=bites[1:],
+    )
+
+
+TASKS["arteriotomy-closure"] = _closure_row()
 
 
 def task_spec(name: str) -> TaskSpec:

@@ -217,3 +217,62 @@ def test_the_interrupted_stitch_on_an_artery_scores_where_each_bite_went(tmp_pat
         other["entry_to_target"] > expert["entry_to_target"]
         and other["exit_to_target"] > expert["exit_to_target"]
     )
+
+
+ROW = {**TARGETS, "wound_direction": [0.0, 1.0, 0.0], "target_spacing_m": 0.002}  # the edge runs along y
+
+
+def test_a_row_of_stitches_scores_its_spacing_by_hand():
+    """Entries at y = 2, 5, 7 mm along the edge (2 mm asked): spacings 3 and 2 mm, errors 1 and 0 mm,
+    variation std/mean = 0.5 / 2.5."""
+    events = []
+    for k, y in enumerate((0.002, 0.005, 0.007)):
+        events += [dict(e, time=e["time"] + 3.0 * k) for e in bite((0.0105, y, 0.0015), (0.0105, y, 0.0))]
+    values = metrics_of(streams_of(events, targets=ROW))
+    assert values["spacing_error"] == pytest.approx(0.0005, abs=1e-12)
+    assert values["spacing_variation"] == pytest.approx(0.2, abs=1e-12)
+    single = metrics_of(streams_of(bite((0.0105, 0.005, 0.0015), (0.0105, 0.005, 0.0)), targets=ROW))
+    assert math.isnan(single["spacing_error"]) and math.isnan(single["spacing_variation"])
+    no_row = metrics_of(streams_of(events))  # the task asks no row: spacing is not scored
+    assert math.isnan(no_row["spacing_error"])
+
+
+@pytest.mark.slow
+def test_the_arteriotomy_closure_row_is_segmented_and_its_spacing_scored(tmp_path):
+    """Three bites along the arteriotomy's edge through the real runner's scripted device: three
+    stitches; an expert's row is even and on its marks, a first-day trainee's is not."""
+    from metrics import from_recorded
+    from metrics.tissue import with_tissue_fields
+    from recorder import SessionWriter, open_session
+    from recorder.runtime import RuntimeRecorder
+    from sessions.runner import SessionPlan, open_device
+    from sessions.synthetic import pass_parameters
+    from sessions.tasks import task_preset, task_spec, tissue_for
+    from sim.needle import Needle
+    from sim.runtime import Simulation
+
+    task = "arteriotomy-closure"
+    spec, wall, forces = task_spec(task), tissue_for(task, None), task_preset(task).forces
+    values = {}
+    for skill in (1.0, 0.3):
+        device, duration = open_device(
+            "scripted", SessionPlan("s", "p", task, 1), None, pass_parameters(skill, 2)
+        )
+        header = {
+            "session_id": "s",
+            "task": task,
+            "placement": spec.placement,
+            "needle_forces": forces.as_dict(),
+        }
+        writer = SessionWriter(tmp_path / str(skill), header, flush_interval=0.1)
+        RuntimeRecorder(writer).attach(
+            Simulation(wall, Needle.curved(), device, forces=forces)
+        ).run_simulated(duration)
+        writer.close()
+        streams = with_tissue_fields(from_recorded(open_session(tmp_path / str(skill))), wall)
+        assert len(streams.stitches) == 3
+        values[skill] = metrics_of(streams)
+    expert, trainee = values[1.0], values[0.3]
+    assert expert["full_thickness_fraction"] == 1.0 and expert["spacing_error"] < 0.0002
+    assert expert["spacing_variation"] < 0.1 and expert["entry_to_target"] < 0.0003, expert
+    assert trainee["spacing_error"] > expert["spacing_error"] and trainee["entry_to_target"] > 0.0005, trainee
