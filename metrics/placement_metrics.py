@@ -82,8 +82,9 @@ def exit_to_target(context: SessionContext) -> float:
 @metric(
     "bite_asymmetry",
     unit="m",
-    definition="Mean over stitches of |entry distance - exit distance| from the wound edge (a symmetric "
-    "bite takes as much tissue on the way in as on the way out).",
+    definition="Mean over stitches of |(entry distance from the wound edge - its target) - (exit distance "
+    "- its target)|: a bite that takes as much tissue on the way out as the template asks for the way "
+    "in scores 0 (on a flat wall the two targets are equal; through a curved wall they differ).",
     streams=("stitches",),
     better=LOWER,
     reference=OSATS_REF,
@@ -91,7 +92,10 @@ def exit_to_target(context: SessionContext) -> float:
 )
 def bite_asymmetry(context: SessionContext) -> float:
     placed = context.placement
-    return NAN if placed is None else mean_or_nan(np.abs(placed.entry_bite - placed.exit_bite))
+    if placed is None:
+        return NAN
+    entry_off, exit_off = placed.entry_bite - placed.target_bite, placed.exit_bite - placed.target_exit_bite
+    return mean_or_nan(np.abs(entry_off - exit_off))
 
 
 @metric(
