@@ -37,6 +37,7 @@ FAR_SURFACE_COSINE = 0.7
 STITCH_COLUMNS = (
     "stitch",
     "pierce_time",
+    "exit_time",
     "entry_x",
     "entry_y",
     "entry_z",
@@ -137,11 +138,12 @@ def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
             continue  # a recording without the point (older schema or a foreign source)
         point = weights @ mesh.points[mesh.surface_triangles[triangle]]
         if event.kind == "pierce":
-            current = {"stitch": len(rows), "pierce_time": float(event.time)}
+            current = {"stitch": len(rows), "pierce_time": float(event.time), "exit_time": math.nan}
             current.update(zip(("entry_x", "entry_y", "entry_z"), point.tolist(), strict=True))
-            current.update({c: math.nan for c in STITCH_COLUMNS[5:]})
+            current.update({c: math.nan for c in STITCH_COLUMNS[6:]})
             rows.append(current)
         elif current is not None and math.isnan(current["exit_x"]):
+            current["exit_time"] = float(event.time)
             current.update(zip(("exit_x", "exit_y", "exit_z"), point.tolist(), strict=True))
             normal = mesh.surface_normals[triangle]
             current.update(zip(("exit_nx", "exit_ny", "exit_nz"), normal.tolist(), strict=True))
@@ -219,6 +221,18 @@ def _nearest(points: NDArray[np.float64], marks: NDArray[np.float64]) -> NDArray
         return np.full(len(points), np.nan)
     distances = np.linalg.norm(points[:, None, :] - marks[None, :, :], axis=2)
     return distances.min(axis=1)
+
+
+MARK_COLOURS = ((0.25e-3, (40, 170, 60)), (0.75e-3, (240, 150, 20)), (math.inf, (210, 30, 30)))
+"""A bite mark's colour by its distance from its target mark: green within 0.25 mm, orange within
+0.75 mm, red farther (replay frames)."""
+
+
+def mark_colour(distance: float) -> tuple[int, int, int]:
+    """RGB of a bite that landed ``distance`` (m) from its mark (grey when unknown)."""
+    if not math.isfinite(distance):
+        return (128, 128, 128)
+    return next(colour for limit, colour in MARK_COLOURS if distance <= limit)
 
 
 def mean_or_nan(values: NDArray[np.float64]) -> float:

@@ -141,10 +141,44 @@ class TissueRenderer:
             ),
             color="dodgerblue",
         )
+        # the task's target marks and where bites went (show_placement), bites revealed as they happen
+        self._bites = np.zeros((0, 3))
+        self._bite_colours = np.zeros((0, 3), dtype=np.uint8)
+        self._bite_actor = None
+        self._bites_shown = 0
         self._arrow_matrix = vtk_matrix()
         self._arrow_actor.SetUserMatrix(self._arrow_matrix)
         self._pixels = None
         self._camera_set = False
+
+    def show_placement(self, targets: NDArray[np.float64], bites: NDArray[np.float64], colours) -> None:
+        """The task's target marks (m, drawn as small white dots) and where bites went (m, one RGB
+        colour each, uint8), the bites revealed one by one with :meth:`reveal_bites`."""
+        marks = self._pv.PolyData(np.asarray(targets, dtype=np.float64).reshape(-1, 3))
+        self.plotter.add_mesh(marks, color="white", point_size=8, render_points_as_spheres=True)
+        self._bites = np.asarray(bites, dtype=np.float64).reshape(-1, 3)
+        self._bite_colours = np.asarray(colours, dtype=np.uint8).reshape(-1, 3)
+
+    def reveal_bites(self, count: int) -> None:
+        """Show the first ``count`` bite marks (a replay shows each once it has been made)."""
+        count = min(count, len(self._bites))
+        if count == self._bites_shown:
+            return
+        if self._bite_actor is not None:
+            self.plotter.remove_actor(self._bite_actor)
+            self._bite_actor = None
+        if count > 0:
+            points = self._pv.PolyData(self._bites[:count])
+            points.point_data["colour"] = self._bite_colours[:count]
+            self._bite_actor = self.plotter.add_mesh(
+                points,
+                scalars="colour",
+                rgb=True,
+                point_size=11,
+                render_points_as_spheres=True,
+                show_scalar_bar=False,
+            )
+        self._bites_shown = count
 
     def set_camera(self, position, focal_point, view_up) -> None:
         """Fix the camera (m): replays use one camera for every frame, and for both sides of a comparison."""

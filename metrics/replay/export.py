@@ -110,7 +110,59 @@ class SceneReplay:
         )
 
 
-def _hud_lines(scene: SceneReplay, k: int, bands: dict[str, dict]) -> tuple[str, list[HudLine]]:
+@dataclass(frozen=True)
+class BiteMarks:
+    """Where a session's bites went against its task's marks, for the replay: the marks (m), each
+    entry and exit point (m) with its colour and the time it was made (s), and each stitch's
+    entry distance from its mark (m) with its pierce time."""
+
+    targets: np.ndarray
+    points: np.ndarray
+    colours: np.ndarray
+    times: np.ndarray
+    pierce_times: np.ndarray
+    entry_off: np.ndarray
+
+    @classmethod
+    def of(cls, streams, mesh) -> BiteMarks | None:
+        from metrics.placement import PlacementTargets, StitchPlacement, mark_colour, stitch_points
+
+        targets = PlacementTargets.from_attributes(dict(streams.attributes))
+        stitches = stitch_points(streams.events, mesh)
+        if targets is None or stitches.empty:
+            return None
+        placed = StitchPlacement.of(stitches, targets)
+        exited = np.isfinite(stitches["exit_time"].to_numpy(dtype=float))
+        entries = stitches[["entry_x", "entry_y", "entry_z"]].to_numpy(dtype=float)
+        exits = stitches[["exit_x", "exit_y", "exit_z"]].to_numpy(dtype=float)[exited]
+        pierced = stitches["pierce_time"].to_numpy(dtype=float)
+        times = np.concatenate([pierced, stitches["exit_time"].to_numpy(dtype=float)[exited]])
+        distances = np.concatenate([placed.entry_to_target, placed.exit_to_target[exited]])
+        order = np.argsort(times, kind="stable")
+        return cls(
+            np.vstack([targets.entry_targets, targets.exit_targets]),
+            np.vstack([entries, exits])[order],
+            np.array([mark_colour(d) for d in distances[order]], dtype=np.uint8).reshape(-1, 3),
+            times[order],
+            pierced,
+            placed.entry_to_target,
+        )
+
+    def made_by(self, when: float) -> int:
+        """How many bite marks are made by time ``when``."""
+        return int(np.searchsorted(self.times, when, side="right"))
+
+    def hud_line(self, when: float) -> HudLine | None:
+        """The latest bite's miss of its mark, once it has been made."""
+        made = int(np.searchsorted(self.pierce_times, when, side="right"))
+        if made == 0:
+            return None
+        return HudLine("bite", f"{1e3 * self.entry_off[made - 1]:.1f} mm off its mark")
+
+
+def _hud_lines(
+    scene: SceneReplay, k: int, bands: dict[str, dict], marks: BiteMarks | None = None
+) -> tuple[str, list[HudLine]]:
     when = float(scene.track.times[k])
     phase = scene.phase_at(when)
     force_band = bands.get("force", {}).get(phase)
@@ -126,6 +178,9 @@ def _hud_lines(scene: SceneReplay, k: int, bands: dict[str, dict]) -> tuple[str,
             else "-",
         ),
     ]
+    bite = marks.hud_line(when) if marks is not None else None
+    if bite is not None:
+        lines.append(bite)
     return f"t = {when:6.2f} s", lines
 
 
@@ -182,6 +237,9 @@ def export_replay(
         renderers.append(
             TissueRenderer(tissue.mesh, size=view, offscreen=True, anti_aliasing=settings.anti_aliasing)
         )
+    marks = BiteMarks.of(streams, tissue.mesh)
+    if marks is not None:  # the trainee's view shows the task's marks and where the bites went
+        renderers[0].show_placement(marks.targets, marks.points, marks.colours)
     ghost_path = expert_scene.track.tip if expert_scene is not None and not split else None
     total = len(scene.track)
     scale = height / 720
@@ -206,6 +264,8 @@ def export_replay(
         with VideoWriter(out, settings.size, settings.fps) as writer, threadpool_limits(1):
             for k, (frame, expert_frame) in enumerate(frames_ahead(scene_frames, total)):
                 began = time.perf_counter()
+                if marks is not None:
+                    renderers[0].reveal_bites(marks.made_by(float(scene.track.times[k])))
                 pixels = renderers[0].render(frame)
                 if k == 0 and split:
                     renderers[1].set_camera(*renderers[0].plotter.camera_position)
@@ -218,7 +278,7 @@ def export_replay(
                         pixels = np.pad(
                             pixels, ((0, 0), (0, width - pixels.shape[1]), (0, 0)), constant_values=255
                         )
-                title, lines = _hud_lines(scene, k, bands)
+                title, lines = _hud_lines(scene, k, bands, marks)
                 draw_hud(pixels, title, lines, scale)
                 if k == insertion:
                     written += _write_insertion_stills(Path(stills), scene, k, frame, pixels)

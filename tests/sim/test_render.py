@@ -106,3 +106,29 @@ def test_the_display_scene_shows_the_solved_field_and_keeps_its_handle_per_conta
     scene(GraphicsSnapshot(0.3, needle, "contact", None, (other, push)))
     assert scene._field is not handle and scene._field.nodes.tolist() == other.tolist()
     assert scene.frames == 4 and np.abs(scene.last_image.astype(int) - at_rest).max() > 0
+
+
+def test_bite_marks_appear_as_they_are_made_in_their_colour():
+    """Issue 22: the task's marks drawn white, each bite in its error colour once revealed."""
+    mesh, frame = pressed_cube_frame()
+    renderer = TissueRenderer(mesh, size=(200, 150), offscreen=True)
+    top = mesh.points[mesh.points[:, 2] > mesh.points[:, 2].max() - 1e-9]
+    mark, bite = top[len(top) // 2], top[len(top) // 2 + 2]
+    red = (210, 30, 30)
+    renderer.show_placement(mark[None], bite[None], [red])
+
+    def reds(pixels):
+        return int(np.sum((pixels[..., 0] > 180) & (pixels[..., 1] < 70) & (pixels[..., 2] < 70)))
+
+    def whites(pixels):
+        return int(np.sum(np.all(pixels > 235, axis=2)))
+
+    before = renderer.render(frame).copy()
+    renderer.reveal_bites(1)
+    after = renderer.render(frame).copy()
+    renderer.reveal_bites(0)
+    hidden = renderer.render(frame)
+    renderer.close()
+    # (the stress colour bar has a few such pixels of its own)
+    assert reds(after) > reds(before) + 10 and reds(hidden) == reds(before)
+    assert whites(before) > 0  # the mark (and the white background) are there from the start
