@@ -7,8 +7,9 @@ For every task of the library (``sessions.tasks.TASKS``):
   nothing (no disk cache);
 - load to first tick: in a fresh cache state only the disk cache remains (what a station does
   when a session starts): load the model from it, build the simulation, run its first haptic step;
-- simulated time: one scripted expert pass (all layers, no rendering, live local stress), simulated
-  seconds per wall second, median of ``--repeats`` (target >= 20x on the interrupted stitch).
+- simulated time: the whole task (every bite) by a scripted expert (all layers, no rendering, live
+  local stress), simulated seconds per wall second, median of ``--repeats`` (target >= 20x on the
+  interrupted stitch).
 """
 
 from __future__ import annotations
@@ -24,20 +25,18 @@ import numpy as np
 # This folder holds scripts named like our packages (metrics.py, recorder.py): keep it off the path.
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
+from sessions.runner import SessionPlan, open_device  # noqa: E402
 from sessions.synthetic import pass_parameters  # noqa: E402
-from sessions.tasks import TASKS, task_preset, task_spec, tissue_for  # noqa: E402
-from sim.devices import ScriptedDevice, SuturingPass  # noqa: E402
+from sessions.tasks import TASKS, task_preset, tissue_for  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
 
 
 def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
-    spec = task_spec(task)
-    passing = SuturingPass(
-        Needle.curved(), spec.entry, spec.normal, spec.bite_direction, pass_parameters(1.0, seed)
-    )
-    device = ScriptedDevice(passing.pose_and_grip)
-    return Simulation(tissue, Needle.curved(), device, forces=task_preset(task).forces), passing.duration
+    """The whole task (every bite) as a scripted expert makes it, through the runner's device."""
+    plan = SessionPlan("benchmark", "E", task, 1)
+    device, duration = open_device("scripted", plan, None, pass_parameters(1.0, seed))
+    return Simulation(tissue, Needle.curved(), device, forces=task_preset(task).forces), duration
 
 
 def main() -> None:
