@@ -11,16 +11,13 @@ import html
 import math
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from jinja2 import Environment
 from markupsafe import Markup
 from sklearn.metrics import roc_curve
 
+from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
@@ -32,7 +29,6 @@ FIGURE_FORMATS = ("png", "svg")
 def _save(figure, folder: Path, name: str) -> str:
     for kind in FIGURE_FORMATS:
         figure.savefig(folder / f"{name}.{kind}", dpi=100)
-    plt.close(figure)
     return f"figures/{name}.png"
 
 
@@ -49,7 +45,8 @@ def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
     metrics = analysis.validity.table["metric"].tolist()
     columns = 4
     rows = max(1, math.ceil(len(metrics) / columns))
-    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.6 * rows), squeeze=False)
+    figure = new_figure(figsize=(3.2 * columns, 2.6 * rows))
+    axes = figure.subplots(rows, columns, squeeze=False)
     per_participant = participant_medians(analysis, metrics)
     significant = set(analysis.validity.discriminating())
     for axis, metric in zip(axes.ravel(), metrics, strict=False):
@@ -80,7 +77,8 @@ def _roc(analysis: StudyAnalysis, folder: Path) -> str:
     ranked = table.assign(effect=(table["auc"] - 0.5).abs()).sort_values("effect", ascending=False).head(6)
     per_participant = participant_medians(analysis, ranked["metric"].tolist())
     skilled = (per_participant[settings.group_col] == settings.skilled_group).to_numpy()
-    figure, axis = plt.subplots(figsize=(5, 5))
+    figure = new_figure(figsize=(5, 5))
+    axis = figure.subplots()
     for metric in ranked["metric"]:
         values = oriented(per_participant[metric], metric)
         keep = ~np.isnan(values)
@@ -120,7 +118,8 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
         return []
     columns = min(2, len(benchmarks))
     rows = math.ceil(len(benchmarks) / columns)
-    figure, axes = plt.subplots(rows, columns, figsize=(6 * columns, 3.4 * rows), squeeze=False)
+    figure = new_figure(figsize=(6 * columns, 3.4 * rows))
+    axes = figure.subplots(rows, columns, squeeze=False)
     curves = analysis.learning_curves
     fitted = {(r.participant_id, r.metric): r for r in curves.itertuples()} if not curves.empty else {}
     participants = trainees[settings.cluster_col].unique()[:MAX_TRAINEES_DRAWN]

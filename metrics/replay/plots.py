@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from metrics.figures import new_figure
 from metrics.replay.reference import SIGNALS, ExpertReference, signal_of
 from metrics.streams import SessionStreams
 
@@ -22,15 +23,11 @@ EVENT_STYLES = {
 
 def signal_figure(session: SessionStreams, reference: ExpertReference | None = None, signals=tuple(SIGNALS)):
     """A matplotlib figure, one panel per signal the session has, sharing the time axis."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     present = [name for name in signals if signal_of(session, name) is not None]
-    figure, axes = plt.subplots(
-        len(present), 1, figsize=(9, 2.2 * max(len(present), 1)), sharex=True, squeeze=False
-    )
+    figure = new_figure(figsize=(9, 2.2 * max(len(present), 1)))
+    axes = figure.subplots(len(present), 1, sharex=True, squeeze=False)
     events = session.events
     for axis, name in zip(axes[:, 0], present, strict=True):
         label, factor = SIGNALS[name]
@@ -55,7 +52,7 @@ def signal_figure(session: SessionStreams, reference: ExpertReference | None = N
     if present:
         axes[0, 0].legend(loc="upper right", fontsize=8)
         handles = [
-            plt.Line2D([], [], color=colour, linestyle="--", label=text)
+            Line2D([], [], color=colour, linestyle="--", label=text)
             for kind, (text, colour) in EVENT_STYLES.items()
             if (events["kind"] == kind).any()
         ]
@@ -78,8 +75,6 @@ def write_signal_plots(
     session: SessionStreams, out_dir: str | Path, reference: ExpertReference | None = None, dpi: int = 100
 ) -> list[Path]:
     """``signals.png`` (through OpenImageIO) and ``signals.svg`` (vector, for papers) in ``out_dir``."""
-    import matplotlib.pyplot as plt
-
     from sim.render import write_image
 
     out = Path(out_dir)
@@ -88,5 +83,4 @@ def write_signal_plots(
     png = write_image(out / "signals.png", figure_pixels(figure, dpi))
     svg = out / "signals.svg"
     figure.savefig(svg)
-    plt.close(figure)
     return [png, svg]
