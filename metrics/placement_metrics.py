@@ -7,11 +7,12 @@ task declares no targets). Distances are in m, errors never negative.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from metrics.context import SessionContext
-from metrics.placement import mean_or_nan
+from metrics.placement import StitchPlacement, mean_or_nan
 from metrics.registry import HIGHER, LOWER, metric
 
 NAN = math.nan
@@ -20,6 +21,12 @@ TARGETS_REF = (
     "AMBF suturing challenge scoring (Munawar et al. 2022)"
 )
 OSATS_REF = "Martin et al. 1997, Br J Surg 84:273 (OSATS: respect for tissue)"
+
+
+def _over_stitches(context: SessionContext, per_stitch: Callable[[StitchPlacement], np.ndarray]) -> float:
+    """The mean over the session's stitches of ``per_stitch`` (NaN without placement)."""
+    placed = context.placement
+    return NAN if placed is None else mean_or_nan(per_stitch(placed))
 
 
 @metric(
@@ -32,8 +39,7 @@ OSATS_REF = "Martin et al. 1997, Br J Surg 84:273 (OSATS: respect for tissue)"
     group="placement",
 )
 def bite_error_entry(context: SessionContext) -> float:
-    placed = context.placement
-    return NAN if placed is None else mean_or_nan(np.abs(placed.entry_bite - placed.target_bite))
+    return _over_stitches(context, lambda placed: np.abs(placed.entry_bite - placed.target_bite))
 
 
 @metric(
@@ -47,8 +53,7 @@ def bite_error_entry(context: SessionContext) -> float:
     group="placement",
 )
 def bite_error_exit(context: SessionContext) -> float:
-    placed = context.placement
-    return NAN if placed is None else mean_or_nan(np.abs(placed.exit_bite - placed.target_exit_bite))
+    return _over_stitches(context, lambda placed: np.abs(placed.exit_bite - placed.target_exit_bite))
 
 
 @metric(
@@ -61,8 +66,7 @@ def bite_error_exit(context: SessionContext) -> float:
     group="placement",
 )
 def entry_to_target(context: SessionContext) -> float:
-    placed = context.placement
-    return NAN if placed is None else mean_or_nan(placed.entry_to_target)
+    return _over_stitches(context, lambda placed: placed.entry_to_target)
 
 
 @metric(
@@ -75,8 +79,7 @@ def entry_to_target(context: SessionContext) -> float:
     group="placement",
 )
 def exit_to_target(context: SessionContext) -> float:
-    placed = context.placement
-    return NAN if placed is None else mean_or_nan(placed.exit_to_target)
+    return _over_stitches(context, lambda placed: placed.exit_to_target)
 
 
 @metric(
@@ -91,11 +94,10 @@ def exit_to_target(context: SessionContext) -> float:
     group="placement",
 )
 def bite_asymmetry(context: SessionContext) -> float:
-    placed = context.placement
-    if placed is None:
-        return NAN
-    entry_off, exit_off = placed.entry_bite - placed.target_bite, placed.exit_bite - placed.target_exit_bite
-    return mean_or_nan(np.abs(entry_off - exit_off))
+    return _over_stitches(
+        context,
+        lambda p: np.abs((p.entry_bite - p.target_bite) - (p.exit_bite - p.target_exit_bite)),
+    )
 
 
 @metric(

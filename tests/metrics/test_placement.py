@@ -173,50 +173,51 @@ def test_recorded_stitches_expert_on_target_trainee_off(tmp_path):
     assert trainee["bite_asymmetry"] > expert["bite_asymmetry"], (expert, trainee)
 
 
+def recorded_task(task: str, skill: float, seed: int, folder):
+    """A scripted session of ``task`` through the runner's device (every bite), recorded as a session
+    is and read back with its tissue streams and stitch points."""
+    from metrics import from_recorded
+    from metrics.tissue import with_tissue_fields
+    from recorder import SessionWriter, open_session
+    from recorder.runtime import RuntimeRecorder
+    from sessions.runner import SessionPlan, open_device
+    from sessions.synthetic import pass_parameters
+    from sessions.tasks import task_preset, task_spec, tissue_for
+    from sim.needle import Needle
+    from sim.runtime import Simulation
+
+    spec, wall, forces = task_spec(task), tissue_for(task, None), task_preset(task).forces
+    device, duration = open_device(
+        "scripted", SessionPlan("s", "p", task, 1), None, pass_parameters(skill, seed)
+    )
+    header = {"session_id": "s", "task": task, "placement": spec.placement, "needle_forces": forces.as_dict()}
+    writer = SessionWriter(folder, header, flush_interval=0.1)
+    RuntimeRecorder(writer).attach(Simulation(wall, Needle.curved(), device, forces=forces)).run_simulated(
+        duration
+    )
+    writer.close()
+    return with_tissue_fields(from_recorded(open_session(folder)), wall)
+
+
 @pytest.mark.slow
 def test_the_interrupted_stitch_on_an_artery_scores_where_each_bite_went(tmp_path):
     """Issue 22's first vessel task: a bite through an arteriotomy's edge on a curved artery wall.
     The expert's lands within 0.35 mm of its marks and through the intima, at a credible puncture
     force; a clumsier hand's lands further off."""
-    from metrics import from_recorded
-    from metrics.tissue import with_tissue_fields
-    from recorder import SessionWriter, open_session
-    from recorder.runtime import RuntimeRecorder
-    from sessions.synthetic import pass_parameters
-    from sessions.tasks import task_preset, task_spec, tissue_for
-    from sim.devices import ScriptedDevice, SuturingPass
-    from sim.needle import Needle
-    from sim.runtime import Simulation
+    from sessions.tasks import tissue_for
 
-    task = "interrupted-stitch"
-    spec, wall, forces = task_spec(task), tissue_for(task, None), task_preset(task).forces
+    wall = tissue_for("interrupted-stitch", None)
     assert "wound_a" in wall.mesh.node_sets and wall.mesh.n_nodes > 5000  # a real vessel wall with its wound
-    values = {}
-    for skill in (1.0, 0.6):
-        passing = SuturingPass(
-            Needle.curved(), spec.entry, spec.normal, spec.bite_direction, pass_parameters(skill, 1)
-        )
-        header = {
-            "session_id": "s",
-            "task": task,
-            "placement": spec.placement,
-            "needle_forces": forces.as_dict(),
-        }
-        writer = SessionWriter(tmp_path / str(skill), header, flush_interval=0.1)
-        simulation = Simulation(wall, Needle.curved(), ScriptedDevice(passing.pose_and_grip), forces=forces)
-        RuntimeRecorder(writer).attach(simulation).run_simulated(passing.duration)
-        writer.close()
-        values[skill] = metrics_of(
-            with_tissue_fields(from_recorded(open_session(tmp_path / str(skill))), wall)
-        )
+    values = {
+        skill: metrics_of(recorded_task("interrupted-stitch", skill, 1, tmp_path / str(skill)))
+        for skill in (1.0, 0.6)
+    }
     expert, other = values[1.0], values[0.6]
     assert expert["full_thickness_fraction"] == 1.0
     assert expert["entry_to_target"] < 0.00035 and expert["exit_to_target"] < 0.00035, expert
     assert 0.5 < expert["peak_force"] < 1.2  # the calibrated puncture (0.8 N), not mN
-    assert (
-        other["entry_to_target"] > expert["entry_to_target"]
-        and other["exit_to_target"] > expert["exit_to_target"]
-    )
+    assert other["entry_to_target"] > expert["entry_to_target"]
+    assert other["exit_to_target"] > expert["exit_to_target"]
 
 
 ROW = {**TARGETS, "wound_direction": [0.0, 1.0, 0.0], "target_spacing_m": 0.002}  # the edge runs along y
@@ -241,35 +242,9 @@ def test_a_row_of_stitches_scores_its_spacing_by_hand():
 def test_the_arteriotomy_closure_row_is_segmented_and_its_spacing_scored(tmp_path):
     """Three bites along the arteriotomy's edge through the real runner's scripted device: three
     stitches; an expert's row is even and on its marks, a first-day trainee's is not."""
-    from metrics import from_recorded
-    from metrics.tissue import with_tissue_fields
-    from recorder import SessionWriter, open_session
-    from recorder.runtime import RuntimeRecorder
-    from sessions.runner import SessionPlan, open_device
-    from sessions.synthetic import pass_parameters
-    from sessions.tasks import task_preset, task_spec, tissue_for
-    from sim.needle import Needle
-    from sim.runtime import Simulation
-
-    task = "arteriotomy-closure"
-    spec, wall, forces = task_spec(task), tissue_for(task, None), task_preset(task).forces
     values = {}
     for skill in (1.0, 0.3):
-        device, duration = open_device(
-            "scripted", SessionPlan("s", "p", task, 1), None, pass_parameters(skill, 2)
-        )
-        header = {
-            "session_id": "s",
-            "task": task,
-            "placement": spec.placement,
-            "needle_forces": forces.as_dict(),
-        }
-        writer = SessionWriter(tmp_path / str(skill), header, flush_interval=0.1)
-        RuntimeRecorder(writer).attach(
-            Simulation(wall, Needle.curved(), device, forces=forces)
-        ).run_simulated(duration)
-        writer.close()
-        streams = with_tissue_fields(from_recorded(open_session(tmp_path / str(skill))), wall)
+        streams = recorded_task("arteriotomy-closure", skill, 2, tmp_path / str(skill))
         assert len(streams.stitches) == 3
         values[skill] = metrics_of(streams)
     expert, trainee = values[1.0], values[0.3]
