@@ -1,6 +1,6 @@
 """Per-task figures of issue 22: precompute, load to first haptic tick, simulated-time throughput.
 
-Run:  .venv/bin/python benchmarks/tasks.py [--repeats 3]
+Run:  .venv/bin/python benchmarks/tasks.py [--repeats 3] [--convergence]
 
 For every task of the library (``sessions.tasks.TASKS``):
 - precompute: mesh, biphase model and condensed inverse over the stitch region, built from
@@ -39,12 +39,42 @@ def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
     return Simulation(tissue, Needle.curved(), device, forces=task_preset(task).forces), duration
 
 
+def convergence() -> None:
+    """The interrupted stitch's needle force at fixed depths on its mesh and two refinements (cells
+    0.3, 0.22, 0.17 mm; the wound's gap 0.1 mm in all three, the finest grid's limit)."""
+    import dataclasses
+
+    from sessions.tasks import stitch_region_nodes, task_mesh, task_spec
+    from sim.experiments import kernel_indentation_curve
+    from sim.fem import BiphaseTissue
+
+    base, preset = task_spec("interrupted-stitch"), task_preset("interrupted-stitch")
+    for divisions in ([30, 5, 34], [40, 7, 45], [52, 9, 58]):
+        wound = {**base.parameters["wound"], "gap_m": 1e-4}
+        spec = dataclasses.replace(
+            base, parameters={**base.parameters, "divisions": divisions, "wound": wound}
+        )
+        mesh = task_mesh(spec)
+        fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
+        candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
+        tissue = BiphaseTissue.build(mesh, fixed, preset.biphase, contact_nodes=candidates)
+        curve = kernel_indentation_curve(tissue, preset.forces, spec.entry, spec.normal, [0.0, 2e-4, 4e-4])
+        forces = ", ".join(f"{f:.4f}" for f in curve.force[1:])
+        print(f"divisions {divisions} ({mesh.n_nodes} nodes): force at 0.2 / 0.4 mm {forces} N", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument(
+        "--convergence", action="store_true", help="the interrupted stitch's mesh convergence"
+    )
     args = parser.parse_args()
+    if args.convergence:
+        convergence()
+        return
     for task in TASKS:
         with tempfile.TemporaryDirectory() as folder:
             cache = Path(folder)
