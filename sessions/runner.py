@@ -34,11 +34,10 @@ from sessions.models import (
 )
 from sessions.status import SCORABLE, SessionStatus
 from sessions.synthetic import bite_parameters
-from sessions.tasks import session_tissue, task_preset, task_spec, tissue_for
+from sessions.tasks import region_presets, session_tissue, task_preset, task_simulation, task_spec
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
 from sim.needle import Needle
-from sim.runtime import Simulation
 
 
 @dataclass(frozen=True)
@@ -65,6 +64,7 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
         "clock": plan.clock,
         "tissue_preset": task_preset(plan.task).name,
         "needle_forces": task_preset(plan.task).forces.as_dict(),
+        "region_tissue": {region: preset.name for region, preset in region_presets(plan.task).items()},
         "haptic_scale": 1.0,  # the device is sent the tissue's force, clamped to its rating
         "placement": task_spec(plan.task).placement,  # the wound edge and targets bites are scored against
     }
@@ -156,9 +156,7 @@ def run_session(
             orm.delete(catalog.recorded_session(orm, uid))
         raise
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
-    tissue = tissue_for(plan.task, home / "cache")
-    forces = task_preset(plan.task).forces
-    simulation = RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device, forces=forces))
+    simulation = RuntimeRecorder(writer).attach(task_simulation(plan.task, device, home / "cache"))
     try:
         if plan.clock == "simulated":
             simulation.run_simulated(duration)

@@ -151,6 +151,34 @@ def _closure_row(spacing: float = 0.0015, count: int = 3) -> TaskSpec:
 TASKS["arteriotomy-closure"] = _closure_row()
 
 
+def _diseased_wall() -> TaskSpec:
+    """The closure row through a diseased wall: a calcified plaque through the whole wall under the
+    row's second and third bites (angles 3-35 deg, z 4.25-7.25 mm), four times stiffer with a
+    puncture at the band's top (the ``calcified`` preset); the first bite is through healthy wall."""
+    row = _closure_row()
+    parameters = {
+        **row.parameters,
+        "calcification": {"angle_deg": [3.0, 35.0], "z_m": [0.00425, 0.00725], "layers": [0, 1, 2, 3, 4]},
+        "region_tissue": {"calcified": "calcified"},
+    }
+    return TaskSpec(
+        "diseased-wall",
+        "vessel_patch",
+        "The arteriotomy closure through a diseased wall: the row's second and third bites go through a "
+        "calcified plaque (four times stiffer, puncture at 1.5 N instead of 0.8 N), where a decisive "
+        "needle at a square angle matters most.",
+        row.entry,
+        row.normal,
+        row.bite_direction,
+        parameters,
+        placement=row.placement,
+        more_bites=row.more_bites,
+    )
+
+
+TASKS["diseased-wall"] = _diseased_wall()
+
+
 def task_spec(name: str) -> TaskSpec:
     if name not in TASKS:
         raise VascsimError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
@@ -161,11 +189,12 @@ def task_mesh(spec: TaskSpec):
     """The task's mesh: for a patch, ``stitch_cell_m`` cells over the stitch region (x and y) and
     through the wall, graded to ``cell_m`` elsewhere, so the needle's force kernel spans 3 cells;
     for a vessel patch, a wall segment with its arteriotomy at uniform divisions."""
-    from sim.mesh import Wound, grid_box_mesh, refined_coordinates, vessel_mesh
+    from sim.mesh import Calcification, Wound, grid_box_mesh, refined_coordinates, vessel_mesh
 
     p = spec.parameters
     if spec.scenario == "vessel_patch":
         wound = p["wound"]
+        plaque = p.get("calcification")
         return vessel_mesh(
             inner_radius=p["inner_radius_m"],
             wall_thickness=p["wall_m"],
@@ -175,6 +204,9 @@ def task_mesh(spec: TaskSpec):
             radial_divisions=p["divisions"][1],
             axial_divisions=p["divisions"][2],
             wound=Wound(wound["angle_deg"], *wound["z_m"], gap=wound["gap_m"]),
+            calcification=None
+            if plaque is None
+            else Calcification(tuple(plaque["angle_deg"]), tuple(plaque["z_m"]), tuple(plaque["layers"])),
         )
     (length, width, thickness), coarse, fine = p["size_m"], p["cell_m"], p["stitch_cell_m"]
     (x0, x1), (y0, y1) = p["stitch_region_m"]
@@ -209,6 +241,23 @@ def task_preset(task: str):
     return tissue_preset(task_spec(task).parameters.get("tissue", "paper"))
 
 
+def region_presets(task: str) -> dict:
+    """Mesh region name -> tissue preset for the task's regions that differ from its wall (e.g. a
+    calcified plaque); empty for a uniform wall."""
+    from sim.tissue_presets import tissue_preset
+
+    return {
+        region: tissue_preset(name)
+        for region, name in task_spec(task).parameters.get("region_tissue", {}).items()
+    }
+
+
+def region_forces(task: str, mesh) -> dict:
+    """Mesh region id -> the needle forces of that region's preset (see :func:`region_presets`)."""
+    ids = {name: rid for rid, name in mesh.region_names.items()}
+    return {ids[region]: preset.forces for region, preset in region_presets(task).items()}
+
+
 @cache
 def tissue_for(task: str, cache_dir: Path | None = None):
     """The task's precomputed tissue model (built once per process, cached on disk): the preset's
@@ -219,7 +268,10 @@ def tissue_for(task: str, cache_dir: Path | None = None):
     mesh = task_mesh(spec)
     fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
     candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
-    tissue = BiphaseTissue.build(mesh, fixed, task_preset(task).biphase, contact_nodes=candidates)
+    regions = {region: preset.biphase for region, preset in region_presets(task).items()}
+    tissue = BiphaseTissue.build(
+        mesh, fixed, task_preset(task).biphase, region_parameters=regions, contact_nodes=candidates
+    )
     tissue.precompute(cache_dir=cache_dir)
     return tissue
 
@@ -229,3 +281,21 @@ def session_tissue(streams, cache_dir: Path | None = None):
     sessions of other origins (imported data, unknown tasks)."""
     task = streams.attributes.get("task")
     return tissue_for(task, cache_dir) if task in TASKS else None
+
+
+def task_simulation(task: str, device, cache_dir: Path | None = None, **options):
+    """A :class:`sim.runtime.Simulation` of ``task`` driven by ``device``: the task's tissue, the
+    curved needle, its preset's needle forces and its regions' own (a calcified plaque pierces at
+    its own threshold). ``options`` go to the Simulation (e.g. ``settings``)."""
+    from sim.needle import Needle
+    from sim.runtime import Simulation
+
+    tissue = tissue_for(task, cache_dir)
+    return Simulation(
+        tissue,
+        Needle.curved(),
+        device,
+        forces=task_preset(task).forces,
+        region_forces=region_forces(task, tissue.mesh),
+        **options,
+    )

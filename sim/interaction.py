@@ -40,6 +40,7 @@ instead of rotating it along its curve therefore loads the wall.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from time import perf_counter
 
@@ -141,6 +142,28 @@ _NO_NODES = _read_only(np.zeros(0, dtype=np.int64))
 _NO_REACTIONS = _read_only(np.zeros((0, 3)))
 
 
+def _checked_region_forces(
+    default: NeedleForces, given: Mapping[int, NeedleForces], mesh
+) -> dict[int, NeedleForces]:
+    """Region id -> needle forces, checked against the mesh's regions and the default's load model
+    (one force kernel serves every region: the load and kernel radius cannot differ)."""
+    known = set(np.unique(mesh.regions).tolist())
+    checked = {}
+    for region, forces in given.items():
+        if int(region) not in known:
+            raise InteractionError(f"needle forces given for region {region}, which the mesh does not have")
+        if (forces.load, forces.kernel_radius, forces.near_field) != (
+            default.load,
+            default.kernel_radius,
+            default.near_field,
+        ):
+            raise InteractionError(
+                f"region {region}'s needle forces must share the tissue's load model and kernel radius"
+            )
+        checked[int(region)] = forces
+    return checked
+
+
 def entry_angle_deg(tangent: NDArray[np.float64], outward_normal: NDArray[np.float64]) -> float:
     """Angle (deg) between the needle's direction and the inward normal: 0 = perpendicular entry."""
     cosine = float(np.clip(-tangent @ outward_normal / np.linalg.norm(tangent), -1.0, 1.0))
@@ -158,11 +181,16 @@ class NeedleInteraction:
         collision: CollisionMesh | None = None,
         grasp: Pose | None = None,
         forces: NeedleForces | None = None,
+        region_forces: Mapping[int, NeedleForces] | None = None,
     ) -> None:
         self.tissue = tissue
         self.needle = needle
         self.rules = rules or PiercingRules()
         self.forces = forces or NeedleForces()
+        """The needle forces of the current contact: the entered region's (``region_forces``) or
+        the tissue's default."""
+        self.default_forces = self.forces
+        self.region_forces = _checked_region_forces(self.forces, region_forces or {}, tissue.mesh)
         self._load: KernelLoad | None = None  # the kernels' stiffness for the current contact set
         self._load_key: tuple = ()
         self.soft_share = math.nan
@@ -203,6 +231,15 @@ class NeedleInteraction:
         self._pose_seen: Pose | None = None
         self._pose_geometry = (np.zeros((0, 3)), np.zeros(3))
         self.tip_speed = 0.0
+
+    def forces_at(self, triangle: int) -> NeedleForces:
+        """The needle forces of the wall region under surface triangle ``triangle`` (the region of
+        the element the face belongs to): puncture, passage and damage follow the region entered."""
+        if not self.region_forces:
+            return self.default_forces
+        mesh = self.tissue.mesh
+        region = int(mesh.regions[mesh.surface_elements[triangle]])
+        return self.region_forces.get(region, self.default_forces)
 
     # -- haptic rate ----------------------------------------------------------------
     def hold(self, time: float, holder_pose: Pose, grip_closed: bool) -> list[NeedleEvent]:
@@ -308,6 +345,7 @@ class NeedleInteraction:
         point = hits.points(*segment_ends(vertices))[0]
         self.contacts = [TriangleContact.from_hit(self.collision, hits, 0, point)]
         self.state = "contact"
+        self.forces = self.forces_at(self.contacts[0].triangle)
         self._handle = None
         self._load = None
         tangent = self.tip_tangent()

@@ -20,7 +20,7 @@ with defaults limit_0 = 0.2, v_crit = 0.01 m/s, floor = 0.25, p = 2.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -145,12 +145,32 @@ class BiphaseTissue:
         mesh: TetMesh,
         fixed_nodes: ArrayLike,
         parameters: BiphaseParameters | None = None,
+        region_parameters: Mapping[str, BiphaseParameters] | None = None,
         **model_options: object,
     ) -> BiphaseTissue:
-        """Both phases on one mesh from the parameters' moduli (uniform material)."""
+        """Both phases on one mesh from the parameters' moduli: uniform, or per mesh region where
+        ``region_parameters`` names a region (e.g. ``{"calcified": ...}``). Only the moduli and
+        Poisson ratio vary by region; the strain limit and its speed law are ``parameters``'.
+        With one E2/E1 and Poisson ratio in every region the two phases still share one
+        factorisation."""
         p = parameters or BiphaseParameters()
-        soft = TissueModel(mesh, Material(p.soft_modulus, p.poisson_ratio), fixed_nodes, **model_options)
-        stiff = TissueModel(mesh, Material(p.stiff_modulus, p.poisson_ratio), fixed_nodes, **model_options)
+        by_region = dict(region_parameters or {})
+        unknown = sorted(set(by_region) - set(mesh.region_names.values()))
+        if unknown:
+            raise ModelError(
+                f"tissue parameters given for region(s) {', '.join(unknown)}, which the mesh does not "
+                f"have (regions: {', '.join(sorted(mesh.region_names.values()))})"
+            )
+
+        def phase(modulus: Callable[[BiphaseParameters], float]) -> dict[int, Material]:
+            return {
+                rid: Material(modulus(q), q.poisson_ratio)
+                for rid, name in mesh.region_names.items()
+                for q in [by_region.get(name, p)]
+            }
+
+        soft = TissueModel(mesh, phase(lambda q: q.soft_modulus), fixed_nodes, **model_options)
+        stiff = TissueModel(mesh, phase(lambda q: q.stiff_modulus), fixed_nodes, **model_options)
         return cls(soft, stiff, p)
 
     @property

@@ -23,7 +23,7 @@ import math
 import threading
 import time as wallclock
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -253,10 +253,13 @@ class Simulation:
         on_event: Callable[[NeedleEvent | RuntimeEvent], None] | None = None,
         on_sample: Callable[..., None] | None = None,
         forces: NeedleForces | None = None,
+        region_forces: Mapping[int, NeedleForces] | None = None,
     ) -> None:
         self.settings = settings or RuntimeSettings()
         self.device = device
-        self.interaction = NeedleInteraction(tissue, needle, rules, forces=forces)
+        self.interaction = NeedleInteraction(
+            tissue, needle, rules, forces=forces, region_forces=region_forces
+        )
         self.safety = ForceSafety(device.limits, self.settings.safety, tick=self.settings.period("haptic"))
         self.holder = Mailbox()
         self.fem = Mailbox()

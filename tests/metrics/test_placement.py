@@ -182,21 +182,18 @@ def recorded_task(task: str, skill: float, seed: int, folder):
     from recorder.runtime import RuntimeRecorder
     from sessions.runner import SessionPlan, open_device
     from sessions.synthetic import pass_parameters
-    from sessions.tasks import task_preset, task_spec, tissue_for
-    from sim.needle import Needle
-    from sim.runtime import Simulation
+    from sessions.tasks import task_preset, task_simulation, task_spec
 
-    spec, wall, forces = task_spec(task), tissue_for(task, None), task_preset(task).forces
+    spec, forces = task_spec(task), task_preset(task).forces
     device, duration = open_device(
         "scripted", SessionPlan("s", "p", task, 1), None, pass_parameters(skill, seed)
     )
     header = {"session_id": "s", "task": task, "placement": spec.placement, "needle_forces": forces.as_dict()}
     writer = SessionWriter(folder, header, flush_interval=0.1)
-    RuntimeRecorder(writer).attach(Simulation(wall, Needle.curved(), device, forces=forces)).run_simulated(
-        duration
-    )
+    simulation = RuntimeRecorder(writer).attach(task_simulation(task, device))
+    simulation.run_simulated(duration)
     writer.close()
-    return with_tissue_fields(from_recorded(open_session(folder)), wall)
+    return with_tissue_fields(from_recorded(open_session(folder)), simulation.interaction.tissue)
 
 
 @pytest.mark.slow
@@ -251,3 +248,23 @@ def test_the_arteriotomy_closure_row_is_segmented_and_its_spacing_scored(tmp_pat
     assert expert["full_thickness_fraction"] == 1.0 and expert["spacing_error"] < 0.0002
     assert expert["spacing_variation"] < 0.1 and expert["entry_to_target"] < 0.0003, expert
     assert trainee["spacing_error"] > expert["spacing_error"] and trainee["entry_to_target"] > 0.0005, trainee
+
+
+@pytest.mark.slow
+def test_the_diseased_wall_pierces_its_plaque_at_the_calcified_threshold(tmp_path):
+    """Issue 22's diseased wall: the row's first bite is through healthy wall (puncture 0.8 N), the
+    second and third through a calcified plaque that pierces at 1.5 N; the plaque is four times
+    stiffer in both phases, so the two phases still share one factorisation."""
+    from sessions.tasks import task_mesh, task_spec, tissue_for
+
+    mesh = task_mesh(task_spec("diseased-wall"))
+    assert "calcified" in mesh.region_names.values()
+    wall = tissue_for("diseased-wall", None)
+    assert wall.stiff.inverse_source is not None
+    streams = recorded_task("diseased-wall", 1.0, 2, tmp_path)
+    pierces = streams.events[streams.events.kind == "pierce"]
+    forces = pierces.detail.str.extract(r"normal force ([0-9.]+) N")[0].astype(float).to_numpy()
+    assert len(forces) == 3, pierces
+    assert 0.8 <= forces[0] < 1.2, forces  # healthy wall
+    assert (forces[1:] >= 1.5).all() and (forces[1:] < 2.2).all(), forces  # the plaque
+    assert metrics_of(streams)["full_thickness_fraction"] == 1.0

@@ -123,6 +123,6 @@ def test_tasks_list_and_show_describe_the_task_library():
     unknown = CliRunner().invoke(main, ["tasks", "show", "nope"])
     assert (
         unknown.exit_code == 1
-        and "unknown task 'nope'; known tasks: wall-stitch, interrupted-stitch, arteriotomy-closure"
+        and "unknown task 'nope'; known tasks: wall-stitch, interrupted-stitch, arteriotomy-closure, "
         in unknown.output
     )

@@ -209,3 +209,29 @@ def test_the_stiff_contact_derived_from_the_soft_one_equals_an_independent_stiff
         ours.surface_displacement(reactions), theirs.surface_displacement(reactions), rtol=1e-8, atol=1e-15
     )
     assert ours.penalty == pytest.approx(theirs.penalty, rel=1e-12)
+
+
+def test_region_parameters_give_each_region_its_moduli_and_keep_one_factorisation():
+    """A calcified plaque four times stiffer in both phases: its elements carry the plaque's moduli,
+    the stiff phase is still the soft one scaled (shared inverse); a region the mesh lacks is named."""
+    from sim.mesh import Calcification, vessel_mesh
+
+    mesh = vessel_mesh(
+        arc_deg=90.0,
+        circumferential_divisions=6,
+        radial_divisions=2,
+        axial_divisions=4,
+        length=0.004,
+        calcification=Calcification((0.0, 45.0), (0.0, 0.004), (0, 1)),
+    )
+    wall = BiphaseParameters(soft_modulus=300e3, stiff_modulus=6e6)
+    plaque = BiphaseParameters(soft_modulus=1.2e6, stiff_modulus=24e6)
+    fixed = mesh.node_sets["end0"]
+    tissue = BiphaseTissue.build(mesh, fixed, wall, region_parameters={"calcified": plaque})
+    calcified = mesh.regions == {n: r for r, n in mesh.region_names.items()}["calcified"]
+    assert 0 < calcified.sum() < len(calcified)
+    ratio = tissue.soft.lame[1][calcified] / tissue.soft.lame[1][~calcified].max()
+    assert np.allclose(ratio, 4.0)
+    assert tissue.stiff.inverse_source == (tissue.soft, pytest.approx(20.0))
+    with pytest.raises(ModelError, match="region\\(s\\) plaque, which the mesh does not have"):
+        BiphaseTissue.build(mesh, fixed, wall, region_parameters={"plaque": plaque})

@@ -242,6 +242,21 @@ def test_entry_angle_and_rules_validation():
         PiercingRules(puncture_stress=-1)
 
 
+def test_region_forces_follow_the_entered_region_and_are_checked(wall):
+    """A region's own needle forces (a calcified plaque's higher puncture) apply where its faces are
+    entered; a region the mesh lacks, or another load model, is refused by name."""
+    from sim.interaction import InteractionError
+
+    plaque = NeedleForces(puncture_force=1.5)
+    interaction = NeedleInteraction(wall, Needle.straight(), region_forces={0: plaque})
+    assert interaction.forces_at(0) is plaque and interaction.forces_at(7) is plaque
+    assert NeedleInteraction(wall, Needle.straight()).forces_at(0) == NeedleForces()
+    with pytest.raises(InteractionError, match="region 5, which the mesh does not have"):
+        NeedleInteraction(wall, Needle.straight(), region_forces={5: plaque})
+    with pytest.raises(InteractionError, match="region 0's needle forces must share"):
+        NeedleInteraction(wall, Needle.straight(), region_forces={0: NeedleForces(kernel_radius=2e-3)})
+
+
 def test_needle_geometry():
     needle = Needle.curved(radius=0.004, arc_fraction=3 / 8, segments=16)
     assert needle.length == pytest.approx(2 * math.pi * 0.004 * 3 / 8, rel=2e-3)
