@@ -47,6 +47,9 @@ STITCH_COLUMNS = (
     "exit_nx",
     "exit_ny",
     "exit_nz",
+    "entry_nx",
+    "entry_ny",
+    "entry_nz",
 )
 
 
@@ -125,8 +128,10 @@ def _distance(given: dict[str, Any], name: str) -> float:
 
 
 def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
-    """One row per stitch (columns :data:`STITCH_COLUMNS`): the entry point of each pierce, and the
-    exit point and exit face's outward normal of the exit that follows it (NaN without one)."""
+    """One row per pierce (columns :data:`STITCH_COLUMNS`): the entry point and entry face's outward
+    normal of each pierce, and the exit point and exit face's outward normal of the exit that
+    follows it (NaN without one). A pierce in through the far (luminal) surface is a back-wall catch,
+    not a stitch (:meth:`StitchPlacement.of` tells them apart with the task's far normal)."""
     rows = []
     current: dict[str, float] | None = None
     for event in events.itertuples(index=False):
@@ -140,7 +145,9 @@ def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
         if event.kind == "pierce":
             current = {"stitch": len(rows), "pierce_time": float(event.time), "exit_time": math.nan}
             current.update(zip(("entry_x", "entry_y", "entry_z"), point.tolist(), strict=True))
-            current.update({c: math.nan for c in STITCH_COLUMNS[6:]})
+            current.update({c: math.nan for c in STITCH_COLUMNS[6:12]})
+            normal = mesh.surface_normals[triangle]
+            current.update(zip(("entry_nx", "entry_ny", "entry_nz"), normal.tolist(), strict=True))
             rows.append(current)
         elif current is not None and math.isnan(current["exit_x"]):
             current["exit_time"] = float(event.time)
@@ -150,8 +157,19 @@ def stitch_points(events: pd.DataFrame, mesh) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(STITCH_COLUMNS))
 
 
-STITCH_QUANTITIES = ("entry_bite", "exit_bite", "entry_to_target", "exit_to_target", "full_thickness")
-"""What is kept per stitch: bite distances and distances to target (m), full thickness (1 or 0)."""
+STITCH_QUANTITIES = (
+    "entry_bite",
+    "exit_bite",
+    "entry_to_target",
+    "exit_to_target",
+    "full_thickness",
+    "track_offset",
+    "swept_area",
+    "wound_edge_stress",
+)
+"""What is kept per stitch: bite distances and distances to target (m), full thickness (1 or 0),
+and how the needle went through the wall (:mod:`metrics.passage`: m, m^2, Pa; NaN for a session
+recorded without its scene)."""
 
 
 @dataclass(frozen=True)
@@ -169,14 +187,25 @@ class StitchPlacement:
     """Distances (m) along the wound between successive stitches' entry points (empty when the task
     states no wound direction or there is one stitch)."""
     target_spacing: float | None
+    track_offset: NDArray[np.float64]
+    swept_area: NDArray[np.float64]
+    wound_edge_stress: NDArray[np.float64]
+    back_wall_catches: int = 0
+    """Pierces in through the far (luminal) surface: the needle caught the vessel's back wall."""
+    marks: int = 0
+    """The task's target entry marks: the stitches it asks for."""
 
     @classmethod
-    def of(cls, stitches: pd.DataFrame, targets: PlacementTargets) -> StitchPlacement:
+    def of(cls, pierces: pd.DataFrame, targets: PlacementTargets) -> StitchPlacement:
+        entry_normals = _columns(pierces, ("entry_nx", "entry_ny", "entry_nz"))
+        catch = entry_normals @ targets.far_normal >= FAR_SURFACE_COSINE
+        stitches = pierces[~catch]
         entry = stitches[["entry_x", "entry_y", "entry_z"]].to_numpy(dtype=np.float64)
         exit_ = stitches[["exit_x", "exit_y", "exit_z"]].to_numpy(dtype=np.float64)
         normals = stitches[["exit_nx", "exit_ny", "exit_nz"]].to_numpy(dtype=np.float64)
         facing = (normals @ targets.far_normal >= FAR_SURFACE_COSINE).astype(float)
         through = np.where(np.isnan(normals[:, 0]), np.nan, facing)
+        passage = {name: _columns(stitches, (name,))[:, 0] for name in STITCH_QUANTITIES[5:]}
         return cls(
             targets.bite_distance(entry),
             targets.bite_distance(exit_),
@@ -187,6 +216,9 @@ class StitchPlacement:
             targets.target_exit_bite,
             _spacing(entry, targets.wound_direction),
             targets.target_spacing,
+            **passage,
+            back_wall_catches=int(catch.sum()),
+            marks=len(targets.entry_targets),
         )
 
     def table(self) -> pd.DataFrame:
@@ -206,6 +238,16 @@ def stitch_table(streams) -> pd.DataFrame | None:
     if targets is None or streams.stitches is None or streams.stitches.empty:
         return None
     return StitchPlacement.of(streams.stitches, targets).table()
+
+
+def _columns(table: pd.DataFrame, names: tuple[str, ...]) -> NDArray[np.float64]:
+    """(n, len(names)) of the table's columns, NaN for a column it lacks (an older table)."""
+    return np.column_stack(
+        [
+            table[name].to_numpy(dtype=np.float64) if name in table.columns else np.full(len(table), np.nan)
+            for name in names
+        ]
+    ).reshape(len(table), len(names))
 
 
 def _spacing(entries: NDArray[np.float64], direction: NDArray[np.float64] | None) -> NDArray[np.float64]:

@@ -152,3 +152,84 @@ def spacing_variation(context: SessionContext) -> float:
     if placed is None or placed.spacing.size < 2 or not placed.spacing.mean() > 0:
         return NAN
     return float(placed.spacing.std() / placed.spacing.mean())
+
+
+PASSAGE_REF = (
+    "needle-curve following: vascular technique (rotate the needle along its curve, never lever); "
+    "tissue damage as swept area: PerkTutor (Ungi et al. 2012, IEEE TBME 59:3475)"
+)
+
+
+@metric(
+    "needle_track_offset",
+    unit="m",
+    definition="Mean over stitches of the mean distance, while the needle is in the wall, from the "
+    "stitch's entry point to the needle's own curve: near 0 when the wrist turns the needle along its "
+    "curve, larger when the needle is levered sideways through its hole.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=PASSAGE_REF,
+    group="placement",
+)
+def needle_track_offset(context: SessionContext) -> float:
+    return _over_stitches(context, lambda placed: placed.track_offset)
+
+
+@metric(
+    "tissue_swept_area",
+    unit="m^2",
+    definition="Mean over stitches of the wall the needle swept beyond its own track: the sideways "
+    "movement of the needle at the entry hole times the length of needle inside the wall, summed over "
+    "the frames it is in the wall (tremor and levering inside the wall both count).",
+    streams=("stitches",),
+    better=LOWER,
+    reference=PASSAGE_REF,
+    group="placement",
+)
+def tissue_swept_area(context: SessionContext) -> float:
+    return _over_stitches(context, lambda placed: placed.swept_area)
+
+
+@metric(
+    "wound_edge_stress",
+    unit="Pa",
+    definition="Mean over stitches of the peak von Mises stress of the elements on the wound's cut faces "
+    "during the stitch (the tissue model's linear far field under the recorded needle load): a bite too "
+    "near the edge, or a levered needle, loads the edge that must hold the suture.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=OSATS_REF,
+    group="placement",
+)
+def wound_edge_stress(context: SessionContext) -> float:
+    return _over_stitches(context, lambda placed: placed.wound_edge_stress)
+
+
+@metric(
+    "back_wall_catches",
+    unit="1",
+    definition="Pierces in through the vessel's luminal surface (entry face within 45 deg of the far "
+    "normal): the needle caught the back wall, which narrows or closes the vessel.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=OSATS_REF,
+    group="placement",
+)
+def back_wall_catches(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else float(placed.back_wall_catches)
+
+
+@metric(
+    "extra_punctures",
+    unit="1",
+    definition="Stitches beyond the task's target marks: each a further hole through the wall (a "
+    "withdrawn and re-inserted needle), never fewer than 0.",
+    streams=("stitches",),
+    better=LOWER,
+    reference=OSATS_REF,
+    group="placement",
+)
+def extra_punctures(context: SessionContext) -> float:
+    placed = context.placement
+    return NAN if placed is None else float(max(0, placed.entry_bite.size - placed.marks))

@@ -18,7 +18,7 @@ from metrics.streams import MetricsError
 if TYPE_CHECKING:
     from metrics.context import SessionContext
 
-REGISTRY_VERSION = "5"
+REGISTRY_VERSION = "6"
 
 LOWER, HIGHER = "lower", "higher"
 

@@ -41,6 +41,47 @@ def _empty_events() -> pd.DataFrame:
 
 
 @dataclass(frozen=True, eq=False)
+class NeedleFrames:
+    """The needle and the tissue's drive at the graphics rate (the recorded scene stream).
+
+    times (F,) s; state (F,) as ``needle_state``; needle (F, V, 3) m, the needle's vertices tip
+    first; drives: per frame None (the tissue untouched) or (contact node ids (k,), their
+    intended displacements (k, 3) m, the biphase soft share or nan); tip_speed (F,) m/s."""
+
+    times: NDArray[np.float64]
+    state: NDArray[np.int8]
+    needle: NDArray[np.float64]
+    drives: list
+    tip_speed: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        frames = len(self.times)
+        shapes = (len(self.state), len(self.needle), len(self.drives), len(self.tip_speed))
+        if any(n != frames for n in shapes) or self.needle.ndim != 3 or self.needle.shape[2:] != (3,):
+            raise MetricsError(f"needle frames disagree in length or shape: {frames} times, {shapes}")
+
+    @classmethod
+    def from_scene(cls, scene) -> NeedleFrames:
+        """From a scene table (:data:`recorder.scene.SCENE_SCHEMA`)."""
+        flat = scene.column("needle").combine_chunks()
+        vertices = len(flat[0]) // 3 if len(flat) else 0
+        nodes = scene.column("drive_nodes").to_pylist()
+        intended = scene.column("drive_intended").to_pylist()
+        shares = scene.column("drive_soft_share").to_numpy(zero_copy_only=False).astype(np.float64)
+        drives = [
+            (np.asarray(n, np.int64), np.asarray(d, np.float64).reshape(-1, 3), float(share)) if n else None
+            for n, d, share in zip(nodes, intended, shares, strict=True)
+        ]
+        return cls(
+            scene.column("time").to_numpy().astype(np.float64),
+            scene.column("state").to_numpy().astype(np.int8),
+            flat.flatten().to_numpy().reshape(-1, vertices, 3).astype(np.float64),
+            drives,
+            scene.column("tip_speed").to_numpy().astype(np.float64),
+        )
+
+
+@dataclass(frozen=True, eq=False)
 class SessionStreams:
     """One session's samples (SI units) and events.
 
@@ -57,7 +98,9 @@ class SessionStreams:
     table of the tissue surface at the moment of insertion (columns x, y, z, area,
     von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known. stitches:
     optional table of each stitch's entry and exit points on the tissue surface
-    (:func:`metrics.placement.stitch_points`, derived with the tissue mesh).
+    (:func:`metrics.placement.stitch_points`, derived with the tissue mesh), with how the needle
+    went through the wall where the scene was recorded (:mod:`metrics.passage`). needle_frames:
+    the recorded scene (:class:`NeedleFrames`), if any.
     """
 
     session_id: str
@@ -80,6 +123,7 @@ class SessionStreams:
     force_limit: float | None = None
     attributes: Mapping[str, Any] = field(default_factory=dict)
     stitches: pd.DataFrame | None = None
+    needle_frames: NeedleFrames | None = None
 
     def __post_init__(self) -> None:
         time = np.ascontiguousarray(self.time, dtype=np.float64)
@@ -166,6 +210,9 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     # device was sent, which equals it unless the device clamped or scaled it
     reaction = columns("reaction_x", "reaction_y", "reaction_z")
     force = reaction if np.all(np.isfinite(reaction)) else columns("force_x", "force_y", "force_z")
+    from recorder.scene import read_scene
+
+    scene = read_scene(session)
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),
         participant_id=participant_id or metadata.get("participant_id"),
@@ -185,6 +232,7 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
         events=events,
         force_limit=metadata.get("force_limit"),
         attributes=metadata,
+        needle_frames=None if scene is None or scene.num_rows == 0 else NeedleFrames.from_scene(scene),
     )
 
 

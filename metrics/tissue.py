@@ -85,7 +85,8 @@ def with_tissue_fields(
     streams: SessionStreams, tissue: Tissue, forces: NeedleForces | None = None
 ) -> SessionStreams:
     """The streams with ``stretch``, ``local_stress``, ``stress_field`` and ``stitches`` (each bite's
-    entry and exit points, :func:`metrics.placement.stitch_points`) derived (see the module).
+    entry and exit points, :func:`metrics.placement.stitch_points`, and from a recorded scene how
+    the needle went through the wall, :mod:`metrics.passage`) derived (see the module).
 
     forces: the needle-force law the session ran under (default: :func:`session_forces`). Per-tick
     streams the runtime recorded are kept; only what is missing is derived. Streams that lack what
@@ -93,7 +94,12 @@ def with_tissue_fields(
     if streams.stitches is None and len(streams.events):  # where each bite went, on this mesh
         from metrics.placement import stitch_points
 
-        streams = dataclasses.replace(streams, stitches=stitch_points(streams.events, tissue.mesh))
+        stitches = stitch_points(streams.events, tissue.mesh)
+        if streams.needle_frames is not None:  # and how the needle went through the wall
+            from metrics.passage import passage_columns
+
+            stitches = passage_columns(stitches, streams.needle_frames, tissue)
+        streams = dataclasses.replace(streams, stitches=stitches)
     needed = ("needle_state", "tip_position", "contact_triangle", "contact_barycentric", "tip_speed")
     if any(getattr(streams, name) is None for name in needed):
         return streams

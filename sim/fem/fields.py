@@ -120,10 +120,17 @@ class TissueFieldReplay:
     frame gives exactly ``tissue.solve(..., full_field=True, fields=True)``.
     """
 
-    def __init__(self, tissue: TissueModel | BiphaseTissue, cache_size: int = 16) -> None:
+    def __init__(
+        self,
+        tissue: TissueModel | BiphaseTissue,
+        cache_size: int = 16,
+        elements: NDArray[np.int64] | None = None,
+    ) -> None:
+        """elements: the elements whose stress :meth:`state` returns (default: the element under
+        each exterior triangle, in the mesh's surface order)."""
         self.tissue = tissue
         self.mesh = tissue.mesh
-        self._surface = self.mesh.surface_elements
+        self._surface = self.mesh.surface_elements if elements is None else np.asarray(elements, np.int64)
         self._cache: dict[tuple[int, ...], list[tuple[object, NDArray, NDArray]]] = {}
         self._cache_size = cache_size
         # A phase whose K0 is s times the first one's (the biphase stiff phase with one Poisson
@@ -175,7 +182,7 @@ class TissueFieldReplay:
         soft_share: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(N, 3) displacement of every node (m) and (F,) von Mises stress (Pa) under each exterior
-        triangle, for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s).
+        triangle (or of each of the replay's ``elements``), for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s).
 
         soft_share: the biphase split the runtime applied (the force kernel's, from its own strain);
         None or nan derives it from the drive (the barycentric rule's drive sums to the tip's)."""

@@ -248,6 +248,11 @@ def test_the_arteriotomy_closure_row_is_segmented_and_its_spacing_scored(tmp_pat
     assert expert["full_thickness_fraction"] == 1.0 and expert["spacing_error"] < 0.0002
     assert expert["spacing_variation"] < 0.1 and expert["entry_to_target"] < 0.0003, expert
     assert trainee["spacing_error"] > expert["spacing_error"] and trainee["entry_to_target"] > 0.0005, trainee
+    # how the needle went through the wall, from the recorded scene: the expert turns it along its curve
+    assert expert["back_wall_catches"] == 0 and expert["extra_punctures"] == 0
+    assert expert["needle_track_offset"] < 0.0003 < trainee["needle_track_offset"], (expert, trainee)
+    assert expert["tissue_swept_area"] < trainee["tissue_swept_area"]
+    assert 1e5 < expert["wound_edge_stress"] < trainee["wound_edge_stress"], (expert, trainee)
 
 
 @pytest.mark.slow
