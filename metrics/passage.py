@@ -131,7 +131,7 @@ class WoundEdgeStress:
             if drive is None or not len(drive[0]):
                 continue
             nodes, intended, share = drive
-            _, stress = self._replay.state(nodes, intended, float(frames.tip_speed[k]), share)
+            stress = self._replay.stress(nodes, intended, float(frames.tip_speed[k]), share)
             peak = float(stress.max()) if math.isnan(peak) else max(peak, float(stress.max()))
         return peak
 

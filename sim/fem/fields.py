@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from sim.errors import ModelError
 from sim.fem.assembly import displacement_gradients, small_strain, stress_tensor, von_mises_of_stress
 from sim.fem.biphase import BiphaseTissue
+from sim.fem.condensation import node_dofs
 from sim.fem.model import TissueModel
 
 _CHUNK = 512  # ticks per block: keeps the (ticks x elements x 3 x 3) temporaries small
@@ -126,11 +127,14 @@ class TissueFieldReplay:
         cache_size: int = 16,
         elements: NDArray[np.int64] | None = None,
     ) -> None:
-        """elements: the elements whose stress :meth:`state` returns (default: the element under
-        each exterior triangle, in the mesh's surface order)."""
+        """elements: replay only these elements' stress (:meth:`stress`; e.g. the wound's edge),
+        reading only the rows of K0^-1's columns at their nodes; by default every exterior
+        triangle's element (in the mesh's surface order) and the whole displacement
+        (:meth:`state`)."""
         self.tissue = tissue
         self.mesh = tissue.mesh
         self._surface = self.mesh.surface_elements if elements is None else np.asarray(elements, np.int64)
+        self._rows = None if elements is None else node_dofs(np.unique(self.mesh.tets[self._surface]))
         self._cache: dict[tuple[int, ...], list[tuple[object, NDArray, NDArray]]] = {}
         self._cache_size = cache_size
         # A phase whose K0 is s times the first one's (the biphase stiff phase with one Poisson
@@ -147,17 +151,21 @@ class TissueFieldReplay:
             else:
                 self._layout.append((len(self._part_models), 1.0))
                 self._part_models.append(model)
-        self._stress_operators = [surface_stress_operator(m, self._surface) for m in self._part_models]
+        operators = [surface_stress_operator(m, self._surface) for m in self._part_models]
+        if self._rows is not None:  # the operator reads only the elements' own dofs
+            operators = [operator.tocsc()[:, self._rows].tocsr() for operator in operators]
+        self._stress_operators = operators
 
     def _phase_parts(self, nodes: NDArray[np.int64]) -> list[tuple[object, NDArray, NDArray]]:
         """Per model with arrays of its own: the contact handle, K0^-1 columns at the contact dofs
-        (3N, 3k), and the surface elements' stress per unit reaction (3k, F, 3, 3)."""
+        (3N, 3k; only the elements' rows for a restricted replay), and the elements' stress per unit
+        reaction (3k, F, 3, 3)."""
         key = tuple(int(n) for n in nodes)
         parts = self._cache.get(key)
         if parts is None:
             parts = []
             for model, operator in zip(self._part_models, self._stress_operators, strict=True):
-                columns = model._nodes_columns(nodes)
+                columns = model._nodes_columns(nodes, self._rows)
                 unit_stress = (operator @ columns).T.reshape(columns.shape[1], len(self._surface), 3, 3)
                 parts.append((model.contact(nodes), columns, unit_stress))
             if len(self._cache) >= self._cache_size:
@@ -182,10 +190,27 @@ class TissueFieldReplay:
         soft_share: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(N, 3) displacement of every node (m) and (F,) von Mises stress (Pa) under each exterior
-        triangle (or of each of the replay's ``elements``), for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s).
+        triangle, for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s).
 
         soft_share: the biphase split the runtime applied (the force kernel's, from its own strain);
         None or nan derives it from the drive (the barycentric rule's drive sums to the tip's)."""
+        if self._rows is not None:
+            raise ModelError("a replay of chosen elements has no whole displacement; use stress()")
+        return self._replay(nodes, intended, needle_speed, soft_share, with_displacement=True)
+
+    def stress(
+        self,
+        nodes: ArrayLike,
+        intended: ArrayLike,
+        needle_speed: float = 0.0,
+        soft_share: float | None = None,
+    ) -> NDArray[np.float64]:
+        """(F,) von Mises stress (Pa) of the replay's elements for a drive (as :meth:`state`)."""
+        return self._replay(nodes, intended, needle_speed, soft_share, with_displacement=False)[1]
+
+    def _replay(
+        self, nodes: ArrayLike, intended: ArrayLike, needle_speed: float, soft_share, with_displacement: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         ids = np.asarray(nodes, dtype=np.int64).ravel()
         drive = np.asarray(intended, dtype=np.float64).reshape(-1, 3)
         if ids.size == 0:
@@ -208,7 +233,8 @@ class TissueFieldReplay:
             parts, displacement_reactions, stress_reactions, strict=True
         ):
             if moved is not None:
-                displacement += (columns @ moved).reshape(-1, 3)
+                if with_displacement:
+                    displacement += (columns @ moved).reshape(-1, 3)
                 stress += np.tensordot(stressed, unit_stress, axes=1)
         return displacement, von_mises_of_stress(stress)
 
