@@ -39,6 +39,7 @@ class StudySettings:
         2  # retention: the last delayed session against the mean of this many last practice ones
     )
     rating_col: str | None = None  # a continuous rating for concurrent validity (e.g. "grs_total")
+    task: str | None = None  # the task whose sessions are analysed (None: the study's only task)
     learning_model: str = "power"
     cusum_p0: float = 0.2
     cusum_p1: float = 0.5
@@ -68,6 +69,24 @@ def practice_mask(table: pd.DataFrame) -> pd.Series:
     return table["phase"].fillna("practice") != "retention"
 
 
+def sessions_of_task(table: pd.DataFrame, task: str | None) -> pd.DataFrame:
+    """The table's sessions of ``task``: trials count per task, so one analysis never mixes tasks. A
+    table of several tasks needs one named; one without a ``task`` column is taken as it is."""
+    if "task" not in table.columns:
+        return table
+    tasks = sorted(map(str, pd.unique(table["task"])))
+    if task is None:
+        if len(tasks) > 1:
+            raise MetricsError(
+                f"the study has sessions of {len(tasks)} tasks ({', '.join(tasks)}); analyse one at a time "
+                "(the analysis setting task, or --task)"
+            )
+        return table
+    if task not in tasks:
+        raise MetricsError(f"the study has no scored session of task {task!r}; its tasks: {', '.join(tasks)}")
+    return table[table["task"] == task].reset_index(drop=True)
+
+
 def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) -> StudyAnalysis:
     """Everything the study report shows, from one table of per-session metrics."""
     settings = settings or StudySettings()
@@ -75,6 +94,7 @@ def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) ->
         raise MetricsError(
             "the sessions table needs a 'trial' column (1-based order of each participant's sessions)"
         )
+    table = sessions_of_task(table, settings.task)
     table = table.sort_values([settings.cluster_col, "trial"], kind="stable").reset_index(drop=True)
     practice = practice_mask(table)
     validity = construct_validity(

@@ -37,6 +37,7 @@ DECLARABLE = (
     "rating_col",
     "learning_model",
     "alpha",
+    "task",
 )
 """The choices a study declares; the rest of StudySettings (seeds, resample counts) are the code's."""
 
@@ -74,9 +75,9 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise CatalogError(f"{what}: {name} must be a whole number >= 1; got {value!r}")
             values[name] = value
-        elif name == "rating_col":
+        elif name in ("rating_col", "task"):
             if value is not None and (not isinstance(value, str) or not value):
-                raise CatalogError(f"{what}: rating_col must be a column name or null; got {value!r}")
+                raise CatalogError(f"{what}: {name} must be a name or null; got {value!r}")
             values[name] = value
         elif name == "alpha":
             if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0 < value < 1:
@@ -225,6 +226,13 @@ def analyse_catalog_study(
         "declared analysis v" + str(version) if version is not None else "default analysis (none declared)"
     )
     analysis.notes.insert(0, f"Settings: the study's {source}.")
+    tasks = sorted(map(str, pd.unique(table["task"])))
+    if len(tasks) > 1:
+        others = ", ".join(t for t in tasks if t != settings.task)
+        analysis.notes.insert(
+            1, f"Task: {settings.task} (trials count per task); the study's other task(s), {others}, "
+            "are analysed on their own (--task)."
+        )
     if overridden:
         analysis.notes.insert(
             1,

@@ -383,6 +383,8 @@ def demo(small: bool, as_json: bool) -> None:
     for note in validity.notes + analysis.notes:
         click.echo(f"note: {note}")
     click.echo(f"composite score: {composite_summary(validity.composite)}")
+    if result.final is not None:
+        click.echo(_final_task_line(result.final, result.final_report))
     click.echo(f"{result.sessions} sessions in {result.seconds:.0f} s; full report: {result.report}")
     first_trainee = analysis.sessions.loc[analysis.sessions["label"] == "trainee", "session_id"]
     if len(first_trainee):
@@ -825,6 +827,17 @@ def sessions_show(uid: str, as_json: bool) -> None:
             click.echo(f"{key:12s} {value}")
 
 
+def _final_task_line(final, report) -> str:
+    """One line on the demo's final task: its three largest expert-trainee differences and its report."""
+    table = final.validity.table.dropna(subset=["auc"])
+    top = table.assign(effect=(table["auc"] - 0.5).abs()).nlargest(3, "effect")
+    named = ", ".join(f"{row.metric} (AUC {row.auc:.2f})" for row in top.itertuples())
+    return (
+        f"final task {final.settings.task} (each participant once, after practice): largest expert-trainee "
+        f"differences {named}; report: {report}"
+    )
+
+
 def _show_stitches(stitches: list[dict]) -> None:
     """Where each bite went, in mm (fits 80 columns)."""
     if not stitches:
@@ -944,9 +957,10 @@ def score(uids, study, as_json) -> None:
 @click.option(
     "--rating", default=None, help="Override: a continuous rating for concurrent validity, e.g. grs_total."
 )
+@click.option("--task", default=None, help="Override: the task whose sessions are analysed.")
 @click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
 @user_errors
-def report(study, out, groups, level, metric_names, rule, rating, as_json) -> None:
+def report(study, out, groups, level, metric_names, rule, rating, task, as_json) -> None:
     """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures).
 
     The analysis is the one the study declared (`vascsim studies analysis STUDY` shows it), the
@@ -962,6 +976,8 @@ def report(study, out, groups, level, metric_names, rule, rating, as_json) -> No
     overrides = _analysis_options(groups, level, metric_names, rule)
     if rating is not None:
         overrides["rating_col"] = rating
+    if task is not None:
+        overrides["task"] = task
     with _stderr_console().status("analysing and writing the report..."):
         analysis, source = analyse_catalog_study(catalog, study, overrides)
         page = write_report(analysis, Path(out) if out else home / "reports" / study, title=f"Study {study}")

@@ -31,9 +31,10 @@ from sessions.models import (
     StitchResult,
     StreamFile,
     Study,
+    Task,
 )
 from sessions.status import SCORABLE, SessionStatus
-from sessions.synthetic import bite_parameters
+from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import region_presets, session_tissue, task_preset, task_simulation, task_spec
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
@@ -76,7 +77,14 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
     if spec == "scripted":
         bites = task.bites()
         each = bite_parameters(parameters or SuturingPassParameters(), len(bites))
-        passes = [SuturingPass(Needle.curved(), *bite, p) for bite, p in zip(bites, each, strict=True)]
+        approach = None
+        if task.access is not None:  # the hand comes in from where the wound lets it
+            approach = task.access["approach"]
+            each = [in_restricted_access(p, task.access["tilt_deg"]) for p in each]
+        passes = [
+            SuturingPass(Needle.curved(), *bite, p, approach=approach)
+            for bite, p in zip(bites, each, strict=True)
+        ]
         if len(passes) == 1:
             return ScriptedDevice(passes[0].pose_and_grip), passes[0].duration
         trajectory, duration = sequence_of_passes(passes)
@@ -312,7 +320,8 @@ def _with_ratings(catalog: Catalog, study_name: str, wide: pd.DataFrame) -> pd.D
 
 
 def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
-    """One row per scored session of a study: ids, label, trial, phase, synthetic flag, every metric."""
+    """One row per scored session of a study: ids, label, trial, phase, synthetic flag, task, every
+    metric (trials count per task: an analysis takes one task's sessions)."""
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
         rows = orm.execute(
@@ -323,10 +332,12 @@ def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
                 Session.trial,
                 Session.phase,
                 Participant.synthetic,
+                Task.name,
                 MetricResult.metric,
                 MetricResult.value,
             )
             .join(Participant, Session.participant_id == Participant.id)
+            .join(Task, Session.task_id == Task.id)
             .join(MetricResult, MetricResult.session_id == Session.id)
             .where(
                 Participant.study_id == study.id,
@@ -334,11 +345,12 @@ def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
                 MetricResult.registry_version == REGISTRY_VERSION,
             )
         ).all()
-    columns = ["session_id", "participant_id", "label", "trial", "phase", "synthetic", "metric", "value"]
+    columns = ["session_id", "participant_id", "label", "trial", "phase", "synthetic", "task"]
+    columns += ["metric", "value"]
     long = pd.DataFrame(rows, columns=columns)
     if long.empty:
         raise WrongState(f"study {study_name!r} has no scored sessions; run `vascsim score` first")
-    ids = columns[:6]
+    ids = columns[:7]
     wide = long.set_index([*ids, "metric"])["value"].unstack("metric").reset_index()
     wide.columns.name = None
     from metrics import REGISTRY

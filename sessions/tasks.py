@@ -25,6 +25,9 @@ class TaskSpec:
     :class:`metrics.placement.PlacementTargets`); recorded in each session's header."""
     more_bites: tuple = ()
     """Further bites after the first, in the order they are made: (entry, normal, bite_direction)."""
+    access: dict | None = None
+    """Restricted access: ``approach`` (unit vector from the entry point: the only direction the
+    hand can come from) and ``tilt_deg`` (its angle from the wall's normal); None: open access."""
 
     def bites(self) -> list[tuple]:
         """Every bite of the task, in order: (entry, normal, bite_direction) each (m, unit vectors)."""
@@ -177,6 +180,32 @@ def _diseased_wall() -> TaskSpec:
 
 
 TASKS["diseased-wall"] = _diseased_wall()
+
+
+def _restricted_access(tilt_deg: float = 45.0) -> TaskSpec:
+    """The interrupted stitch at the bottom of a deep, narrow wound: the hand can only come in
+    ``tilt_deg`` off the wall's normal, along the vessel's axis, yet the needle must still meet the
+    wall square and be turned along its curve, so the wrist must turn further."""
+    single = _interrupted_stitch()
+    normal = np.asarray(single.normal)
+    tilt = np.radians(tilt_deg)
+    approach = np.cos(tilt) * normal + np.sin(tilt) * np.array([0.0, 0.0, 1.0])
+    return TaskSpec(
+        "restricted-access",
+        "vessel_patch",
+        f"The interrupted stitch through an arteriotomy deep in a narrow wound: the needle holder can "
+        f"only come in {tilt_deg:g} deg off the wall's normal, along the vessel, so entering square and "
+        "turning the needle along its curve take a further turn of the wrist.",
+        single.entry,
+        single.normal,
+        single.bite_direction,
+        dict(single.parameters),
+        placement=single.placement,
+        access={"approach": [float(x) for x in approach], "tilt_deg": tilt_deg},
+    )
+
+
+TASKS["restricted-access"] = _restricted_access()
 
 
 def task_spec(name: str) -> TaskSpec:

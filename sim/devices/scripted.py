@@ -247,7 +247,8 @@ class SuturingPass:
     """A whole stitch: approach, insertion by wrist rotation, release, re-grab at the tip, pull-through.
 
     entry: entry point on the tissue surface (m); normal: outward surface normal there;
-    bite_direction: along the surface towards the exit. The needle's circle lies in
+    bite_direction: along the surface towards the exit; approach: the direction the hand
+    descends from onto the entry point (default: the normal). The needle's circle lies in
     the plane of the normal and the bite direction; its tip reaches the entry point
     at the end of the approach with the parameters' entry angle (tilted away from
     the bite). ``pose_and_grip(t)`` is a trajectory for :class:`ScriptedDevice`.
@@ -260,10 +261,16 @@ class SuturingPass:
         normal: ArrayLike,
         bite_direction: ArrayLike,
         parameters: SuturingPassParameters | None = None,
+        approach: ArrayLike | None = None,
     ) -> None:
         self.needle = needle
         self.p = parameters or SuturingPassParameters()
         n = _unit(normal)
+        self.approach = n if approach is None else _unit(approach)
+        """The direction (from the entry point) the hand descends along: the normal, or where a
+        restricted access lets it come from; it must come from outside the wall."""
+        if not self.approach @ n > 0.05:
+            raise DeviceError("a suturing pass must approach from outside the wall (approach . normal > 0)")
         s = np.asarray(bite_direction, dtype=np.float64)
         s = _unit(s - (s @ n) * n)
         tilt = math.radians(self.p.entry_angle_deg)
@@ -336,7 +343,7 @@ class SuturingPass:
         if t < phases["insertion"][0]:
             pose = self._at_entry
             lift = (1.0 - max(t, 0.0) / self.p.approach_time) * self.p.approach_distance
-            pose, grip = Pose.unchecked(pose.position + lift * self.normal, pose.rotation), True
+            pose, grip = Pose.unchecked(pose.position + lift * self.approach, pose.rotation), True
         elif t < phases["regrab"][0]:
             angle = self._insertion_angle(t - phases["insertion"][0])
             pose, grip = self.turned(self.p.wrist_rotation * angle), True

@@ -27,7 +27,9 @@ def demo_site(tmp_path_factory):
     run_demo(
         catalog,
         home,
-        DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=2, retention=False),
+        DemoSize(
+            experts=2, expert_sessions=2, trainees=2, practice_sessions=2, retention=False, closures=False
+        ),
     )
     with catalog.session() as orm:
         study = orm.scalar(select(Study).where(Study.name == DEMO_STUDY))

@@ -273,3 +273,23 @@ def test_the_diseased_wall_pierces_its_plaque_at_the_calcified_threshold(tmp_pat
     assert 0.8 <= forces[0] < 1.2, forces  # healthy wall
     assert (forces[1:] >= 1.5).all() and (forces[1:] < 2.2).all(), forces  # the plaque
     assert metrics_of(streams)["full_thickness_fraction"] == 1.0
+
+
+@pytest.mark.slow
+def test_restricted_access_comes_in_from_the_side_and_magnifies_a_clumsy_hand(tmp_path):
+    """Issue 22's restricted access: the same bite as the interrupted stitch, the hand coming in 45 deg
+    off the wall's normal. The same hand (same seed) enters further off square there than with open
+    access; an expert still lands on the marks, through the intima."""
+    from sessions.tasks import task_spec
+
+    access = task_spec("restricted-access").access
+    normal = np.asarray(task_spec("restricted-access").normal)
+    assert math.degrees(math.acos(float(np.asarray(access["approach"]) @ normal))) == pytest.approx(45.0)
+    open_, restricted = (
+        metrics_of(recorded_task(task, 0.3, 4, tmp_path / task))
+        for task in ("interrupted-stitch", "restricted-access")
+    )
+    assert restricted["entry_angle_error_deg"] > open_["entry_angle_error_deg"] + 5.0, (open_, restricted)
+    expert = metrics_of(recorded_task("restricted-access", 1.0, 4, tmp_path / "expert"))
+    assert expert["full_thickness_fraction"] == 1.0 and expert["entry_to_target"] < 0.00035, expert
+    assert expert["entry_angle_error_deg"] < 6.0

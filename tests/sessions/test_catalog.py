@@ -72,7 +72,7 @@ def test_bad_urls_are_one_line_errors(tmp_path):
 @pytest.mark.slow
 def test_reduced_demo_report_matches_the_stored_streams(catalog_url, tmp_path, open_catalog):
     catalog = open_catalog(catalog_url)
-    result = run_demo(catalog, tmp_path, DemoSize(2, 2, 3, 3, True))
+    result = run_demo(catalog, tmp_path, DemoSize(2, 2, 3, 3, True, closures=False))
     assert result.sessions == 2 * 2 + 3 * 4
     with catalog.session() as orm:
         rows = orm.execute(select(Session.uid, Session.directory, Session.status)).all()

@@ -144,6 +144,9 @@ def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
     lines = result.stdout.strip().splitlines()
     report = Path(lines[-3].rsplit("full report: ", 1)[1])
     assert report.is_file() and report.name == "report.html"
+    # the curriculum's final task (issue 22): analysed on its own, with its own report
+    assert lines[-4].startswith("final task arteriotomy-closure (each participant once, after practice)")
+    assert Path(lines[-4].rsplit("report: ", 1)[1]).is_file()
     assert lines[-2].startswith("replay a trainee against the experts: vascsim replay S-")
     uid = lines[-2].split("vascsim replay ", 1)[1].split()[0]
     assert lines[-1].startswith("open the results in the dashboard: vascsim users add NAME --role admin")

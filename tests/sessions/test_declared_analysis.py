@@ -36,7 +36,11 @@ def demo(tmp_path_factory):
     home = tmp_path_factory.mktemp("home")
     catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
     run_demo(
-        catalog, home, DemoSize(experts=3, expert_sessions=2, trainees=3, practice_sessions=3, retention=True)
+        catalog,
+        home,
+        DemoSize(
+            experts=3, expert_sessions=2, trainees=3, practice_sessions=3, retention=True, closures=False
+        ),
     )
     with catalog.session() as orm:
         create_user(orm, "supervisor", PASSWORD, "supervisor")
@@ -152,7 +156,11 @@ def test_cli_declares_and_shows(demo):
 
 def test_what_counts_as_retention_is_declared_and_used(tmp_path):
     catalog = Catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}")
-    run_demo(catalog, tmp_path, DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=3))
+    run_demo(
+        catalog,
+        tmp_path,
+        DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=3, closures=False),
+    )
     before, _ = analyse_catalog_study(catalog, DEMO_STUDY)
     _cli(
         tmp_path,
@@ -200,7 +208,9 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
     run_demo(
         catalog,
         home,
-        DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=3, retention=False),
+        DemoSize(
+            experts=2, expert_sessions=2, trainees=2, practice_sessions=3, retention=False, closures=False
+        ),
     )
     with catalog.session() as orm:
         old = orm.scalar(select(Session).order_by(Session.id).limit(1))

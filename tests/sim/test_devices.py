@@ -240,6 +240,13 @@ def test_suturing_pass_parameters_shape_the_motion():
     np.testing.assert_allclose(needle.world_vertices(at_entry)[0], [0, 0, 0], atol=1e-12)
     tangent = needle.tip_tangent(at_entry)
     assert math.degrees(math.acos(-tangent[2])) == pytest.approx(30.0, abs=1e-9)
+    # restricted access: the hand descends along the approach, onto the same pose at entry
+    side = SuturingPass(needle, [0, 0, 0], [0, 0, 1], [1, 0, 0], approach=[0, 1, 1])
+    start, entry = (side.pose_and_grip(t)[0].position for t in (0.0, side.phases["insertion"][0]))
+    np.testing.assert_allclose(entry, base.pose_and_grip(base.phases["insertion"][0])[0].position, atol=1e-15)
+    np.testing.assert_allclose(start - entry, side.p.approach_distance * np.array([0, 1, 1]) / math.sqrt(2))
+    with pytest.raises(DeviceError, match="approach from outside the wall"):
+        SuturingPass(needle, [0, 0, 0], [0, 0, 1], [1, 0, 0], approach=[1, 0, -0.2])
 
 
 @settings(max_examples=200, deadline=None)
