@@ -27,7 +27,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 
 from sessions.runner import SessionPlan, open_device  # noqa: E402
 from sessions.synthetic import pass_parameters  # noqa: E402
-from sessions.tasks import TASKS, task_preset, tissue_for  # noqa: E402
+from sessions.tasks import TASKS, region_forces, task_preset, tissue_for  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
 
@@ -36,7 +36,8 @@ def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
     """The whole task (every bite) as a scripted expert makes it, through the runner's device."""
     plan = SessionPlan("benchmark", "E", task, 1)
     device, duration = open_device("scripted", plan, None, pass_parameters(1.0, seed))
-    return Simulation(tissue, Needle.curved(), device, forces=task_preset(task).forces), duration
+    forces, by_region = task_preset(task).forces, region_forces(task, tissue.mesh)
+    return Simulation(tissue, Needle.curved(), device, forces=forces, region_forces=by_region), duration
 
 
 def convergence() -> None:

@@ -18,7 +18,7 @@ from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import composite_summary, participant_medians, summary_table
 from metrics.study import practice_mask
 from sessions.catalog import Catalog
-from sessions.models import Annotation, Participant, Session, Study, User
+from sessions.models import Annotation, Participant, Session, Study, Task, User
 from sessions.review import against_band, expert_band, session_stitches
 from sessions.status import SCORABLE
 
@@ -157,15 +157,17 @@ def participant_progress(
             "study": {"id": participant.study.id, "name": participant.study.name},
         }
         sessions = orm.execute(
-            select(Session.uid, Session.trial, Session.phase, Session.status, Session.started_at)
+            select(Session.uid, Task.name, Session.trial, Session.phase, Session.status, Session.started_at)
+            .join(Task, Session.task_id == Task.id)
             .where(Session.participant_id == participant.id)
-            .order_by(Session.trial, Session.id)
+            .order_by(Session.started_at, Session.id)
         ).all()
         study_id = participant.study_id
     progress = {
         "participant": info,
         "sessions": [
-            {"uid": u, "trial": t, "phase": p, "status": s, "started_at": a} for u, t, p, s, a in sessions
+            {"uid": u, "task": k, "trial": t, "phase": p, "status": s, "started_at": a}
+            for u, k, t, p, s, a in sessions
         ],
         "curves": [],
         "benchmarks": [],

@@ -723,16 +723,17 @@ def sessions() -> None:
 
 @sessions.command("list")
 @click.option("--study", default=None, help="Only this study.")
+@click.option("--task", default=None, help="Only sessions of this task.")
 @click.option("--status", type=click.Choice(SESSION_STATUSES), default=None)
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @user_errors
-def sessions_list(study, status, as_json) -> None:
-    """List sessions (newest last)."""
+def sessions_list(study, task, status, as_json) -> None:
+    """List sessions (newest last), with the task each ran (trials count per task)."""
     import pandas as pd
     from sqlalchemy import select
 
     from sessions.analysis import metric_versions
-    from sessions.models import Participant, Session, Study
+    from sessions.models import Participant, Session, Study, Task
 
     catalog, _ = _catalog()
     with catalog.session() as orm:
@@ -741,6 +742,7 @@ def sessions_list(study, status, as_json) -> None:
                 Session.uid,
                 Study.name,
                 Participant.code,
+                Task.name,
                 Session.trial,
                 Session.phase,
                 Session.device,
@@ -748,21 +750,28 @@ def sessions_list(study, status, as_json) -> None:
             )
             .join(Participant, Session.participant_id == Participant.id)
             .join(Study, Participant.study_id == Study.id)
+            .join(Task, Session.task_id == Task.id)
             .order_by(Session.id)
         )
         if study:
             catalog.study(orm, study)
             query = query.where(Study.name == study)
+        if task:
+            query = query.where(Task.name == task)
         if status:
             query = query.where(Session.status == status)
         found = orm.execute(query.add_columns(Session.id)).all()
     versions = metric_versions(catalog, [r[-1] for r in found])
-    columns = ("session", "study", "participant", "trial", "phase", "device", "status")
+    columns = ("session", "study", "participant", "task", "trial", "phase", "device", "status")
     rows = [dict(zip(columns, r[:-1], strict=True), metrics=versions[r[-1]]) for r in found]
     if as_json:
         _json(rows)
         return
-    _print_frame(pd.DataFrame(rows, columns=[*columns, "metrics"]), "Sessions")
+    frame = pd.DataFrame(rows, columns=[*columns, "metrics"])
+    # a column with one value in every row is said once, in the caption, so the rest fit 80 columns
+    same = [c for c in ("study", "device", "metrics") if len(frame) and frame[c].nunique() == 1]
+    caption = "; ".join(f"{c} {frame[c].iloc[0]}" for c in same) if same else None
+    _print_frame(frame.drop(columns=same), "Sessions", f"all sessions: {caption}" if caption else None)
     stale = [r for r in rows if r["metrics"].startswith("stale")]
     if stale:
         studies = sorted({r["study"] for r in stale})

@@ -178,7 +178,6 @@ def run_demo(
         (SessionPlan(DEMO_STUDY, code, task, trial, phase), skill, seed * 100_000 + index)
         for index, (code, task, trial, phase, skill) in enumerate(plans)
     ]
-    runs.sort(key=lambda run: run[0].task != FINAL_TASK)  # the longest sessions first: no idle tail
     for plan in _run_all(catalog, home, runs, workers):
         if advance is not None:
             advance(f"{plan.participant} {plan.task} trial {plan.trial} ({plan.phase})")

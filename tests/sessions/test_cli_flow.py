@@ -153,3 +153,6 @@ def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
     assert lines[-1].endswith("http://127.0.0.1:8000/studies/1")  # the demo study of a fresh catalog
     shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
     assert shown["status"] == "complete"
+    listed = invoke("sessions", "list", "--study", "synthetic-demo").stdout  # a curriculum: the task shown
+    assert "arteriotomy-closure" in listed and "interrupted-stitch" in listed and uid in listed
+    assert max(len(line) for line in listed.splitlines()) <= 80 and "metrics current" in listed
