@@ -840,7 +840,10 @@ def _final_task_line(final, report) -> str:
     """One line on the demo's final task: its three largest expert-trainee differences and its report."""
     table = final.validity.table.dropna(subset=["auc"])
     top = table.assign(effect=(table["auc"] - 0.5).abs()).nlargest(3, "effect")
-    named = ", ".join(f"{row.metric} (AUC {row.auc:.2f})" for row in top.itertuples())
+    named = ", ".join(
+        f"{row.metric} (AUC {row.auc:.2f}: {'experts' if row.auc > 0.5 else 'trainees'} better)"
+        for row in top.itertuples()
+    )
     return (
         f"final task {final.settings.task} (each participant once, after practice): largest expert-trainee "
         f"differences {named}; report: {report}"

@@ -104,11 +104,16 @@ def _reset_study(catalog: Catalog, name: str) -> None:
 _WORKER_CATALOGS: dict[str, Catalog] = {}
 
 
-def _run_planned(url: str, home: str, plan: SessionPlan, skill: float, seed: int) -> SessionPlan:
+def _skills(profile, trial: int, phase: str = "practice") -> tuple[float, float]:
+    """(motion skill, placement skill) of a synthetic participant at a trial."""
+    return profile.skill(trial, phase), profile.placement_skill(trial, phase)
+
+
+def _run_planned(url: str, home: str, plan: SessionPlan, skills: tuple, seed: int) -> SessionPlan:
     """One demo session in a worker process (its own catalog connection, opened once)."""
     if url not in _WORKER_CATALOGS:
         _WORKER_CATALOGS[url] = Catalog(url, migrate=False)
-    run_session(_WORKER_CATALOGS[url], Path(home), plan, pass_parameters(skill, seed))
+    run_session(_WORKER_CATALOGS[url], Path(home), plan, pass_parameters(skills[0], seed, skills[1]))
     return plan
 
 
@@ -117,8 +122,8 @@ def _run_all(catalog: Catalog, home: Path, runs: list, workers: int) -> Iterator
     independent, their trials are fixed in advance and the catalog takes concurrent writers);
     yields each plan as its session is stored."""
     if workers <= 1:
-        for plan, skill, session_seed in runs:
-            run_session(catalog, home, plan, pass_parameters(skill, session_seed))
+        for plan, skills, session_seed in runs:
+            run_session(catalog, home, plan, pass_parameters(skills[0], session_seed, skills[1]))
             yield plan
         return
     context = multiprocessing.get_context("spawn")  # no inherited database connections or threads
@@ -163,11 +168,11 @@ def run_demo(
                     kind, seed * 1000 + zlib.crc32(code.encode()) % 997
                 )  # not hash(): salted per process
                 for trial in range(1, sessions + 1):
-                    plans.append((code, TASK, trial, "practice", profile.skill(trial)))
+                    plans.append((code, TASK, trial, "practice", _skills(profile, trial)))
                 if size.closures:  # the final task, with the skill the practice left
-                    plans.append((code, FINAL_TASK, 1, "practice", profile.skill(sessions)))
+                    plans.append((code, FINAL_TASK, 1, "practice", _skills(profile, sessions)))
                 if kind == "trainee" and size.retention:
-                    retained = profile.skill(sessions, "retention")
+                    retained = _skills(profile, sessions, "retention")
                     plans.append((code, TASK, sessions + 1, "retention", retained))
         for name in {task for _, task, *_ in plans}:  # the rows the workers' sessions point at
             spec = task_spec(name)
@@ -175,8 +180,8 @@ def run_demo(
     for name in {task for _, task, *_ in plans}:
         tissue_for(name, home / "cache")  # precomputed once, on disk, before the workers load it
     runs = [
-        (SessionPlan(DEMO_STUDY, code, task, trial, phase), skill, seed * 100_000 + index)
-        for index, (code, task, trial, phase, skill) in enumerate(plans)
+        (SessionPlan(DEMO_STUDY, code, task, trial, phase), skills, seed * 100_000 + index)
+        for index, (code, task, trial, phase, skills) in enumerate(plans)
     ]
     for plan in _run_all(catalog, home, runs, workers):
         if advance is not None:

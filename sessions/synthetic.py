@@ -32,12 +32,25 @@ class Profile:
     learning_rate: float  # per practice trial
 
     def skill(self, trial: int, phase: str = "practice") -> float:
+        return self._curve(trial, phase, self.learning_rate)
+
+    def placement_skill(self, trial: int, phase: str = "practice") -> float:
+        """How accurately the hand places its bites: the same curve, learnt at 0.4 of the rate (a
+        modelling choice: aiming a curved needle at a mark improves more slowly than the motion)."""
+        return self._curve(trial, phase, PLACEMENT_LEARNING * self.learning_rate)
+
+    def _curve(self, trial: int, phase: str, rate: float) -> float:
         if self.kind == "expert":
             return self.start_skill
-        skill = self.start_skill + (0.99 - self.start_skill) * (
-            1 - math.exp(-self.learning_rate * (trial - 1))
-        )
+        skill = self.start_skill + (0.99 - self.start_skill) * (1 - math.exp(-rate * (trial - 1)))
         return skill - (0.08 if phase == "retention" else 0.0)
+
+
+PLACEMENT_LEARNING = 0.4
+"""Placement accuracy's learning rate as a fraction of the motion's (synthetic trainees)."""
+SHALLOW_BITE_OFFSET = 1.1e-3
+"""A bite taken this much too near the wound edge (0.4 mm from it on the interrupted stitch): the
+needle's curve comes out through the cut edge, a partial-thickness bite."""
 
 
 def profile_for(kind: str, seed: int) -> Profile:
@@ -49,10 +62,14 @@ def profile_for(kind: str, seed: int) -> Profile:
     raise ValueError(f"synthetic profile must be one of {', '.join(PROFILES)}; got {kind!r}")
 
 
-def pass_parameters(skill: float, seed: int) -> SuturingPassParameters:
-    """A scripted pass for a given skill (0 = first-day trainee, 1 = expert)."""
+def pass_parameters(skill: float, seed: int, placement_skill: float | None = None) -> SuturingPassParameters:
+    """A scripted pass for a given skill (0 = first-day trainee, 1 = expert); where the bite lands
+    follows ``placement_skill`` (default: the same skill). A hand that places badly now and then
+    (probability 0.3 x its placement clumsiness) takes its bite too near the edge, a partial-thickness
+    bite out through the cut edge."""
     rng = np.random.default_rng(seed)
     clumsiness = 1.0 - min(max(skill, 0.0), 1.0)
+    aim = clumsiness if placement_skill is None else 1.0 - min(max(placement_skill, 0.0), 1.0)
     angle = float(abs(rng.normal(2.0 + 26.0 * clumsiness, 1.5 + 4.0 * clumsiness)))
     speed = float(0.003 + 0.007 * clumsiness + rng.normal(0, 0.0003))
     hesitations = int(rng.binomial(3, clumsiness))
@@ -60,9 +77,11 @@ def pass_parameters(skill: float, seed: int) -> SuturingPassParameters:
     # first-day trainee's ~0.8 mm off (sd 1.2 mm); along it (the bite's size) 0.4 of that, which
     # keeps every bite clear of the wound edge. Drawn after the other parameters, so a seed's other
     # parameters are what they always were.
-    spread = 1e-4 + 1.1e-3 * clumsiness
+    spread = 1e-4 + 1.1e-3 * aim
     along = float(np.clip(rng.normal(0.0, 0.4 * spread), -0.5e-3, 0.5e-3))
     across = float(np.clip(rng.normal(0.0, spread), -1.2e-3, 1.2e-3))
+    if rng.random() < 0.3 * aim:  # drawn last: a seed's other parameters are what they were
+        along = SHALLOW_BITE_OFFSET
     return SuturingPassParameters(
         entry_angle_deg=angle,
         insertion_speed=speed,
