@@ -162,7 +162,9 @@ class BiphaseTissue:
                 f"have (regions: {', '.join(sorted(mesh.region_names.values()))})"
             )
 
-        def phase(modulus: Callable[[BiphaseParameters], float]) -> dict[int, Material]:
+        def phase(modulus: Callable[[BiphaseParameters], float]) -> Material | dict[int, Material]:
+            if not by_region:  # one material: the model (and its cache key) as a uniform wall's
+                return Material(modulus(p), p.poisson_ratio)
             return {
                 rid: Material(modulus(q), q.poisson_ratio)
                 for rid, name in mesh.region_names.items()
