@@ -3,15 +3,17 @@
 Run:  .venv/bin/python benchmarks/demo.py [--repeats 3]
 
 Each repeat runs the installed `vascsim demo` command in a new, empty VASCSIM_HOME
-(so the task model is built and cached inside the timed run, as on a fresh set-up)
-with the embedded SQLite catalog: 54 sessions through the real simulator, recorder
-and catalog, all metrics, the construct-validity report, benchmarks and learning
-curves. Prints the median wall time; target < 120 s on 2 cores.
+(so the task models are built and cached inside the timed run, as on a fresh set-up)
+with the embedded SQLite catalog: the two-task curriculum's 64 sessions through the
+real simulator, recorder and catalog (two at once), all metrics, each task's
+construct-validity report, benchmarks and learning curves. Prints the median wall
+time; target < 120 s on 2 cores.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -33,10 +35,11 @@ def main() -> None:
             env = dict(os.environ, VASCSIM_HOME=home)
             env.pop("VASCSIM_DATABASE_URL", None)
             start = time.perf_counter()
-            subprocess.run([str(command), "demo", "--json"], env=env, check=True, capture_output=True)
+            done = subprocess.run([str(command), "demo", "--json"], env=env, check=True, capture_output=True)
             times.append(time.perf_counter() - start)
+            sessions = json.loads(done.stdout)["sessions"]
     print(
-        f"vascsim demo, fresh VASCSIM_HOME, 54 sessions: median {np.median(times):.1f} s, "
+        f"vascsim demo, fresh VASCSIM_HOME, {sessions} sessions: median {np.median(times):.1f} s, "
         f"min {min(times):.1f} s over {args.repeats} runs (target < 120 s)"
     )
 

@@ -23,7 +23,7 @@ from sqlalchemy import func, select
 from metrics.registry import REGISTRY_VERSION
 from metrics.study import StudyAnalysis, oriented
 from sessions.analysis import analyse_catalog_study
-from sessions.catalog import Catalog, CatalogError
+from sessions.catalog import Catalog, NotFound
 from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
 
 CACHED_STUDIES = 16
@@ -97,7 +97,7 @@ class AnalysisCache:
         with self.catalog.session() as orm:
             study = orm.get(Study, study_id)
             if study is None:
-                raise CatalogError(f"no study {study_id}")
+                raise NotFound("study", study_id)
             name = study.name
         analysis, _ = analyse_catalog_study(self.catalog, name)
         uid_of = {uid: k for k, uid in enumerate(analysis.sessions["session_id"])}

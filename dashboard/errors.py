@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse, Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from sessions.catalog import AlreadyExists, WrongState
+from sessions.catalog import AlreadyExists, Forbidden, NotFound, WrongState
 from sim.errors import VascsimError
 
 
@@ -60,6 +60,18 @@ CONFLICT = {409: ERROR_SCHEMA}
 """Documented on the routes that answer 409: what they would create exists, or the state forbids it."""
 
 
+def status_of(error: VascsimError) -> int:
+    """The HTTP status of a domain error, by its type: not found 404, forbidden 403, already there or
+    in the wrong state 409, anything else the request's fault (400)."""
+    if isinstance(error, NotFound):
+        return 404
+    if isinstance(error, Forbidden):
+        return 403
+    if isinstance(error, AlreadyExists | WrongState):
+        return 409
+    return 400
+
+
 def _answer(request: Request, status: int, message: str, headers: dict | None = None) -> Response:
     if request.url.path.startswith("/api") or request.url.path.startswith("/ingest"):
         return JSONResponse(error_body(status, message), status_code=status, headers=headers)
@@ -77,10 +89,7 @@ def install_error_handlers(app) -> None:
         return _answer(request, error.status, error.message, headers)
 
     async def vascsim_error(request: Request, error: VascsimError) -> Response:
-        message = str(error)
-        if isinstance(error, AlreadyExists | WrongState):
-            return _answer(request, 409, message)
-        return _answer(request, 404 if message.startswith("no ") else 400, message)
+        return _answer(request, status_of(error), str(error))
 
     async def http_error(request: Request, error: StarletteHTTPException) -> Response:
         return _answer(request, error.status_code, str(error.detail))

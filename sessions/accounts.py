@@ -17,7 +17,7 @@ from argon2.exceptions import InvalidHashError, VerificationError
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session as OrmSession
 
-from sessions.catalog import AlreadyExists, CatalogError, now
+from sessions.catalog import AlreadyExists, CatalogError, NotFound, now
 from sessions.models import ROLES, LoginSession, Participant, StationToken, User
 
 MIN_PASSWORD_LENGTH = 10
@@ -34,6 +34,10 @@ class AccountError(CatalogError):
 
 class AccountConflict(AccountError, AlreadyExists):
     """An account, link or station token that already exists."""
+
+
+class AccountNotFound(AccountError, NotFound):
+    """No user or station token of that name or id."""
 
 
 def token_digest(token: str) -> str:
@@ -73,7 +77,7 @@ def create_user(orm: OrmSession, username: str, password: str, role: str) -> Use
 def user_named(orm: OrmSession, username: str) -> User:
     found = orm.scalar(select(User).where(User.username == username))
     if found is None:
-        raise AccountError(f"no user {username!r}; list them with `vascsim users list`")
+        raise AccountNotFound("user", username, list(orm.scalars(select(User.username))))
     return found
 
 
@@ -180,6 +184,6 @@ def station_for_token(orm: OrmSession, token: str) -> str | None:
 def revoke_station_token(orm: OrmSession, token_id: int) -> StationToken:
     row = orm.get(StationToken, token_id)
     if row is None:
-        raise AccountError(f"no station token {token_id}")
+        raise AccountNotFound("station token", token_id)
     row.revoked_at = row.revoked_at or now()
     return row

@@ -7,6 +7,7 @@ schema is created and upgraded by the Alembic migrations in ``sessions/migration
 
 from __future__ import annotations
 
+import difflib
 import fcntl
 import math
 import random
@@ -45,6 +46,23 @@ class AlreadyExists(CatalogError):
 
 class WrongState(CatalogError):
     """The request is well formed but what it names is not in a state that allows it (HTTP 409)."""
+
+
+class NotFound(CatalogError):
+    """What a request names is not in the catalog (HTTP 404). ``kind`` says what was looked for
+    ("study", "session", ...), so a front-end can say where to list them."""
+
+    def __init__(
+        self, kind: str, name: object, known: list[str] | None = None, where: str = "", noun: str = ""
+    ) -> None:
+        nearest = difflib.get_close_matches(str(name), known or [], n=1, cutoff=0.6)
+        hint = f"; did you mean {nearest[0]!r}?" if nearest else ""
+        super().__init__(f"no {noun or kind} {name!r}{where}{hint}")
+        self.kind = kind
+
+
+class Forbidden(CatalogError):
+    """The request is refused to this user or station (HTTP 403)."""
 
 
 def now() -> datetime:
@@ -152,17 +170,17 @@ class Catalog:
         found = orm.scalar(select(Study).where(Study.name == name))
         if found is None:
             if not create:
-                raise CatalogError(f"no study named {name!r}; list them with `vascsim studies`")
+                raise NotFound("study", name, list(orm.scalars(select(Study.name))), noun="study named")
             found = Study(name=name, description=description, created_at=now())
             orm.add(found)
             orm.flush()
         return found
 
     def recorded_session(self, orm: OrmSession, uid: str) -> Session:
-        """The session with this uid; a CatalogError naming it when there is none."""
+        """The session with this uid; :class:`NotFound` naming it when there is none."""
         found = orm.scalar(select(Session).where(Session.uid == uid))
         if found is None:
-            raise CatalogError(f"no session {uid!r}; list them with `vascsim sessions list`")
+            raise NotFound("session", uid)
         return found
 
     def participant(self, orm: OrmSession, study: Study, code: str) -> Participant:
@@ -170,9 +188,8 @@ class Catalog:
             select(Participant).where(Participant.study_id == study.id, Participant.code == code)
         )
         if found is None:
-            raise CatalogError(
-                f"no participant {code!r} in study {study.name!r}; add one with `vascsim participants add`"
-            )
+            codes = list(orm.scalars(select(Participant.code).where(Participant.study_id == study.id)))
+            raise NotFound("participant", code, codes, where=f" in study {study.name!r}")
         return found
 
     def add_participant(
@@ -232,7 +249,7 @@ class Catalog:
                         f"trial {fields['trial']} of this participant on this task is already catalogued"
                     ) from None
                 time.sleep(random.uniform(0.0, 0.01 * (attempt + 1)))
-        raise CatalogError(f"no free trial number after {TRIAL_ATTEMPTS} attempts; too many runs at once")
+        raise WrongState(f"no free trial number after {TRIAL_ATTEMPTS} attempts; too many runs at once")
 
     @staticmethod
     def next_trial(orm: OrmSession, participant_id: int, task_id: int) -> int:
@@ -250,7 +267,7 @@ class Catalog:
         found = orm.scalar(select(Task).where(Task.name == name))
         if found is None:
             if scenario is None:
-                raise CatalogError(f"no task named {name!r}; known tasks come from `vascsim run --help`")
+                raise NotFound("task", name, list(orm.scalars(select(Task.name))), noun="task named")
             found = Task(name=name, scenario=scenario, parameters=parameters or {})
             orm.add(found)
             orm.flush()

@@ -20,6 +20,16 @@ import pandas as pd
 from sessions.status import SCORABLE, SESSION_STATUSES
 from sim.errors import VascsimError
 
+LISTED_BY = {
+    "study": "vascsim studies list",
+    "session": "vascsim sessions list",
+    "participant": "vascsim participants list --study STUDY",
+    "task": "vascsim tasks list",
+    "user": "vascsim users list",
+}
+"""Where the CLI lists each kind of thing the catalog can fail to find (the library's messages say
+only what is missing)."""
+
 
 def user_errors(command: Callable[..., Any]) -> Callable[..., Any]:
     """Turn vascsim errors into a one-line message and exit status 1 (no traceback)."""
@@ -29,7 +39,10 @@ def user_errors(command: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return command(*args, **kwargs)
         except VascsimError as error:
-            click.echo(f"vascsim: error: {error}", err=True)
+            from sessions.catalog import NotFound
+
+            hint = LISTED_BY.get(getattr(error, "kind", None)) if isinstance(error, NotFound) else None
+            click.echo(f"vascsim: error: {error}" + (f" (list them with `{hint}`)" if hint else ""), err=True)
             sys.exit(1)
 
     return wrapper
@@ -333,14 +346,17 @@ def _json_default(value):
 def demo(small: bool, as_json: bool) -> None:
     """Run a small synthetic study end to end and print what it found.
 
-    With no hardware and no configuration: builds the vessel-wall patch scenario,
-    runs 4 synthetic experts x 3 sessions and 6 synthetic trainees x 6 practice
-    sessions + 1 retention session as scripted stitches through the real simulator
-    (simulated time), records each session, catalogues it, scores every metric,
-    then prints which metrics discriminate (primary set declared in advance),
-    effect sizes, each trainee's proficiency status, and the path of the full
-    report (HTML, Markdown, CSV, figures). Re-running replaces the previous demo
-    study; participants are labelled synthetic everywhere.
+    With no hardware and no configuration, a two-task course on a porcine artery
+    with an arteriotomy: 4 synthetic experts x 3 sessions and 6 synthetic trainees
+    x 5 practice sessions + 1 retention session of the interrupted stitch, then
+    every participant closes the arteriotomy once (a row of three stitches). Each
+    session is a scripted pass through the real simulator (simulated time, two at
+    once), recorded, catalogued and scored. Then it prints which metrics
+    discriminate on the practice task (primary set declared in advance), effect
+    sizes, each trainee's proficiency status, the final task's largest
+    differences, and the paths of the reports (HTML, Markdown, CSV, figures).
+    Re-running replaces the previous demo study; participants are labelled
+    synthetic everywhere.
     """
     from metrics.report import compact_caption, compact_summary, composite_summary, summary_table
     from sessions.demo import DEMO_STUDY, DemoSize, run_demo

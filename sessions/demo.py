@@ -1,7 +1,7 @@
 """``vascsim demo``: a small synthetic course through the real simulator, recorder, catalog and metrics.
 
 A two-task curriculum on a porcine artery with an arteriotomy (docs/tasks.md): 4 experts x 3
-sessions and 6 trainees x 6 practice sessions + 1 delayed retention session of the
+sessions and 6 trainees x 5 practice sessions + 1 delayed retention session of the
 interrupted stitch, then every participant closes the arteriotomy with a row of three
 stitches (the course's final task). Each session is scripted through the simulator in
 simulated time, recorded, catalogued and scored; then, per task (trials count per task),
@@ -66,7 +66,7 @@ class DemoSize:
     experts: int = 4
     expert_sessions: int = 3
     trainees: int = 6
-    practice_sessions: int = 6
+    practice_sessions: int = 5
     retention: bool = True
     closures: bool = True  # each participant closes the arteriotomy once, after practice
 

@@ -170,3 +170,18 @@ def test_deactivating_an_account_ends_its_sign_ins_for_good(seeded, client_for):
         == 200
     )
     assert trainee.get("/api/me").status_code == 401  # the old cookie stays dead; a new sign-in is needed
+
+
+def test_domain_errors_map_to_http_statuses_by_type_never_by_wording():
+    """Issue 24: NotFound 404, Forbidden 403, AlreadyExists / WrongState 409, the rest 400; a message
+    that happens to start with "no " is not a 404 (it was: "no free trial number" answered 404)."""
+    from dashboard.errors import status_of
+    from sessions.accounts import AccountConflict, AccountNotFound
+    from sessions.catalog import AlreadyExists, CatalogError, Forbidden, NotFound, WrongState
+
+    assert status_of(NotFound("study", "x")) == 404
+    assert status_of(AccountNotFound("user", "nobody")) == 404
+    assert status_of(Forbidden("this station may not write that session")) == 403
+    assert status_of(AlreadyExists("study 'x' exists")) == status_of(AccountConflict("taken")) == 409
+    assert status_of(WrongState("no free trial number after 20 attempts")) == 409
+    assert status_of(CatalogError("no good: the request is malformed")) == 400

@@ -53,6 +53,13 @@ def test_user_errors_are_one_line_and_change_nothing(home):
         (("sessions", "show", "S-000"), "no session 'S-000'"),
         (("report", "--study", "s"), "has no scored sessions"),
         (("run", "--study", "s", "--participant", "GHOST", "--device", "replay:S-1"), "no participant"),
+        # issue 24: not-found errors by type; the library names what is missing and the nearest name,
+        # the CLI where to list them
+        (
+            ("participants", "list", "--study", "ss"),
+            "no study named 'ss'; did you mean 's'? (list them with `vascsim studies list`)",
+        ),
+        (("sessions", "show", "S-000"), "(list them with `vascsim sessions list`)"),
     ]
     for args, message in cases:
         result = CliRunner().invoke(main, list(args))
