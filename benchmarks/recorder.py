@@ -48,6 +48,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 from recorder import COLUMN, SAMPLE_COLUMNS, SessionWriter  # noqa: E402
 from recorder.remote import encode_batch, pack_frame  # noqa: E402
 from recorder.writer import samples_batch  # noqa: E402
+from sessions.config import prepare_rendering  # noqa: E402
 from sim.runtime.cpu import IdlePolling, stolen_seconds  # noqa: E402
 from sim.runtime.realtime import _set_all_threads, _sleep_until  # noqa: E402
 from sim.tissue_presets import tissue_preset  # noqa: E402
@@ -530,6 +531,7 @@ def in_process() -> None:
 
 
 def main() -> None:
+    prepare_rendering()  # offscreen EGL without a display, as the CLI
     formatter = argparse.RawDescriptionHelpFormatter
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=formatter)
     parser.add_argument("--part", choices=["all", "in-process", "ingest"], default="all")

@@ -32,6 +32,7 @@ from metrics.bench.tracking import read_video, track_frames  # noqa: E402
 from metrics.replay.export import ReplaySettings, export_replay  # noqa: E402
 from recorder import SessionWriter, open_session  # noqa: E402
 from recorder.runtime import RuntimeRecorder  # noqa: E402
+from sessions.config import prepare_rendering  # noqa: E402
 from sim.devices import ScriptedDevice  # noqa: E402
 from sim.devices.scripted import sequence_of_passes  # noqa: E402
 from sim.fem import BiphaseTissue  # noqa: E402
@@ -141,6 +142,7 @@ def tracking_figures(repeats: int) -> None:
 
 
 def main() -> None:
+    prepare_rendering()  # offscreen EGL without a display, as the CLI
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--only", choices=("tracking", "replay"), default=None, help="Run one part only.")

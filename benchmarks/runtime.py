@@ -37,6 +37,7 @@ import time
 import numpy as np
 from kernel_trace import HapticCoreTrace, late_periods_explained
 
+from sessions.config import prepare_rendering
 from sim.devices import ScriptedDevice
 from sim.devices.scripted import sequence_of_passes
 from sim.experiments import paper_cube
@@ -279,6 +280,7 @@ def renderer_for(tissue, size, enabled):
 
 
 def main() -> None:
+    prepare_rendering()  # offscreen EGL without a display, as the CLI
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

@@ -6,6 +6,8 @@ dashboard -> sessions); the web stack is imported only when `serve` runs.
 
 from __future__ import annotations
 
+import inspect
+
 import click
 
 from sessions.cli import _catalog, main, user_errors
@@ -14,9 +16,13 @@ __all__ = ["main"]
 
 
 def _settings_help() -> str:
+    """The settings block of `serve --help`, one per line, kept as written (click's \\b)."""
     from dashboard.settings import documented_settings
 
-    return "\n".join(f"  {name} (default {default}): {text}" for name, default, text in documented_settings())
+    lines = []
+    for name, default, text in documented_settings():
+        lines += [f"{name} (default {default})", f"    {text}"]
+    return "\b\n" + "\n".join(lines)
 
 
 @main.command()
@@ -25,8 +31,15 @@ def _settings_help() -> str:
 )
 @click.option("--port", default=8000, show_default=True, type=click.IntRange(1, 65535), help="TCP port.")
 @click.option("--secure-cookies", is_flag=True, help="Mark cookies Secure (when served behind HTTPS).")
+@click.option(
+    "--setting",
+    "setting_pairs",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Any setting listed above (repeatable); also VASCSIM_SETTING_NAME in the environment.",
+)
 @user_errors
-def serve(host: str, port: int, secure_cookies: bool) -> None:
+def serve(host: str, port: int, secure_cookies: bool, setting_pairs: tuple[str, ...]) -> None:
     """Run the dashboard web application.
 
     Open http://HOST:PORT/ and sign in; create the first account with
@@ -34,14 +47,27 @@ def serve(host: str, port: int, secure_cookies: bool) -> None:
     tokens issued on the Administration page. Every asset is served locally.
     """
     import uvicorn
+    from click.core import ParameterSource
 
     from dashboard.app import create_app
-    from dashboard.settings import DashboardSettings
+    from dashboard.settings import DashboardSettings, SettingError, parse_settings
+    from sessions.config import settings_from_environment
 
     catalog, home = _catalog()
-    settings = DashboardSettings(
-        home=home, database_url=catalog.url, host=host, port=port, secure_cookies=secure_cookies
-    )
+    chosen = dict(parse_settings(settings_from_environment(), "environment"))
+    pairs = {}
+    for pair in setting_pairs:
+        name, separator, value = pair.partition("=")
+        if not separator:
+            raise SettingError(f"--setting {pair!r}: expected NAME=VALUE")
+        pairs[name.strip()] = value.strip()
+    chosen.update(parse_settings(pairs, "--setting"))
+    context = click.get_current_context()
+    for name, value in (("host", host), ("port", port), ("secure_cookies", secure_cookies)):
+        if name not in chosen or context.get_parameter_source(name) is not ParameterSource.DEFAULT:
+            chosen[name] = value  # an explicit --host/--port/--secure-cookies wins
+    settings = DashboardSettings(home=home, database_url=catalog.url, **chosen)
+    host, port = settings.host, settings.port
     app = create_app(settings, catalog)
     if host not in ("127.0.0.1", "localhost", "::1"):
         click.echo(f"warning: binding {host}: the dashboard is reachable from other machines", err=True)
@@ -49,4 +75,4 @@ def serve(host: str, port: int, secure_cookies: bool) -> None:
     uvicorn.run(app, host=host, port=port, log_level="warning", proxy_headers=False)
 
 
-serve.help = (serve.help or "") + "\n\nSettings:\n\n" + _settings_help()
+serve.help = inspect.cleandoc(serve.help or "") + "\n\nSettings:\n\n" + _settings_help()

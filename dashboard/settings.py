@@ -1,9 +1,19 @@
-"""The dashboard's settings, declared once: (name, default, help), passed to ``create_app``."""
+"""The dashboard's settings, declared once: (name, default, help), passed to ``create_app``.
+
+Each can be set as ``vascsim serve --setting NAME=VALUE`` or in the environment as
+``VASCSIM_SETTING_NAME`` (read by :mod:`sessions.config`); :func:`parse_settings` checks both.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+
+from sessions.catalog import CatalogError
+
+
+class SettingError(CatalogError):
+    """A setting that is not declared, or a value of the wrong kind; the message names it."""
 
 
 def _setting(default, help_text: str):
@@ -36,3 +46,31 @@ def documented_settings() -> list[tuple[str, object, str]]:
     return [
         (f.name, f.default, f.metadata["help"]) for f in fields(DashboardSettings) if "help" in f.metadata
     ]
+
+
+KIND_NAMES = {int: "a whole number", float: "a number", bool: "true or false"}
+
+
+def parse_settings(given: dict[str, str], source: str) -> dict[str, object]:
+    """Declared settings from text values ({name: text}), each converted to its declared type;
+    an unknown name or a bad value is a :class:`SettingError` naming it and ``source``."""
+    declared = {f.name: f for f in fields(DashboardSettings) if "help" in f.metadata}
+    parsed: dict[str, object] = {}
+    for name, text in given.items():
+        if name not in declared:
+            raise SettingError(f"{source}: unknown setting {name!r}; settings: {', '.join(declared)}")
+        kind = type(declared[name].default)
+        try:
+            if kind is bool:
+                if text.lower() not in ("1", "0", "true", "false", "yes", "no", "on", "off"):
+                    raise ValueError(text)
+                value: object = text.lower() in ("1", "true", "yes", "on")
+            else:
+                value = kind(text)
+        except ValueError:
+            kind_name = KIND_NAMES.get(kind, kind.__name__)
+            raise SettingError(f"{source}: setting {name} must be {kind_name}; got {text!r}") from None
+        if isinstance(value, int | float) and not isinstance(value, bool) and not value > 0:
+            raise SettingError(f"{source}: setting {name} must be positive; got {text!r}")
+        parsed[name] = value
+    return parsed

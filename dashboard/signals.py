@@ -14,6 +14,7 @@ from metrics.streams import from_recorded
 from metrics.tissue import with_tissue_fields
 from recorder import open_session
 from recorder.writer import SAMPLES_FILE
+from sessions.config import cache_dir
 from sessions.tasks import session_tissue
 
 MAX_POINTS = 2000
@@ -70,7 +71,7 @@ class SignalCache:
 
     def _compute(self, folder: Path) -> dict:
         streams = from_recorded(open_session(folder))
-        tissue = session_tissue(streams, self.home / "cache")
+        tissue = session_tissue(streams, cache_dir(self.home))
         if tissue is not None:
             streams = with_tissue_fields(streams, tissue)
         out: dict = {"duration_s": float(streams.duration), "signals": {}, "events": []}

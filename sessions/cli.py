@@ -57,6 +57,9 @@ def main() -> None:
     explains each command. Data lives in VASCSIM_HOME (default
     ~/.local/share/vascsim); VASCSIM_DATABASE_URL selects a PostgreSQL catalog.
     """
+    from sessions.config import prepare_rendering
+
+    prepare_rendering()
 
 
 @main.command()
@@ -115,7 +118,7 @@ def indentation(preset: str, max_strain: float, max_depth: float, steps: int, as
             return
         _print_curve(curve)
         return
-    from sessions.config import data_home
+    from sessions.config import cache_dir
     from sessions.tasks import task_spec, tissue_for
     from sim.experiments import kernel_indentation_curve
     from sim.fem import BiphaseTissue
@@ -123,7 +126,7 @@ def indentation(preset: str, max_strain: float, max_depth: float, steps: int, as
 
     spec, chosen = task_spec("wall-stitch"), tissue_preset(preset)
     with console.status(f"precomputing the wall-stitch patch ({preset}) and pressing the needle..."):
-        base = tissue_for("wall-stitch", data_home() / "cache")
+        base = tissue_for("wall-stitch", cache_dir())
         tissue = base
         if chosen.biphase != base.parameters:
             tissue = BiphaseTissue.build(

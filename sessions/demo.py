@@ -27,6 +27,7 @@ from metrics.report import write_report
 from metrics.study import StudyAnalysis, StudySettings
 from sessions.analysis import analyse_catalog_study, declare_analysis
 from sessions.catalog import Catalog, CatalogError
+from sessions.config import cache_dir
 from sessions.models import Study
 from sessions.runner import SessionPlan, run_session
 from sessions.synthetic import pass_parameters, profile_for
@@ -178,7 +179,7 @@ def run_demo(
             spec = task_spec(name)
             catalog.task(orm, spec.name, spec.scenario, spec.parameters)
     for name in {task for _, task, *_ in plans}:
-        tissue_for(name, home / "cache")  # precomputed once, on disk, before the workers load it
+        tissue_for(name, cache_dir(home))  # precomputed once, on disk, before the workers load it
     runs = [
         (SessionPlan(DEMO_STUDY, code, task, trial, phase), skills, seed * 100_000 + index)
         for index, (code, task, trial, phase, skills) in enumerate(plans)

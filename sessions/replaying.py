@@ -8,6 +8,7 @@ from sqlalchemy import select
 
 from recorder import open_session
 from sessions.catalog import Catalog, CatalogError
+from sessions.config import cache_dir
 from sessions.models import Participant, Session
 from sessions.status import SCORABLE
 from sessions.tasks import TASKS, tissue_for
@@ -64,5 +65,5 @@ def replay_inputs(
                     f"no complete sessions of group {versus_group!r} on task {task!r} in this session's study"
                 )
             expert_dirs += [r.directory for r in rows]
-    tissue = tissue_for(task, home / "cache")
+    tissue = tissue_for(task, cache_dir(home))
     return open_session(directory), tissue, [open_session(d) for d in expert_dirs]

@@ -23,7 +23,7 @@ from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from sessions.catalog import Catalog, CatalogError, WrongState, metric_results, new_uid, now, stream_file
-from sessions.config import data_home
+from sessions.config import cache_dir
 from sessions.models import (
     MetricResult,
     Participant,
@@ -164,7 +164,7 @@ def run_session(
             orm.delete(catalog.recorded_session(orm, uid))
         raise
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
-    simulation = RuntimeRecorder(writer).attach(task_simulation(plan.task, device, home / "cache"))
+    simulation = RuntimeRecorder(writer).attach(task_simulation(plan.task, device, cache_dir(home)))
     try:
         if plan.clock == "simulated":
             simulation.run_simulated(duration)
@@ -237,7 +237,7 @@ def scored_streams(
         samples = read_kinematics(directory)
         return Trial(directory.stem, "", code, 0, label, "", float("nan"), {}, samples).to_streams()
     streams = from_recorded(open_session(directory))
-    model = session_tissue(streams, (home or data_home()) / "cache")
+    model = session_tissue(streams, cache_dir(home))
     return with_tissue_fields(streams, model) if model is not None else streams
 
 

@@ -8,7 +8,6 @@ before pixels are read, otherwise frames silently repeat.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,10 +55,6 @@ class RenderFrame:
     ghost_needle: NDArray[np.float64] | None = None
 
 
-def headless() -> bool:
-    return not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")
-
-
 class TissueRenderer:
     """Renders :class:`RenderFrame` objects of one mesh to RGB arrays (H, W, 3) uint8."""
 
@@ -67,16 +62,15 @@ class TissueRenderer:
         self,
         mesh: TetMesh,
         size: tuple[int, int] = (640, 480),
-        offscreen: bool | None = None,
+        offscreen: bool = True,
         stress_range: tuple[float, float] = STRESS_RANGE_PA,
         anti_aliasing: bool = True,
         scalar_bar: bool = True,
         force_scale: float = FORCE_ARROW_M_PER_N,
         zoom: float = 1.0,
     ) -> None:
-        offscreen = headless() if offscreen is None else offscreen
-        if offscreen:
-            os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+        # the render window's class is VTK's choice (VTK_DEFAULT_OPENGL_WINDOW, which the application
+        # sets without a display: sessions.config.prepare_rendering); VTK 9.7 falls back to EGL itself
         import pyvista as pv
 
         self._pv = pv

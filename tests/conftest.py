@@ -7,8 +7,11 @@ import numpy as np
 import psycopg
 import pytest
 
+from sessions.config import prepare_rendering
 from sim.fem import Material, TissueModel
 from sim.mesh import box_mesh
+
+prepare_rendering()  # as the CLI does: offscreen EGL rendering without a display
 
 POSTGRES_ADMIN = os.environ.get("VASCSIM_TEST_POSTGRES", "postgresql://postgres@127.0.0.1:5432/test")
 

@@ -22,11 +22,8 @@ CACHE_FORMAT_VERSION = 1
 
 
 def default_cache_dir() -> Path:
-    """``$VASCSIM_CACHE_DIR``, else ``$VASCSIM_HOME/cache``, else ``~/.cache/vascsim``."""
-    if os.environ.get("VASCSIM_CACHE_DIR"):
-        return Path(os.environ["VASCSIM_CACHE_DIR"])
-    if os.environ.get("VASCSIM_HOME"):
-        return Path(os.environ["VASCSIM_HOME"]) / "cache"
+    """The library's own default, ``~/.cache/vascsim``: the application passes its directory in
+    (:func:`sessions.config.cache_dir`, the one place settings are read from the environment)."""
     return Path.home() / ".cache" / "vascsim"
 
 

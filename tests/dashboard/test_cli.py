@@ -73,18 +73,21 @@ def test_serve_binds_localhost_and_answers(tmp_path):
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    env = dict(os.environ, VASCSIM_HOME=str(tmp_path / "home"))
+    env = dict(os.environ, VASCSIM_HOME=str(tmp_path / "home"), VASCSIM_SETTING_LOGIN_ATTEMPTS="1")
     env.pop("VASCSIM_DATABASE_URL", None)
     command = Path(sys.executable).with_name("vascsim")
-    with subprocess.Popen(
-        [str(command), "serve", "--port", str(port)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    ) as server:
+    arguments = [str(command), "serve", "--port", str(port), "--setting", "login_window_s=60"]
+    with subprocess.Popen(arguments, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE) as server:
         try:
             page = _first_answer(server, f"http://127.0.0.1:{port}/login")
             assert page.status_code == 200 and "Sign in" in page.text
             me = httpx.get(f"http://127.0.0.1:{port}/api/me")
             assert me.status_code == 401 and me.json()["error"]["message"] == "sign in first"
             assert _listening_addresses(port) == ["0100007F"]  # 127.0.0.1 only, as /proc/net/tcp writes it
+            # issue 24: settings from the environment and --setting reach the app (one failure allowed)
+            login = {"username": "nobody", "password": "a wrong password"}
+            assert httpx.post(f"http://127.0.0.1:{port}/api/login", json=login).status_code == 401
+            assert httpx.post(f"http://127.0.0.1:{port}/api/login", json=login).status_code == 429
         finally:
             server.terminate()
             server.wait(20)
@@ -109,3 +112,26 @@ def test_serve_help_lists_every_setting():
     shown = CliRunner().invoke(main, ["serve", "--help"]).output
     for name, _default, _help in documented_settings():
         assert name in shown
+
+
+def test_bad_settings_are_one_line_errors_naming_them(tmp_path, monkeypatch):
+    monkeypatch.setenv("VASCSIM_HOME", str(tmp_path))
+    monkeypatch.delenv("VASCSIM_DATABASE_URL", raising=False)
+    cases = [
+        (
+            ["--setting", "login_attempts=many"],
+            {},
+            "--setting: setting login_attempts must be a whole number; got 'many'",
+        ),
+        (["--setting", "colour=blue"], {}, "--setting: unknown setting 'colour'; settings: host, port"),
+        (["--setting", "live_rate_hz"], {}, "--setting 'live_rate_hz': expected NAME=VALUE"),
+        ([], {"VASCSIM_SETTING_LIVE_POLL_S": "-1"}, "environment: setting live_poll_s must be positive"),
+    ]
+    for arguments, environment, message in cases:
+        for name, value in environment.items():
+            monkeypatch.setenv(name, value)
+        result = CliRunner().invoke(main, ["serve", *arguments])
+        for name in environment:
+            monkeypatch.delenv(name)
+        assert result.exit_code == 1 and message in result.output, (arguments, result.output)
+        assert result.output.count("\n") == 1
