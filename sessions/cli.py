@@ -431,14 +431,21 @@ def tasks_list(as_json: bool) -> None:
     from sessions.tasks import TASKS
 
     rows = [
-        {"task": t.name, "tissue": t.parameters.get("tissue", ""), "description": t.description}
+        {
+            "task": t.name,
+            "tissue": t.parameters.get("tissue", ""),
+            "stitches": t.stitch_count,
+            "time_budget_s": t.time_budget_s,
+            "description": t.description,
+        }
         for t in TASKS.values()
     ]
     if as_json:
         _json(rows)
         return
     for row in rows:
-        click.echo(f"{row['task']}  ({row['tissue']})")
+        asks = f"{row['stitches']} stitch(es) in {row['time_budget_s']:g} s"
+        click.echo(f"{row['task']}  ({row['tissue']}; {asks})")
         click.echo(click.wrap_text(row["description"], 78, initial_indent="  ", subsequent_indent="  "))
 
 
@@ -470,6 +477,13 @@ def tasks_show(name: str, as_json: bool) -> None:
         )
     if geometry:
         click.echo(click.wrap_text(geometry, 78, initial_indent="geometry     ", subsequent_indent=" " * 13))
+    for region, preset in spec.parameters.get("region_tissue", {}).items():
+        click.echo(f"region       {region}: {preset} preset (its moduli, puncture, passage)")
+    if spec.access is not None:
+        tilt = spec.access["tilt_deg"]
+        click.echo(f"access       restricted: the hand comes in {tilt:g} deg off the wall's normal")
+    budget = f"{spec.stitch_count} stitch(es) in {spec.time_budget_s:g} s"
+    click.echo(f"asks for     {budget} (the course's time budget)")
     entry = ", ".join(f"{1e3 * v:.1f}" for v in spec.entry)
     click.echo(f"entry        ({entry}) mm, the scripted passes' aim")
     placement = spec.placement

@@ -28,6 +28,13 @@ class TaskSpec:
     access: dict | None = None
     """Restricted access: ``approach`` (unit vector from the entry point: the only direction the
     hand can come from) and ``tilt_deg`` (its angle from the wall's normal); None: open access."""
+    time_budget_s: float = 60.0
+    """The time a course allows for the task (s): chosen at about ten times a scripted expert's."""
+
+    @property
+    def stitch_count(self) -> int:
+        """The stitches the task asks for (one per target entry mark; one without marks)."""
+        return len(self.placement["entry_targets"]) if self.placement else 1
 
     def bites(self) -> list[tuple]:
         """Every bite of the task, in order: (entry, normal, bite_direction) each (m, unit vectors)."""
@@ -148,6 +155,7 @@ def _closure_row(spacing: float = 0.0015, count: int = 3) -> TaskSpec:
             "target_spacing_m": spacing,
         },
         more_bites=bites[1:],
+        time_budget_s=60.0 * count,
     )
 
 
@@ -176,6 +184,7 @@ def _diseased_wall() -> TaskSpec:
         parameters,
         placement=row.placement,
         more_bites=row.more_bites,
+        time_budget_s=row.time_budget_s + 60.0,
     )
 
 
@@ -202,6 +211,7 @@ def _restricted_access(tilt_deg: float = 45.0) -> TaskSpec:
         dict(single.parameters),
         placement=single.placement,
         access={"approach": [float(x) for x in approach], "tilt_deg": tilt_deg},
+        time_budget_s=90.0,
     )
 
 

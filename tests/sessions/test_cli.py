@@ -118,6 +118,14 @@ def test_tasks_list_and_show_describe_the_task_library():
     shown = CliRunner().invoke(main, ["tasks", "show", "wall-stitch"])
     assert shown.exit_code == 0 and "target bite  1.5 mm from the wound edge" in shown.output
     assert max(len(line) for line in listed.output.splitlines() + shown.output.splitlines()) <= 80
+    from sessions.tasks import TASKS
+
+    for name in TASKS:  # every task declares its stitches and time budget, and fits 80 columns
+        text = CliRunner().invoke(main, ["tasks", "show", name]).output
+        assert "asks for" in text and "(the course's time budget)" in text
+        assert max(len(line) for line in text.splitlines()) <= 80, name
+    diseased = CliRunner().invoke(main, ["tasks", "show", "diseased-wall"]).output
+    assert "asks for     3 stitch(es) in 240 s" in diseased and "region       calcified" in diseased
     as_json = json.loads(CliRunner().invoke(main, ["tasks", "show", "wall-stitch", "--json"]).output)
     assert as_json["placement"]["target_bite_m"] == 0.0015
     unknown = CliRunner().invoke(main, ["tasks", "show", "nope"])
