@@ -18,6 +18,7 @@ from dashboard.auth import COOKIE, STAFF, LoginRateLimiter, Viewer, current_view
 from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
+from recorder.layout import SAMPLES_JOURNAL
 from sessions import accounts
 from sessions.models import Participant, Session, StationToken, Study, User
 from sessions.status import SessionStatus
@@ -267,7 +268,7 @@ def live(request: Request, viewer: Watcher) -> dict:
     stations = []
     root = state.settings.ingest_root
     if root.is_dir():
-        for journal in sorted(root.glob("*/*/samples.arrows")):
+        for journal in sorted(root.glob(f"*/*/{SAMPLES_JOURNAL}")):
             stations.append({"station": journal.parent.parent.name, "session": journal.parent.name})
     return {
         "sessions": [{"uid": u, "participant": c, "started_at": a} for u, c, a in running],
@@ -318,9 +319,9 @@ def live_station(request: Request, station: str, session_id: str, viewer: Watche
     if not all(part.replace("-", "").replace("_", "").isalnum() for part in (station, session_id)):
         raise not_found(f"station session {station}/{session_id}")
     directory = inside(_state(request).settings.home, root / station / session_id)
-    if not (directory / "samples.arrows").exists():
+    if not (directory / SAMPLES_JOURNAL).exists():
         raise not_found(f"station session {station}/{session_id}")
-    return _event_stream(request, directory, lambda: (directory / "samples.arrows").exists())
+    return _event_stream(request, directory, lambda: (directory / SAMPLES_JOURNAL).exists())
 
 
 # -- administration ---------------------------------------------------------------------

@@ -35,6 +35,7 @@ from dashboard.auth import (
 )
 from dashboard.errors import DashboardError
 from dashboard.signals import replay_video
+from recorder.layout import SAMPLES_FILE
 from sessions.models import ROLES, Participant
 from sim.errors import VascsimError
 
@@ -149,7 +150,7 @@ def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
     state = request.app.state
     detail = queries.session_detail(state.catalog, state.analyses, viewer, uid)
     has_video = replay_video(state.settings.home, uid) is not None
-    has_samples = any(f["name"] == "samples.parquet" for f in detail["files"])
+    has_samples = any(f["name"] == SAMPLES_FILE for f in detail["files"])
     data = {"uid": uid, "has_video": has_video, "has_samples": has_samples}
     return render(
         request, "session.html", viewer, data, detail=detail, has_video=has_video, has_samples=has_samples

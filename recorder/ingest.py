@@ -30,6 +30,7 @@ import pyarrow as pa
 import pyarrow.ipc as ipc
 
 from recorder.integrity import CHECKSUM_NAME, scan_journal
+from recorder.layout import EVENTS_JOURNAL, HEADER_FILE, SAMPLES_JOURNAL, write_json_atomically
 from recorder.remote import (
     MAX_BATCH_BYTES,
     MAX_HEADER_BYTES,
@@ -41,7 +42,7 @@ from recorder.remote import (
     unpack_frame,
 )
 from recorder.schema import SCHEMA_VERSION
-from recorder.writer import EVENTS_JOURNAL, HEADER_FILE, SAMPLES_JOURNAL, finalize, write_json_atomically
+from recorder.writer import finalize
 
 log = logging.getLogger("vascsim.ingest")
 JOURNALS = {"samples": SAMPLES_JOURNAL, "events": EVENTS_JOURNAL}

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
+from recorder.layout import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, read_checked, read_header
 from recorder.schema import (
     EVENT_SCHEMA,
     READABLE_VERSIONS,
@@ -18,7 +18,6 @@ from recorder.schema import (
     RecorderError,
     upgraded_samples,
 )
-from recorder.writer import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, read_header, sha256_of
 
 
 @dataclass(frozen=True)
@@ -64,11 +63,11 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
         raise RecorderError(f"{path} is still marked as recording but has no journal")
     if version == 1:
         samples = upgraded_samples(
-            _read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA_V1)
+            read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA_V1)
         )
     else:
-        samples = _read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA)
-    events = _read_checked(path, EVENTS_FILE, header.get("events"), verify, EVENT_SCHEMA)
+        samples = read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA)
+    events = read_checked(path, EVENTS_FILE, header.get("events"), verify, EVENT_SCHEMA)
     times = samples.column("time").to_numpy()
     backwards = np.flatnonzero(np.diff(times) < 0)
     if backwards.size:
@@ -78,37 +77,6 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
             f"({times[k + 1]:.6f} s after {times[k]:.6f} s)"
         )
     return Session(path, header, samples, events)
-
-
-def _read_checked(path: Path, name: str, record: Any, verify: bool, schema: pa.Schema) -> pa.Table:
-    file = path / name
-    if not isinstance(record, dict):
-        raise RecorderError(f"{path / HEADER_FILE} does not describe {name} (no file record in the header)")
-    if not file.is_file():
-        raise RecorderError(f"{file} is missing")
-    if verify:
-        expected = record.get("sha256")
-        if expected is None:
-            raise RecorderError(f"{path / HEADER_FILE} records no checksum for {name}")
-        if sha256_of(file) != expected:
-            raise RecorderError(f"{file} does not match its recorded SHA-256 (corrupted or altered)")
-    try:
-        table = pq.read_table(file)
-        # a damaged footer can still parse with a column name that is not UTF-8 (unverified reads)
-        found = {field.name: field.type for field in table.schema}
-    except (pa.ArrowException, OSError, UnicodeDecodeError) as error:
-        raise RecorderError(f"{file} cannot be read (truncated or not Parquet): {error}") from error
-    if record.get("rows") is not None and table.num_rows != record["rows"]:
-        raise RecorderError(f"{file} has {table.num_rows} rows; its header says {record['rows']}")
-    expected = {field.name: field.type for field in schema}
-    if found != expected:
-        differing = sorted(set(expected.items()) ^ set(found.items()), key=str)
-        names = ", ".join(dict.fromkeys(name for name, _ in differing))
-        raise RecorderError(
-            f"{file} does not have the {_stream_name(schema)} "
-            f"schema (column(s) {names} missing, extra or of another type)"
-        )
-    return table
 
 
 def list_sessions(root: str | Path) -> tuple[list[Session], dict[Path, str]]:
@@ -121,9 +89,3 @@ def list_sessions(root: str | Path) -> tuple[list[Session], dict[Path, str]]:
         except RecorderError as error:
             bad[header.parent] = str(error)
     return good, bad
-
-
-def _stream_name(schema: pa.Schema) -> str:
-    """ "samples", "events" or "scene": the stream a schema describes, for messages."""
-    metadata = schema.metadata or {}
-    return (metadata.get(b"vascsim.schema") or metadata.get(b"stream") or b"expected").decode()

@@ -19,9 +19,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
+from recorder.layout import SCENE_FILE, read_checked, sha256_of
 from recorder.schema import RecorderError
 
-SCENE_FILE = "scene.parquet"
 SCENE_SCHEMA = pa.schema(
     [
         pa.field("time", pa.float64(), metadata={"unit": "s"}),
@@ -98,8 +98,6 @@ class SceneLog:
 
 def write_scene(directory: Path, table: pa.Table) -> dict[str, Any]:
     """Write and verify ``scene.parquet``; returns its header record (file, rows, sha256)."""
-    from recorder.writer import sha256_of
-
     target = directory / SCENE_FILE
     temporary = directory / (SCENE_FILE + ".tmp")
     pq.write_table(table, temporary, compression="zstd")
@@ -112,14 +110,12 @@ def write_scene(directory: Path, table: pa.Table) -> dict[str, Any]:
 
 def read_scene(session) -> pa.Table | None:
     """The verified scene table of a :class:`recorder.Session`, or None if it was recorded without one."""
-    from recorder.reader import _read_checked
-
     record = session.header.get("scene")
     if record is None:
         return None
     try:
-        return _read_checked(session.path, SCENE_FILE, record, True, SCENE_SCHEMA)
+        return read_checked(session.path, SCENE_FILE, record, True, SCENE_SCHEMA)
     except RecorderError:  # recorded before the drive's soft share was: derive it from the drive
-        table = _read_checked(session.path, SCENE_FILE, record, True, _SCENE_SCHEMA_BEFORE_SHARE)
+        table = read_checked(session.path, SCENE_FILE, record, True, _SCENE_SCHEMA_BEFORE_SHARE)
         share = pa.nulls(table.num_rows, pa.float64())
         return table.append_column(SCENE_SCHEMA.field("drive_soft_share"), share)

@@ -29,9 +29,9 @@ from typing import Any
 
 import pyarrow as pa
 
+from recorder.layout import HEADER_FILE, write_json_atomically
 from recorder.remote import STREAMS, encode_batch, pack_frame
 from recorder.schema import RecorderError
-from recorder.writer import write_json_atomically
 
 TRANSPORTS = ("http", "websocket")
 _WINDOW = 64  # WebSocket frames in flight before waiting for their answers
@@ -89,7 +89,7 @@ class StationUploader:
 
     def set_header(self, header: dict[str, Any]) -> None:
         """Spool the session header (sent before any batch that is still pending)."""
-        write_json_atomically(self.spool / "header.json", header)
+        write_json_atomically(self.spool / HEADER_FILE, header)
 
     def submit(self, stream: str, batch: pa.RecordBatch) -> int:
         """Spool one batch of ``stream`` durably; returns its sequence number (sending happens later)."""
@@ -120,7 +120,7 @@ class StationUploader:
     @property
     def pending(self) -> int:
         """Items (header, batches, close) not yet acknowledged."""
-        names = ("header.json", "close.json")
+        names = (HEADER_FILE, "close.json")
         count = sum((self.spool / name).exists() for name in names)
         return count + sum(len(list((self.spool / stream).glob("*.batch"))) for stream in STREAMS)
 
@@ -132,8 +132,8 @@ class StationUploader:
         RecorderError naming it; the item stays in the spool for inspection.
         """
         items: list[tuple[str, Path]] = []
-        if (self.spool / "header.json").exists():
-            items.append(("header", self.spool / "header.json"))
+        if (self.spool / HEADER_FILE).exists():
+            items.append(("header", self.spool / HEADER_FILE))
         for stream in STREAMS:
             items += [(stream, p) for p in sorted((self.spool / stream).glob("*.batch"))]
         closing = self.spool / "close.json"

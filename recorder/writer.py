@@ -24,8 +24,6 @@ Session directory: ``header.json``, ``samples.arrows`` / ``events.arrows``
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import mmap
 import os
@@ -45,6 +43,17 @@ from numpy.typing import NDArray
 
 from recorder._ring import RingProducer
 from recorder.integrity import CHECKSUM_NAME, scan_journal, sealed
+from recorder.layout import (
+    EVENTS_FILE,
+    EVENTS_JOURNAL,
+    HEADER_FILE,
+    SAMPLES_FILE,
+    SAMPLES_JOURNAL,
+    read_header,
+    sha256_of,
+    write_json_atomically,
+)
+from recorder.scene import write_scene
 from recorder.schema import (
     EVENT_SCHEMA,
     INTEGER_COLUMNS,
@@ -53,41 +62,6 @@ from recorder.schema import (
     SCHEMA_VERSION,
     RecorderError,
 )
-
-SAMPLES_JOURNAL, EVENTS_JOURNAL = "samples.arrows", "events.arrows"
-SAMPLES_FILE, EVENTS_FILE, HEADER_FILE = "samples.parquet", "events.parquet", "header.json"
-
-
-def sha256_of(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for chunk in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
-def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
-    temporary = path.with_suffix(path.suffix + ".tmp")
-    with open(temporary, "w") as handle:
-        json.dump(data, handle, indent=2, sort_keys=True, allow_nan=False)  # NaN is not JSON
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(temporary, path)
-
-
-def read_header(directory: Path) -> dict[str, Any]:
-    """A session directory's ``header.json``; RecorderError if it is missing, damaged or not an object."""
-    path = directory / HEADER_FILE
-    try:
-        header = json.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise RecorderError(f"{directory} is not a session directory (no {HEADER_FILE})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise RecorderError(f"{path} is not valid JSON (damaged?): {error}") from error
-    if not isinstance(header, dict):
-        raise RecorderError(f"{path} holds a JSON {type(header).__name__}, not a session header object")
-    return header
-
 
 TRANSPOSE_BLOCK_ROWS = 512
 """Rows transposed at a time: a block of rows (139 kB) stays in cache while it is scattered into
@@ -383,8 +357,6 @@ class SessionWriter:
             stream.close()
             sink.close()
         if self.scene is not None and len(self.scene):
-            from recorder.scene import write_scene
-
             self.header["scene"] = write_scene(self.directory, self.scene.table())
         write_json_atomically(self.directory / HEADER_FILE, self.header)
         finished = finalize(self.directory, status)

@@ -26,7 +26,7 @@ from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError, Ope
 from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
-from recorder.writer import sha256_of
+from recorder.layout import sha256_of
 from sessions.models import MetricResult, Participant, Session, StreamFile, Study, Task
 from sim.errors import VascsimError
 

@@ -938,7 +938,9 @@ def sessions_delete(uid: str, yes: bool) -> None:
 def _is_session_dir(directory: str) -> bool:
     from pathlib import Path
 
-    return (Path(directory) / "header.json").is_file()
+    from recorder.layout import is_session_directory
+
+    return is_session_directory(Path(directory))
 
 
 @main.command()
