@@ -28,7 +28,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from metrics.streams import SessionStreams
-from sim.fem import BiphaseTissue, TissueModel
+from sim.fem import Tissue
 from sim.fem.fields import IndentationStress, TissueFieldReplay, contact_depth
 from sim.needle import Needle
 from sim.needle_forces import NeedleForces
@@ -43,7 +43,6 @@ WIRE_RADIUS = 0.5 * Needle.curved().wire_diameter
 CONTACT_STATE = 1
 PIERCED_STATE = 2
 
-Tissue = TissueModel | BiphaseTissue
 
 
 def indentation_runs(streams: SessionStreams) -> list[tuple[int, int]]:

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 
 from sim.collision.mesh import CollisionMesh, TriangleContact, segment_ends
 from sim.errors import VascsimError
-from sim.fem import BiphaseTissue, TissueModel
+from sim.fem import Tissue
 from sim.fem.fields import LocalStress, contact_depth
 from sim.needle import Needle, Pose
 from sim.needle_forces import NeedleForces
@@ -175,7 +175,7 @@ class NeedleInteraction:
 
     def __init__(
         self,
-        tissue: TissueModel | BiphaseTissue,
+        tissue: Tissue,
         needle: Needle,
         rules: PiercingRules | None = None,
         collision: CollisionMesh | None = None,
@@ -627,7 +627,7 @@ class NeedleInteraction:
             chosen = [self.contacts[rank] for _, rank in key]
             tangent = None if key[0][0] == "surface" else self.tip_tangent()
             make = kernel_factory(self.forces, 0.5 * self.needle.wire_diameter, chosen, tangent)
-            soft = self.tissue.soft if isinstance(self.tissue, BiphaseTissue) else self.tissue
+            soft = self.tissue.base
             built = make(soft)
             self._load = KernelLoad(self.tissue, lambda model: built if model is soft else make(model))
             self._stress = self._load.local_stress(self.tissue) if self.live_stress else None
@@ -658,6 +658,4 @@ class NeedleInteraction:
             self._handle = self.tissue.contact(nodes)
             self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))
             self._handle_nodes = key
-        if isinstance(self.tissue, BiphaseTissue):
-            return self._handle.reaction_forces(intended, tool_displacement, self.tip_speed)
-        return self._handle.reaction_forces(intended)
+        return self._handle.reaction_forces(intended, tool_displacement, self.tip_speed)

@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.fem import BiphaseTissue, TissueModel
+from sim.fem import Tissue, TissueModel
 from sim.fem.fields import LocalStress
 from sim.fem.kernel import ForceKernel, KernelContact, kernel_at, lateral_near_field, normal_near_field
 from sim.needle_forces import NeedleForces
@@ -64,14 +64,14 @@ class KernelLoad:
 
     __slots__ = ("_stiff", "_stiff_scale", "depth", "kernels", "nodes", "parameters", "soft")
 
-    def __init__(self, tissue: TissueModel | BiphaseTissue, make_kernels: KernelFactory) -> None:
-        biphase = isinstance(tissue, BiphaseTissue)
-        soft_model = tissue.soft if biphase else tissue
+    def __init__(self, tissue: Tissue, make_kernels: KernelFactory) -> None:
+        biphase = tissue.biphase is not None
+        soft_model = tissue.base
         kernels, near_field = make_kernels(soft_model)
         self.kernels = kernels
         self.soft = KernelContact(soft_model, kernels, near_field)
         self.nodes = self.soft.nodes
-        self.parameters = tissue.parameters if biphase else None
+        self.parameters = tissue.biphase
         self._stiff: KernelContact | None = None
         self._stiff_scale = 1.0
         self.depth = math.inf
@@ -116,7 +116,7 @@ class KernelLoad:
         exceeds the soft phase's (what :meth:`equivalent_drive` divides by)."""
         return share + (1.0 - share) * self._stiff_scale
 
-    def local_stress(self, tissue: TissueModel | BiphaseTissue) -> LocalStress:
+    def local_stress(self, tissue: Tissue) -> LocalStress:
         """The local-stress operator of these kernels (within 1 mm of their points), per kernel force."""
         return LocalStress(tissue, self.nodes, self.soft.force_map, [k.point for k in self.kernels])
 

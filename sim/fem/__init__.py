@@ -4,6 +4,7 @@ from sim.fem.biphase import BiphaseContact, BiphaseParameters, BiphaseSolution, 
 from sim.fem.material import STABLE_POISSON_LIMIT, Material, PoissonRatioWarning
 from sim.fem.model import Precomputation, TissueModel, fixed_nodes_of
 from sim.fem.solution import ContactHandle, ContactSolution
+from sim.fem.tissue import Tissue
 
 __all__ = [
     "STABLE_POISSON_LIMIT",
@@ -16,6 +17,7 @@ __all__ = [
     "Material",
     "PoissonRatioWarning",
     "Precomputation",
+    "Tissue",
     "TissueModel",
     "fixed_nodes_of",
 ]

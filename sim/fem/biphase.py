@@ -179,6 +179,22 @@ class BiphaseTissue:
     def mesh(self) -> TetMesh:
         return self.soft.mesh
 
+    # -- the Tissue protocol (sim.fem.tissue) ------------------------------------------------
+    @property
+    def models(self) -> tuple[TissueModel, ...]:
+        """The two linear phases, soft first."""
+        return (self.soft, self.stiff)
+
+    @property
+    def base(self) -> TissueModel:
+        """The soft phase: depths are cast and force kernels built on it."""
+        return self.soft
+
+    @property
+    def biphase(self) -> BiphaseParameters:
+        """The biphase law's parameters (the same as :attr:`parameters`)."""
+        return self.parameters
+
     def precompute(
         self, cache_dir: str | Path | None = None, use_cache: bool = True
     ) -> tuple[Precomputation, Precomputation]:

@@ -17,22 +17,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import ModelError
 from sim.fem.assembly import displacement_gradients, small_strain, stress_tensor, von_mises_of_stress
-from sim.fem.biphase import BiphaseTissue
 from sim.fem.condensation import node_dofs
 from sim.fem.model import TissueModel
+from sim.fem.tissue import Tissue
 
 _CHUNK = 512  # ticks per block: keeps the (ticks x elements x 3 x 3) temporaries small
 
 
-def contact_depth(tissue: TissueModel | BiphaseTissue, nodes: NDArray[np.int64]) -> float:
+def contact_depth(tissue: Tissue, nodes: NDArray[np.int64]) -> float:
     """Mean tissue depth h (m) under contact nodes, as the runtime's biphase contact uses it."""
-    if isinstance(tissue, BiphaseTissue):
-        return tissue.depth_under(nodes)
-    return float(np.mean([tissue.tissue_depth(int(n)) for n in nodes]))
+    return tissue.depth_under(nodes)
 
 
-def _phases(tissue: TissueModel | BiphaseTissue) -> list[TissueModel]:
-    return [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
+def _phases(tissue: Tissue) -> list[TissueModel]:
+    return list(tissue.models)
 
 
 class IndentationStress:
@@ -45,7 +43,7 @@ class IndentationStress:
 
     def __init__(
         self,
-        tissue: TissueModel | BiphaseTissue,
+        tissue: Tissue,
         nodes: ArrayLike,
         barycentric: ArrayLike,
         elements: ArrayLike,
@@ -82,9 +80,9 @@ class IndentationStress:
         self, tool_displacement: NDArray[np.float64], needle_speed: NDArray[np.float64]
     ) -> NDArray:
         """(T,) the soft phase's share per tick (1 for a single-phase model)."""
-        if not isinstance(self.tissue, BiphaseTissue):
+        p = self.tissue.biphase
+        if p is None:
             return np.ones(len(tool_displacement))
-        p = self.tissue.parameters
         strain = np.linalg.norm(tool_displacement, axis=1) / self.depth
         ratio = np.minimum(np.clip(needle_speed, 0.0, None) / p.critical_speed, 1.0) ** p.speed_exponent
         limit = p.strain_limit * (1.0 - (1.0 - p.limit_floor) * ratio)
@@ -123,7 +121,7 @@ class TissueFieldReplay:
 
     def __init__(
         self,
-        tissue: TissueModel | BiphaseTissue,
+        tissue: Tissue,
         cache_size: int = 16,
         elements: NDArray[np.int64] | None = None,
     ) -> None:
@@ -176,9 +174,9 @@ class TissueFieldReplay:
     def soft_share(
         self, nodes: NDArray[np.int64], intended: NDArray[np.float64], needle_speed: float
     ) -> float:
-        if not isinstance(self.tissue, BiphaseTissue):
+        p = self.tissue.biphase
+        if p is None:
             return 1.0
-        p = self.tissue.parameters
         strain = float(np.linalg.norm(intended.sum(axis=0))) / self.tissue.depth_under(nodes)
         return p.soft_share(strain, p.strain_limit_at(max(float(needle_speed), 0.0)))
 
@@ -284,7 +282,7 @@ class LocalStress:
 
     def __init__(
         self,
-        tissue: TissueModel | BiphaseTissue,
+        tissue: Tissue,
         nodes: ArrayLike,
         force_map: NDArray[np.float64],
         centres: ArrayLike,

@@ -596,6 +596,26 @@ class TissueModel:
             depth = self._depths[node] = self._cast_depth(node)
         return depth
 
+    def depth_under(self, nodes: NDArray[np.int64]) -> float:
+        """Mean tissue depth (m) under contact nodes (:meth:`tissue_depth`, cached per node)."""
+        return float(np.mean([self.tissue_depth(int(n)) for n in nodes]))
+
+    # -- the Tissue protocol (sim.fem.tissue): one phase -----------------------------------
+    @property
+    def models(self) -> tuple[TissueModel, ...]:
+        """The linear models this tissue superimposes: this one."""
+        return (self,)
+
+    @property
+    def base(self) -> TissueModel:
+        """The model depths are cast and force kernels built on: this one."""
+        return self
+
+    @property
+    def biphase(self) -> None:
+        """The biphase law's parameters: none for one linear phase."""
+        return None
+
     def knows_depth(self, node: int) -> bool:
         """Whether :meth:`tissue_depth` of ``node`` is cached."""
         return node in self._depths

@@ -108,8 +108,11 @@ class ContactHandle:
         """(3k, 3k) matrix mapping intended displacements (m) to reaction forces (N)."""
         return self._stiffness
 
-    def reaction_forces(self, intended: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(k, 3) reaction forces R = -C(u - a) for intended displacements a (k, 3), in N."""
+    def reaction_forces(
+        self, intended: NDArray[np.float64], tool_displacement: object = None, needle_speed: float = 0.0
+    ) -> NDArray[np.float64]:
+        """(k, 3) reaction forces R = -C(u - a) for intended displacements a (k, 3), in N. The tool's
+        displacement and speed, which a biphase contact reads, do not change one linear phase."""
         return self._stiffness.dot(intended.reshape(-1)).reshape(-1, 3)
 
     def surface_displacement(self, reaction_forces: NDArray[np.float64]) -> NDArray[np.float64]:

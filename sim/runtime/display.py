@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.fem import BiphaseTissue, TissueModel
+from sim.fem import Tissue
 from sim.fem.solution import ContactHandle
 from sim.render import RenderFrame, TissueRenderer
 
@@ -19,8 +19,8 @@ class DisplayScene:
     ``frames`` counts renders.
     """
 
-    def __init__(self, tissue: TissueModel | BiphaseTissue, renderer: TissueRenderer) -> None:
-        self.model = tissue.soft if isinstance(tissue, BiphaseTissue) else tissue
+    def __init__(self, tissue: Tissue, renderer: TissueRenderer) -> None:
+        self.model = tissue.base
         # Factorise here, in the parent: CHOLMOD's OpenMP pool does not survive fork, so a
         # forked display process must only solve, never factorise.
         self.model.factorize()

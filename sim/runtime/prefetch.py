@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from sim.collision.mesh import CollisionMesh
 from sim.errors import SolverError
-from sim.fem import BiphaseTissue, TissueModel
+from sim.fem import Tissue, TissueModel
 from sim.geometry import circle_through
 
 AHEAD_NODES = 6
@@ -142,9 +142,9 @@ def _serve(model: TissueModel, pipe) -> None:
             pipe.send_bytes(b"O" + np.ascontiguousarray(columns.T).tobytes())
 
 
-def _own_inverse_models(tissue: TissueModel | BiphaseTissue) -> list[TissueModel]:
+def _own_inverse_models(tissue: Tissue) -> list[TissueModel]:
     """The models that solve their own columns (a biphase stiff phase sharing the soft inverse does not)."""
-    models = [tissue.soft, tissue.stiff] if isinstance(tissue, BiphaseTissue) else [tissue]
+    models = list(tissue.models)
     return [model for model in models if model.inverse_source is None]
 
 
@@ -153,7 +153,7 @@ class Prefetcher:
 
     def __init__(
         self,
-        tissue: TissueModel | BiphaseTissue,
+        tissue: Tissue,
         collision: CollisionMesh | None = None,
         full_columns: bool = False,
         load_radius: float = 0.0,
@@ -169,7 +169,7 @@ class Prefetcher:
         self.workers = [ColumnWorker(model) for model in self.models]
         for model, worker in zip(self.models, self.workers, strict=True):
             model.column_solver = worker.solve
-        self._depth_model = tissue.soft if isinstance(tissue, BiphaseTissue) else tissue
+        self._depth_model = tissue.base
         mesh = tissue.mesh
         # an exit can be on any face (lumen, wound edge), not only on contact candidates
         self._nodes = mesh.surface_nodes

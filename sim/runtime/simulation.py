@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from sim.devices.base import Device, DeviceLostError
 from sim.errors import VascsimError
-from sim.fem import BiphaseTissue, TissueModel
+from sim.fem import Tissue
 from sim.fem.kernel import warm_kernel_geometry
 from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
@@ -225,11 +225,11 @@ class RunResult:
         return self.stop_reason == "completed"
 
 
-def _on_demand(tissue: TissueModel | BiphaseTissue) -> bool:
+def _on_demand(tissue: Tissue) -> bool:
     """Whether some contact could need columns solved on demand (no precomputation, or free
     surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through;
     nodes held fixed on all three axes are not worth a worker: the tissue is clamped there)."""
-    models = (tissue.soft, tissue.stiff) if isinstance(tissue, BiphaseTissue) else (tissue,)
+    models = tissue.models
     for model in models:
         if model.precomputation is None:
             return True
@@ -244,7 +244,7 @@ class Simulation:
 
     def __init__(
         self,
-        tissue: TissueModel | BiphaseTissue,
+        tissue: Tissue,
         needle: Needle,
         device: Device,
         settings: RuntimeSettings | None = None,
@@ -288,7 +288,7 @@ class Simulation:
         self._tissue = tissue
         tissue.warm_contact_caches()
         if self.interaction.forces.load == "kernel":
-            warm_kernel_geometry(tissue.soft if isinstance(tissue, BiphaseTissue) else tissue)
+            warm_kernel_geometry(tissue.base)
         self._prefetcher: Prefetcher | None = None  # started for the length of a run (a worker process)
         self._previous_tip: NDArray[np.float64] | None = None  # at the last graphics frame
 
@@ -449,7 +449,7 @@ class Simulation:
         each): in real time, cast it for every precomputed contact candidate before the clock
         starts rather than on the FEM thread at the touch (the prefetcher casts the rest ahead
         of the needle). Simulated time casts as it goes: the same results, less work in all."""
-        model = self._tissue.soft if isinstance(self._tissue, BiphaseTissue) else self._tissue
+        model = self._tissue.base
         if model.precomputation is not None:
             model.cast_depths(model.contact_nodes)
 

@@ -235,3 +235,18 @@ def test_region_parameters_give_each_region_its_moduli_and_keep_one_factorisatio
     assert tissue.stiff.inverse_source == (tissue.soft, pytest.approx(20.0))
     with pytest.raises(ModelError, match="region\\(s\\) plaque, which the mesh does not have"):
         BiphaseTissue.build(mesh, fixed, wall, region_parameters={"plaque": plaque})
+
+
+def test_one_phase_and_the_biphase_pair_are_both_tissues(small_box):
+    """Issue 24: the Tissue protocol replaces the isinstance(..., BiphaseTissue) branches: the runtime
+    asks a tissue for its models, its base model and its biphase law."""
+    from sim.fem import Tissue
+
+    pair = BiphaseTissue.build(small_box, small_box.node_sets["z0"])
+    single = pair.soft
+    assert isinstance(pair, Tissue) and isinstance(single, Tissue)
+    assert pair.models == (pair.soft, pair.stiff) and pair.base is pair.soft
+    assert pair.biphase is pair.parameters
+    assert single.models == (single,) and single.base is single and single.biphase is None
+    top = small_box.node_sets["z1"][:3]
+    assert single.depth_under(top) == pair.depth_under(top) > 0  # cast in the base model, the same way
