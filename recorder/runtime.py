@@ -11,7 +11,8 @@ from recorder.scene import SceneLog
 from recorder.schema import COLUMN, SAMPLE_COLUMNS
 from recorder.writer import SessionWriter
 from sim.devices.base import DeviceSample
-from sim.runtime.simulation import STATE_CODES, FemSnapshot, Simulation
+from sim.runtime.simulation import Simulation
+from sim.runtime.snapshots import STATE_CODES, FemSnapshot
 
 
 def quaternion_of(rotation: NDArray[np.float64]) -> tuple[float, float, float, float]:

@@ -19,7 +19,7 @@ from metrics.streams import MetricsError
 from sim.devices import ReplayDevice
 from sim.needle import Needle
 from sim.runtime import Simulation
-from sim.runtime.simulation import STATE_CODES
+from sim.runtime.snapshots import STATE_CODES
 
 STATE_NAMES = {code: name for name, code in STATE_CODES.items()}
 

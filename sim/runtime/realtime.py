@@ -42,7 +42,7 @@ from sim.runtime.shared import (
     SharedHolder,
     SharedTelemetry,
 )
-from sim.runtime.simulation import LAYERS, HapticLog, RunResult, RuntimeError_, RuntimeEvent, Simulation
+from sim.runtime.simulation import LAYERS, HapticLog, LayerProcessError, RunResult, RuntimeEvent, Simulation
 from sim.runtime.telemetry import LoopTelemetry
 
 SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
@@ -63,26 +63,17 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     :func:`process_prepared`."""
     settings = simulation.settings
     capacity = int(duration * settings.haptic_rate * 1.2) + 2000
-    display_capacity = int(duration * settings.display_rate * 1.5) + 100  # plus 15 for the FEM slot
-    arena = Arena(
-        18
-        + 512 * 4
-        + 1
-        + capacity * 8
-        + 1
-        + capacity * 2
-        + 1
-        + 4096 * 2
-        + 1
-        + 4
-        + 64
-        + 3
-        + 3 * SharedGraphics.MAX_VERTICES
-        + 1
-        + 4 * SharedGraphics.MAX_CONTACT
-        + display_capacity * 2
-        + 1
-        + 8  # the FEM slot's force, local stress and stretch, and spare
+    display_capacity = int(duration * settings.display_rate * 1.5) + 100
+    arena = Arena(  # each channel states its own size
+        SharedHolder.doubles()
+        + SharedForceHistory.doubles()
+        + SharedHapticLog.doubles(capacity)
+        + SharedTelemetry.doubles(capacity)
+        + SharedEvents.doubles()
+        + ControlBlock.doubles()
+        + SharedGraphics.doubles()
+        + SharedFem.doubles()
+        + SharedTelemetry.doubles(display_capacity)
     )
     simulation.holder = SharedHolder(arena)
     simulation.forces = SharedForceHistory(arena)
@@ -94,7 +85,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     simulation.graphics = SharedGraphics(arena)
     simulation.fem = SharedFem(arena)
     display_telemetry = SharedTelemetry(arena, display_capacity)
-    display_pid = _start_display_process(simulation, duration, control, display_telemetry)
+    display_pid, display_errors = _start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()
     started = clock.perf_counter()
     parent = os.getpid()
@@ -105,8 +96,9 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         try:
             _stop_with_parent(parent, control)
             _haptic_process(simulation, duration, control, telemetry, events, errors_write, pin_cpus)
-        except BaseException:
+        except BaseException as error:  # outside the loop's own report (set-up): the parent reads it
             status = 1
+            _report(errors_write, "haptic", error)
         finally:
             os._exit(status)
     os.close(errors_write)
@@ -115,7 +107,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     polling = IdlePolling() if previous_affinity else contextlib.nullcontext()
     try:
         with polling:
-            _wait_until_ready(pid, control)
+            _wait_until_ready(pid, control, errors_read)
             # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
             control.start = clock.perf_counter() + START_DELAY
             _run_other_layers(simulation, duration, control)
@@ -127,6 +119,9 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         if previous_affinity is not None:
             _set_all_threads(previous_affinity)
     child_error = _read_all(errors_read)
+    failed = _read_all(display_errors)
+    if failed:  # the session went on without its view; the failure is recorded, with its message
+        simulation.events.append(RuntimeEvent("layer_failed", 0.0, "display", failed))
     if display_pid is not None:
         simulation.telemetry["display"] = _as_layer_telemetry("display", simulation, display_telemetry)
     return _collect(
@@ -156,30 +151,44 @@ def _set_all_threads(cpus: set[int]) -> None:
             continue
 
 
-def _wait_until_ready(pid: int, control: ControlBlock, timeout: float = 60.0) -> None:
-    """Block until the haptic process has finished its set-up (or has died trying)."""
+def _wait_until_ready(pid: int, control: ControlBlock, errors: int, timeout: float = 60.0) -> None:
+    """Block until the haptic process has finished its set-up; a :class:`LayerProcessError` with the
+    child's own message when it died trying."""
     deadline = clock.monotonic() + timeout
     while not control.haptic_ready:
         finished, _ = os.waitpid(pid, os.WNOHANG)
         if finished:
-            raise RuntimeError_("haptic: the haptic process exited during its set-up")
+            reason = _read_all(errors, close=False) or "no message"
+            raise LayerProcessError(f"haptic: the haptic process exited during its set-up ({reason})")
         if clock.monotonic() > deadline:
-            raise RuntimeError_(f"haptic: the haptic process was not ready after {timeout:.0f} s")
+            raise LayerProcessError(f"haptic: the haptic process was not ready after {timeout:.0f} s")
         clock.sleep(0.001)
+
+
+def _report(fd: int, layer: str, error: BaseException) -> None:
+    """In a forked child: the failure, named with its layer, for the parent to read."""
+    try:
+        os.write(fd, f"{layer}: {type(error).__name__}: {error}".encode()[:4000])
+    except OSError:
+        pass
 
 
 def _start_display_process(
     simulation: Simulation, duration: float, control: ControlBlock, telemetry: SharedTelemetry
-) -> int | None:
+) -> tuple[int | None, int]:
     """The display layer in its own process, so rendering never takes the FEM thread's GIL; at the
     column worker's niceness (:data:`sim.runtime.prefetch.WORKER_NICENESS`), below the real-time
     FEM and graphics threads."""
+    errors_read, errors_write = os.pipe()
     if simulation.renderer is None:
-        return None
+        os.close(errors_write)
+        return None, errors_read
     parent = os.getpid()
     pid = os.fork()
     if pid != 0:
-        return pid
+        os.close(errors_write)
+        return pid, errors_read
+    os.close(errors_read)
     status = 0
     try:
         _stop_with_parent(parent, control)
@@ -204,8 +213,9 @@ def _start_display_process(
             simulation.display_step(now)
             telemetry.record(now, clock.perf_counter() - began)
             k = max(k + 1, int((clock.perf_counter() - start) / period))
-    except BaseException:
+    except BaseException as error:
         status = 1
+        _report(errors_write, "display", error)
     finally:
         os._exit(status)
 
@@ -472,7 +482,10 @@ def _layer_loop(
 def _wait_for(pid: int, timeout: float) -> None:
     deadline = clock.monotonic() + timeout
     while clock.monotonic() < deadline:
-        done, _ = os.waitpid(pid, os.WNOHANG)
+        try:
+            done, _ = os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:  # already reaped (it died during its set-up)
+            return
         if done:
             return
         clock.sleep(0.01)
@@ -480,11 +493,13 @@ def _wait_for(pid: int, timeout: float) -> None:
     os.waitpid(pid, 0)
 
 
-def _read_all(fd: int) -> str:
+def _read_all(fd: int, close: bool = True) -> str:
+    """Everything a child wrote to its error pipe (the child has exited: the pipe is at its end)."""
     chunks = []
     while chunk := os.read(fd, 4096):
         chunks.append(chunk)
-    os.close(fd)
+    if close:
+        os.close(fd)
     return b"".join(chunks).decode(errors="replace")
 
 

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from sim.needle import Pose
 from sim.runtime.logs import HapticColumns, interpolate_force
+from sim.runtime.snapshots import STATE_CODES, FemSnapshot, GraphicsSnapshot, HolderSnapshot
 
 
 class Arena:
@@ -58,8 +59,13 @@ def _consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
 class SharedHolder:
     """Latest holder snapshot: [seq, time, position 3, rotation 9, velocity 3, grip]."""
 
+    @staticmethod
+    def doubles() -> int:
+        """Its size in the arena: a seqlock counter, time, position, rotation, velocity, grip."""
+        return 18
+
     def __init__(self, arena: Arena) -> None:
-        self._slot = arena.take(18)
+        self._slot = arena.take(self.doubles())
 
     def put(self, snapshot) -> None:
         slot = self._slot
@@ -72,7 +78,6 @@ class SharedHolder:
         slot[0] += 1  # even: consistent
 
     def get(self):
-        from sim.runtime.simulation import HolderSnapshot
 
         copy = _consistent_copy(self._slot)
         if copy is None:
@@ -91,6 +96,11 @@ class SharedForceHistory:
     these VMs a step's compute time is sometimes stretched 5-20x by the host; what the step costs
     is what that multiplies.
     """
+
+    @staticmethod
+    def doubles(capacity: int = 512) -> int:
+        """Its size in the arena: ``capacity`` rows of (time, force) and a counter."""
+        return capacity * 4 + 1
 
     def __init__(self, arena: Arena, capacity: int = 512) -> None:
         self._ring = arena.take(capacity, 4)
@@ -136,6 +146,11 @@ class SharedForceHistory:
 class SharedHapticLog(HapticColumns):
     """The haptic log in shared memory: [time, position 3, grip, force 3] per tick."""
 
+    @staticmethod
+    def doubles(capacity: int) -> int:
+        """Its size in the arena: ``capacity`` rows of 8 and a count."""
+        return capacity * 8 + 1
+
     def __init__(self, arena: Arena, capacity: int) -> None:
         self._data = arena.take(capacity, 8)
         self._count = arena.take(1)
@@ -155,6 +170,11 @@ class SharedHapticLog(HapticColumns):
 
 class SharedTelemetry:
     """Start and compute times of the haptic process's steps."""
+
+    @staticmethod
+    def doubles(capacity: int) -> int:
+        """Its size in the arena: ``capacity`` (period, compute) pairs and a count."""
+        return capacity * 2 + 1
 
     def __init__(self, arena: Arena, capacity: int) -> None:
         self._data = arena.take(capacity, 2)
@@ -188,6 +208,11 @@ EVENT_CODES = (
 class SharedEvents:
     """Runtime events raised in the haptic process: (time, code) pairs."""
 
+    @staticmethod
+    def doubles(capacity: int = 4096) -> int:
+        """Its size in the arena: ``capacity`` events of 2 and a count."""
+        return capacity * 2 + 1
+
     def __init__(self, arena: Arena, capacity: int = 4096) -> None:
         self._data = arena.take(capacity, 2)
         self._count = arena.take(1)
@@ -210,8 +235,13 @@ class ControlBlock:
 
     RUNNING, FINISHED, DEVICE_LOST, FAILED = 0.0, 1.0, 2.0, 3.0
 
+    @staticmethod
+    def doubles() -> int:
+        """Its size in the arena: four control words."""
+        return 4
+
     def __init__(self, arena: Arena) -> None:
-        self._data = arena.take(4)
+        self._data = arena.take(self.doubles())
 
     @property
     def stop_requested(self) -> bool:
@@ -258,8 +288,13 @@ class SharedGraphics:
 
     MAX_VERTICES, MAX_CONTACT = 64, 192  # a needle through a wall: two force kernels of up to ~90 nodes
 
+    @classmethod
+    def doubles(cls) -> int:
+        """Its size in the arena: a header, the needle's vertices, the drive's nodes and displacements."""
+        return 3 + 3 * cls.MAX_VERTICES + 1 + cls.MAX_CONTACT * 4
+
     def __init__(self, arena: Arena) -> None:
-        self._slot = arena.take(3 + 3 * self.MAX_VERTICES + 1 + self.MAX_CONTACT * 4)
+        self._slot = arena.take(self.doubles())
 
     def put(self, snapshot) -> None:
         slot = self._slot
@@ -280,7 +315,6 @@ class SharedGraphics:
         slot[0] += 1
 
     def get(self):
-        from sim.runtime.simulation import GraphicsSnapshot
 
         copy = _consistent_copy(self._slot)
         if copy is None:
@@ -305,13 +339,17 @@ class SharedFem:
     local stress, stretch].
     """
 
+    @staticmethod
+    def doubles() -> int:
+        """Its size in the arena: a seqlock counter, the step's state, force, stress and stretch."""
+        return 19
+
     def __init__(self, arena: Arena) -> None:
-        self._slot = arena.take(19)
+        self._slot = arena.take(self.doubles())
         self._owner = os.getpid()
         self._local = None
 
     def put(self, snapshot) -> None:
-        from sim.runtime.simulation import STATE_CODES
 
         self._local = snapshot
         slot = self._slot
@@ -331,7 +369,6 @@ class SharedFem:
     def get(self):
         if os.getpid() == self._owner:
             return self._local
-        from sim.runtime.simulation import STATE_CODES, FemSnapshot
 
         copy = _consistent_copy(self._slot)
         if copy is None:

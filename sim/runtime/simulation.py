@@ -25,7 +25,6 @@ import time as wallclock
 import traceback
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,13 +39,18 @@ from sim.needle_forces import NeedleForces
 from sim.runtime.logs import HapticColumns, interpolate_force
 from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead
 from sim.runtime.safety import ForceSafety, SafetySettings
+from sim.runtime.snapshots import FemSnapshot, GraphicsSnapshot, HolderSnapshot, RuntimeEvent
 from sim.runtime.telemetry import LayerSummary, LoopTelemetry
 
 LAYERS = ("haptic", "fem", "graphics", "display")
 
 
-class RuntimeError_(VascsimError, RuntimeError):
-    """A runtime setting is out of range."""
+class RuntimeSettingsError(VascsimError, ValueError):
+    """A runtime setting is out of range; the message names it and its range."""
+
+
+class LayerProcessError(VascsimError, RuntimeError):
+    """A layer's own process (haptic, display) failed; the message is the child's, with its layer."""
 
 
 @dataclass(frozen=True)
@@ -79,71 +83,26 @@ class RuntimeSettings:
 
     def __post_init__(self) -> None:
         if not 0.0 < self.haptic_scale <= 1.0:
-            raise RuntimeError_(f"haptic_scale must be in (0, 1]; got {self.haptic_scale}")
+            raise RuntimeSettingsError(f"haptic_scale must be in (0, 1]; got {self.haptic_scale}")
         if not 200.0 <= self.fem_rate <= 1000.0:
-            raise RuntimeError_(f"fem_rate must be 200-1000 Hz (PAPER.md section 7); got {self.fem_rate}")
+            raise RuntimeSettingsError(
+                f"fem_rate must be 200-1000 Hz (PAPER.md section 7); got {self.fem_rate}"
+            )
         if self.haptic_rate < self.fem_rate:
-            raise RuntimeError_(
+            raise RuntimeSettingsError(
                 f"haptic_rate ({self.haptic_rate} Hz) must be at least fem_rate ({self.fem_rate} Hz)"
             )
         for name in ("graphics_rate", "display_rate"):
             if not 1.0 <= getattr(self, name) <= 240.0:
-                raise RuntimeError_(f"{name} must be 1-240 Hz; got {getattr(self, name)}")
+                raise RuntimeSettingsError(f"{name} must be 1-240 Hz; got {getattr(self, name)}")
         for name in ("prefetch_radius", "prefetch_reach"):
             if not 0.0 <= getattr(self, name) <= 0.1:
-                raise RuntimeError_(f"{name} must be 0-0.1 m; got {getattr(self, name)}")
+                raise RuntimeSettingsError(f"{name} must be 0-0.1 m; got {getattr(self, name)}")
         if not 0.0 <= self.force_delay <= 0.2:
-            raise RuntimeError_(f"force_delay must be 0-0.2 s; got {self.force_delay}")
+            raise RuntimeSettingsError(f"force_delay must be 0-0.2 s; got {self.force_delay}")
 
     def period(self, layer: str) -> float:
         return 1.0 / getattr(self, f"{layer}_rate")
-
-
-# The snapshots are NamedTuples: as immutable as frozen dataclasses, and built in a third of the
-# time (a frozen dataclass sets each field through object.__setattr__; one is made every tick).
-class HolderSnapshot(NamedTuple):
-    time: float
-    pose: Pose
-    velocity: NDArray[np.float64]
-    grip: bool
-
-
-class FemSnapshot(NamedTuple):
-    time: float
-    needle_force: NDArray[np.float64]
-    needle_vertices: NDArray[np.float64]
-    state: str
-    contact_nodes: NDArray[np.int64]
-    reaction_forces: NDArray[np.float64]
-    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
-    tip_speed: float = 0.0
-    tip_tangent: NDArray[np.float64] | None = None
-    contact_triangle: int = -1
-    barycentric: tuple[float, float, float] = (math.nan, math.nan, math.nan)
-    soft_share: float = math.nan  # the biphase split of the drive (nan: the drive's own strain sets it)
-    local_stress: float = math.nan  # Pa, largest von Mises stress within 1 mm of the contact
-    stretch: float = math.nan  # the stretch statistic 1 + |d| / h
-
-
-STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
-
-
-class GraphicsSnapshot(NamedTuple):
-    time: float
-    needle_vertices: NDArray[np.float64]
-    state: str
-    hits: object
-    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # driven nodes, intended (m)
-
-
-@dataclass(frozen=True)
-class RuntimeEvent:
-    """A runtime-level event: safety actions, device loss, a layer's failure, the stop."""
-
-    kind: str
-    time: float
-    layer: str
-    detail: str = ""
 
 
 class Mailbox:

@@ -17,7 +17,7 @@ from sim.devices.base import TOUCH_LIMITS
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings, Simulation
-from sim.runtime.simulation import RuntimeError_
+from sim.runtime.simulation import RuntimeSettingsError
 
 
 def record(folder, settings=None):
@@ -64,7 +64,7 @@ def test_a_scale_factor_reduces_what_the_device_is_sent_not_what_is_recorded(tmp
     np.testing.assert_allclose(magnitudes(half, REACTION_COLUMNS), magnitudes(full, REACTION_COLUMNS))
     sent_full, sent_half = (magnitudes(s, ("force_x", "force_y", "force_z")) for s in (full, half))
     assert sent_half.max() < 0.9 * sent_full.max()
-    with pytest.raises(RuntimeError_, match="haptic_scale"):
+    with pytest.raises(RuntimeSettingsError, match="haptic_scale"):
         RuntimeSettings(haptic_scale=0.0)
 
 

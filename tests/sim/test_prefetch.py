@@ -213,7 +213,7 @@ def test_a_needle_still_in_the_air_already_asks_for_its_exit_face(small_box):
     from sim.devices import ScriptedDevice, SuturingPass
     from sim.needle import Needle
     from sim.runtime import Simulation
-    from sim.runtime.simulation import FemSnapshot
+    from sim.runtime.snapshots import FemSnapshot
 
     tissue = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["x0"])
     needle = Needle.curved()

@@ -79,7 +79,7 @@ def test_the_display_scene_shows_the_solved_field_and_keeps_its_handle_per_conta
     """The display layer's scene: a contact renders the tissue deformed as a full-field solve
     deforms it, from one whole-field handle per contact set (rebuilt when the set changes)."""
     from sim.runtime.display import DisplayScene
-    from sim.runtime.simulation import GraphicsSnapshot
+    from sim.runtime.snapshots import GraphicsSnapshot
 
     mesh, fixed = paper_cube()
     model = TissueModel(mesh, Material(20e3, 0.45), fixed)

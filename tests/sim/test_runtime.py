@@ -188,11 +188,11 @@ def test_clamp_and_stop_sequence():
 
 
 def test_settings_validation():
-    from sim.runtime.simulation import RuntimeError_
+    from sim.runtime.simulation import RuntimeSettingsError
 
-    with pytest.raises(RuntimeError_, match="fem_rate must be 200-1000 Hz"):
+    with pytest.raises(RuntimeSettingsError, match="fem_rate must be 200-1000 Hz"):
         RuntimeSettings(fem_rate=100)
-    with pytest.raises(RuntimeError_, match="haptic_rate"):
+    with pytest.raises(RuntimeSettingsError, match="haptic_rate"):
         RuntimeSettings(haptic_rate=400, fem_rate=500)
     assert math.isclose(RuntimeSettings().period("graphics"), 1 / 30)
 
@@ -255,6 +255,31 @@ def test_realtime_run_shares_state_across_processes(tissue):
     assert result.telemetry["haptic"].steps > 1000 and result.telemetry["fem"].steps > 500
     assert_forces_safe(result, LIMITS)
     assert np.all(result.haptic.force[-1] == 0)
+
+
+def test_a_failing_layer_process_reaches_the_parent_with_its_message(tissue):
+    """Issue 24: a display process that fails is reported with its own message (the session goes on
+    without its view); a haptic process that dies in its set-up raises in the parent, saying why."""
+    from sim.runtime import LayerProcessError
+
+    def broken_view(frame):
+        raise ValueError("the view's GPU is gone")
+
+    simulation, _, _ = make(tissue)
+    simulation.renderer = broken_view
+    result = simulation.run_realtime(1.0)
+    assert result.completed, result.error
+    failed = [e for e in result.events if e.kind == "layer_failed"]
+    expected = ("display", "display: ValueError: the view's GPU is gone")
+    assert [(e.layer, e.detail) for e in failed] == [expected]
+
+    def no_memory_lock():
+        raise PermissionError("mlockall refused")
+
+    simulation, _, _ = make(tissue)
+    simulation.on_haptic_start = no_memory_lock
+    with pytest.raises(LayerProcessError, match=r"set-up \(haptic: PermissionError: mlockall refused\)"):
+        simulation.run_realtime(1.0)
 
 
 def test_realtime_device_unplug_ends_the_session(tissue):

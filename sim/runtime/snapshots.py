@@ -1,0 +1,61 @@
+"""What the layers hand each other: snapshots of the holder, the FEM step and the graphics frame,
+and runtime events. Its own module, so the shared-memory channels (sim.runtime.shared) and the
+simulation both import it at the top, with no circle between them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.needle import Pose
+
+
+# The snapshots are NamedTuples: as immutable as frozen dataclasses, and built in a third of the
+# time (a frozen dataclass sets each field through object.__setattr__; one is made every tick).
+class HolderSnapshot(NamedTuple):
+    time: float
+    pose: Pose
+    velocity: NDArray[np.float64]
+    grip: bool
+
+
+class FemSnapshot(NamedTuple):
+    time: float
+    needle_force: NDArray[np.float64]
+    needle_vertices: NDArray[np.float64]
+    state: str
+    contact_nodes: NDArray[np.int64]
+    reaction_forces: NDArray[np.float64]
+    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
+    tip_speed: float = 0.0
+    tip_tangent: NDArray[np.float64] | None = None
+    contact_triangle: int = -1
+    barycentric: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    soft_share: float = math.nan  # the biphase split of the drive (nan: the drive's own strain sets it)
+    local_stress: float = math.nan  # Pa, largest von Mises stress within 1 mm of the contact
+    stretch: float = math.nan  # the stretch statistic 1 + |d| / h
+
+
+STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
+
+
+class GraphicsSnapshot(NamedTuple):
+    time: float
+    needle_vertices: NDArray[np.float64]
+    state: str
+    hits: object
+    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # driven nodes, intended (m)
+
+
+@dataclass(frozen=True)
+class RuntimeEvent:
+    """A runtime-level event: safety actions, device loss, a layer's failure, the stop."""
+
+    kind: str
+    time: float
+    layer: str
+    detail: str = ""
