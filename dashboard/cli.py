@@ -10,7 +10,7 @@ import inspect
 
 import click
 
-from sessions.cli import _catalog, main, user_errors
+from sessions.cli import main, open_catalog, user_errors
 
 __all__ = ["main"]
 
@@ -53,7 +53,7 @@ def serve(host: str, port: int, secure_cookies: bool, setting_pairs: tuple[str, 
     from dashboard.settings import DashboardSettings, SettingError, parse_settings
     from sessions.config import settings_from_environment
 
-    catalog, home = _catalog()
+    catalog, home = open_catalog()
     chosen = dict(parse_settings(settings_from_environment(), "environment"))
     pairs = {}
     for pair in setting_pairs:

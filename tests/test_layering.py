@@ -34,3 +34,25 @@ def test_core_imports_without_the_web_or_rendering_stack():
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_the_command_line_package_loads_no_web_module():
+    """Issue 24: `sessions.cli` (every command but `serve`) imports no web framework."""
+    code = (
+        "import sys; import sessions, sessions.cli; "
+        "bad = [m for m in ('fastapi', 'starlette', 'uvicorn', 'jinja2', 'dashboard') if m in sys.modules]; "
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_each_command_is_registered_where_its_module_says():
+    """Issue 24: every command of `vascsim` is registered explicitly; `serve` by the console script."""
+    from dashboard.cli import main as console
+    from sessions.cli import main
+
+    assert console is main and console.commands["serve"].callback.__module__ == "dashboard.cli"
+    for name, command in main.commands.items():
+        expected = "dashboard.cli" if name == "serve" else "sessions.cli."
+        assert command.callback.__module__.startswith(expected), name

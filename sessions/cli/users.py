@@ -7,7 +7,7 @@ import sys
 import click
 from sqlalchemy import select
 
-from sessions.cli import _catalog, _json, main, user_errors
+from sessions.cli.base import open_catalog, print_json, user_errors
 from sessions.models import ROLES, Participant, User
 
 
@@ -17,7 +17,7 @@ def _password(value: str | None) -> str:
     return click.prompt("password", hide_input=True, confirmation_prompt=True)
 
 
-@main.group()
+@click.group()
 def users() -> None:
     """Dashboard accounts: admin, supervisor, researcher, trainee."""
 
@@ -41,7 +41,7 @@ def users_add(username: str, role: str, participants: tuple[str, ...], password_
     from sessions.accounts import AccountError, create_user, link_participant
 
     password = sys.stdin.readline().rstrip("\n") if password_stdin else _password(None)
-    catalog, _ = _catalog()
+    catalog, _ = open_catalog()
     with catalog.session() as orm:
         user = create_user(orm, username, password, role)
         for item in participants:
@@ -57,7 +57,7 @@ def users_add(username: str, role: str, participants: tuple[str, ...], password_
 @user_errors
 def users_list(as_json: bool) -> None:
     """Every account with its role, state and linked participants."""
-    catalog, _ = _catalog()
+    catalog, _ = open_catalog()
     with catalog.session() as orm:
         rows = []
         for user in orm.scalars(select(User).order_by(User.username)):
@@ -66,7 +66,7 @@ def users_list(as_json: bool) -> None:
                 {"username": user.username, "role": user.role, "active": user.active, "participants": codes}
             )
     if as_json:
-        _json(rows)
+        print_json(rows)
         return
     for row in rows:
         state = "" if row["active"] else " (inactive)"
@@ -83,7 +83,7 @@ def users_passwd(username: str, password_stdin: bool) -> None:
     from sessions.accounts import set_password, user_named
 
     password = sys.stdin.readline().rstrip("\n") if password_stdin else _password(None)
-    catalog, _ = _catalog()
+    catalog, _ = open_catalog()
     with catalog.session() as orm:
         set_password(orm, user_named(orm, username), password)
     click.echo(f"password of {username!r} changed")

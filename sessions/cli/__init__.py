@@ -1,0 +1,52 @@
+"""The ``vascsim`` command line: one entry point, a module per command group.
+
+User errors (any :class:`sim.errors.VascsimError`) print one line on stderr and exit with status
+1; ``--help`` on every command explains its options. Each command is registered here, explicitly,
+so where a command lives is this list; ``vascsim serve`` is registered the same way by the console
+script (:mod:`dashboard.cli`), so this package never imports the web stack.
+"""
+
+from __future__ import annotations
+
+from sessions.cli import (
+    demo,
+    devices,
+    exchange,
+    imports,
+    participants,
+    recorded,
+    recovery,
+    replay,
+    run,
+    scoring,
+    studies,
+    tasks,
+    tissue,
+    users,
+)
+from sessions.cli.base import main, open_catalog, user_errors
+
+__all__ = ["main", "open_catalog", "user_errors"]
+
+for command in (
+    demo.demo,
+    run.run,
+    recorded.sessions,
+    scoring.score,
+    scoring.report,
+    replay.replay,
+    studies.studies,
+    participants.participants,
+    tasks.tasks,
+    tissue.indentation,
+    devices.devices,
+    recovery.recover,
+    exchange.export_bundle,
+    exchange.keys,
+    exchange.import_bundle_command,
+    imports.calibrate,
+    imports.import_video,
+    imports.import_jigsaws,
+    users.users,
+):
+    main.add_command(command)

@@ -1,0 +1,144 @@
+"""The command line's common ground: the main group, one-line errors, the catalog, tables and JSON.
+
+Every command module (:mod:`sessions.cli`) builds on these; the front-end stays thin over the
+domain layer (catalog, runner, analysis).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable
+from functools import wraps
+from typing import Any
+
+import click
+import numpy as np
+import pandas as pd
+
+from sim.errors import VascsimError
+
+LISTED_BY = {
+    "study": "vascsim studies list",
+    "session": "vascsim sessions list",
+    "participant": "vascsim participants list --study STUDY",
+    "task": "vascsim tasks list",
+    "user": "vascsim users list",
+}
+"""Where the CLI lists each kind of thing the catalog can fail to find (the library's messages say
+only what is missing)."""
+
+
+def user_errors(command: Callable[..., Any]) -> Callable[..., Any]:
+    """Turn vascsim errors into a one-line message and exit status 1 (no traceback)."""
+
+    @wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except VascsimError as error:
+            from sessions.catalog import NotFound
+
+            hint = LISTED_BY.get(getattr(error, "kind", None)) if isinstance(error, NotFound) else None
+            click.echo(f"vascsim: error: {error}" + (f" (list them with `{hint}`)" if hint else ""), err=True)
+            sys.exit(1)
+
+    return wrapper
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="vascsim")
+def main() -> None:
+    """vascsim: a haptic vascular-suturing simulator and assessment platform.
+
+    Run `vascsim demo` for a tour on built-in data; `vascsim COMMAND --help`
+    explains each command. Data lives in VASCSIM_HOME (default
+    ~/.local/share/vascsim); VASCSIM_DATABASE_URL selects a PostgreSQL catalog.
+    """
+    from sessions.config import prepare_rendering
+
+    prepare_rendering()
+
+
+def open_catalog():
+    from sessions.catalog import Catalog
+    from sessions.config import data_home, database_url
+
+    home = data_home()
+    catalog = Catalog(database_url(home))
+    click.get_current_context().call_on_close(catalog.close)  # no pooled connection outlives the command
+    return catalog, home
+
+
+def progress_bar(transient: bool = False):
+    """A progress bar on stderr; a transient one vanishes when done and stays silent off a terminal."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    console = stderr_console()
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[last]}"),
+        transient=transient,
+        disable=transient and not console.is_terminal,
+        console=console,
+    )
+
+
+def stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def print_frame(frame, title: str, caption: str | None = None) -> None:
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True)
+    for k, column in enumerate(frame.columns):
+        # names are never cut and no value ends in an ellipsis: a short value keeps its width, a long
+        # one wraps at its spaces ("0.83" over "(0.61-0.95)")
+        widest = max([len(cell_text(v)) for v in frame[column]] or [0])
+        short = max([len(part) for v in frame[column] for part in cell_text(v).split()] or [0])
+        table.add_column(str(column), no_wrap=k == 0, overflow="fold", min_width=min(widest, max(short, 4)))
+    for row in frame.itertuples(index=False):
+        table.add_row(*[cell_text(v) for v in row])
+    Console().print(table)
+
+
+def cell_text(value) -> str:
+    if value is None or value is pd.NA:
+        return ""
+    if isinstance(value, float):
+        return "" if value != value else f"{value:.4g}"
+    if isinstance(value, bool | np.bool_):
+        return "yes" if value else "no"
+    return str(value)
+
+
+def print_json(data) -> None:
+    click.echo(json.dumps(data, indent=2, default=_json_default))
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+def analysis_options(groups, level, metric_names, rule, consecutive=None) -> dict:
+    from sessions.catalog import CatalogError
+
+    options: dict = {"level": level, "benchmark_rule": rule, "consecutive_passes": consecutive}
+    if groups is not None:
+        names = tuple(part.strip() for part in groups.split(","))
+        if len(names) != 2:
+            raise CatalogError(f"--groups needs two comma-separated groups, skilled first; got {groups!r}")
+        options["groups"], options["skilled_group"] = names, names[0]
+    if metric_names is not None:
+        options["metrics"] = tuple(part.strip() for part in metric_names.split(",") if part.strip())
+    return {k: v for k, v in options.items() if v is not None}

@@ -1,0 +1,65 @@
+"""`vascsim participants ...`: pseudonymous participants of a study."""
+
+from __future__ import annotations
+
+import click
+import pandas as pd
+
+from sessions.cli.base import (
+    open_catalog,
+    print_frame,
+    print_json,
+    user_errors,
+)
+
+
+@click.group()
+def participants() -> None:
+    """Pseudonymous participants of a study."""
+
+
+@participants.command("add")
+@click.argument("code")
+@click.option("--study", required=True, help="Study the participant joins.")
+@click.option("--level", default="", help="Self-reported level, e.g. expert, trainee, novice.")
+@click.option("--group", "group_label", default="", help="Group label analysed (default: the level).")
+@click.option("--years", type=click.FloatRange(0, 80), default=None, help="Years of surgical experience.")
+@click.option(
+    "--handedness", type=click.Choice(["right", "left", "ambidextrous"]), default="right", show_default=True
+)
+@user_errors
+def participants_add(code: str, study: str, level: str, group_label: str, years, handedness: str) -> None:
+    """Add participant CODE (a pseudonym; never a name) to a study."""
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        found = catalog.study(orm, study)
+        catalog.add_participant(orm, found, code, level, group_label, years, handedness)
+    click.echo(f"participant {code} added to {study}")
+
+
+@participants.command("list")
+@click.option("--study", required=True, help="Study to list.")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def participants_list(study: str, as_json: bool) -> None:
+    """List a study's participants."""
+
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        found = catalog.study(orm, study)
+        rows = [
+            {
+                "code": p.code,
+                "level": p.level,
+                "group": p.group_label,
+                "years": p.years_experience,
+                "handedness": p.handedness,
+                "synthetic": p.synthetic,
+                "sessions": len(p.sessions),
+            }
+            for p in sorted(found.participants, key=lambda p: p.code)
+        ]
+    if as_json:
+        print_json(rows)
+        return
+    print_frame(pd.DataFrame(rows), f"Participants of {study}")

@@ -1,0 +1,209 @@
+"""`vascsim sessions list|show|delete`: recorded sessions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import pandas as pd
+
+from sessions.cli.base import (
+    cell_text,
+    open_catalog,
+    print_frame,
+    print_json,
+    user_errors,
+)
+from sessions.status import SESSION_STATUSES
+
+
+@click.group()
+def sessions() -> None:
+    """Recorded sessions: list, show, delete."""
+
+
+@sessions.command("list")
+@click.option("--study", default=None, help="Only this study.")
+@click.option("--task", default=None, help="Only sessions of this task.")
+@click.option("--status", type=click.Choice(SESSION_STATUSES), default=None)
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def sessions_list(study, task, status, as_json) -> None:
+    """List sessions (newest last), with the task each ran (trials count per task)."""
+    from sqlalchemy import select
+
+    from sessions.analysis import metric_versions
+    from sessions.models import Participant, Session, Study, Task
+
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        query = (
+            select(
+                Session.uid,
+                Study.name,
+                Participant.code,
+                Task.name,
+                Session.trial,
+                Session.phase,
+                Session.device,
+                Session.status,
+            )
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(Study, Participant.study_id == Study.id)
+            .join(Task, Session.task_id == Task.id)
+            .order_by(Session.id)
+        )
+        if study:
+            catalog.study(orm, study)
+            query = query.where(Study.name == study)
+        if task:
+            query = query.where(Task.name == task)
+        if status:
+            query = query.where(Session.status == status)
+        found = orm.execute(query.add_columns(Session.id)).all()
+    versions = metric_versions(catalog, [r[-1] for r in found])
+    columns = ("session", "study", "participant", "task", "trial", "phase", "device", "status")
+    rows = [dict(zip(columns, r[:-1], strict=True), metrics=versions[r[-1]]) for r in found]
+    if as_json:
+        print_json(rows)
+        return
+    frame = pd.DataFrame(rows, columns=[*columns, "metrics"])
+    # a column with one value in every row is said once, in the caption, so the rest fit 80 columns
+    same = [c for c in ("study", "device", "metrics") if len(frame) and frame[c].nunique() == 1]
+    caption = "; ".join(f"{c} {frame[c].iloc[0]}" for c in same) if same else None
+    print_frame(frame.drop(columns=same), "Sessions", f"all sessions: {caption}" if caption else None)
+    stale = [r for r in rows if r["metrics"].startswith("stale")]
+    if stale:
+        studies = sorted({r["study"] for r in stale})
+        click.echo(
+            f"{len(stale)} session(s) scored with an older metric registry; rescore: "
+            + "; ".join(f"vascsim score --study {name}" for name in studies)
+        )
+
+
+@sessions.command("show")
+@click.argument("uid")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def sessions_show(uid: str, as_json: bool) -> None:
+    """Show one session: who, what, when, files with checksums, metrics."""
+
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        data = {
+            "session": row.uid,
+            "study": row.participant.study.name,
+            "participant": row.participant.code,
+            "synthetic": row.participant.synthetic,
+            "task": row.task.name,
+            "device": row.device,
+            "clock": row.clock,
+            "trial": row.trial,
+            "phase": row.phase,
+            "status": row.status,
+            "started": row.started_at.isoformat(),
+            "ended": row.ended_at.isoformat() if row.ended_at else None,
+            "directory": row.directory,
+            "error": row.error,
+            "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
+        }
+    from sessions.review import session_against_experts, session_stitches
+
+    rows = session_against_experts(catalog, uid)
+    data["metrics"] = {r["metric"]: r["value"] for r in rows}
+    data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
+    data["stitches"] = session_stitches(catalog, uid)
+    if as_json:
+        print_json(data)
+        return
+    for key, value in data.items():
+        if key == "files":
+            for f in value:
+                click.echo(f"  file {f['name']:18s} {f['bytes']:>10d} B  sha256 {f['sha256']}")
+        elif key == "metrics":
+            click.echo(
+                "metrics      (against the experts' quartiles of this task, by each metric's direction)"
+            )
+            for r in rows:
+                versus = r["versus_experts"] or ""
+                click.echo(f"  {r['metric']:28s} {cell_text(r['value']):>12s} {r['unit']:8s} {versus}")
+        elif key == "versus_experts":
+            continue
+        elif key == "stitches":
+            _show_stitches(value)
+        else:
+            click.echo(f"{key:12s} {value}")
+
+
+def final_task_line(final, report) -> str:
+    """One line on the demo's final task: its three largest expert-trainee differences and its report."""
+    table = final.validity.table.dropna(subset=["auc"])
+    top = table.assign(effect=(table["auc"] - 0.5).abs()).nlargest(3, "effect")
+    named = ", ".join(
+        f"{row.metric} (AUC {row.auc:.2f}: {'experts' if row.auc > 0.5 else 'trainees'} better)"
+        for row in top.itertuples()
+    )
+    return (
+        f"final task {final.settings.task} (each participant once, after practice): largest expert-trainee "
+        f"differences {named}; report: {report}"
+    )
+
+
+def _show_stitches(stitches: list[dict]) -> None:
+    """Where each bite went, in mm (fits 80 columns)."""
+    if not stitches:
+        click.echo("stitches     none scored against placement targets (older sessions: `vascsim score`)")
+        return
+    click.echo("stitches     where each bite went, in mm (from the wound edge; from the marks)")
+    click.echo("  stitch  entry bite  exit bite  entry to mark  exit to mark  through intima")
+
+    def mm(value) -> str:
+        return "-" if value is None else f"{1e3 * value:.2f}"
+
+    for s in stitches:
+        through = {None: "no exit", 1.0: "yes", 0.0: "no (cut edge)"}.get(s.get("full_thickness"), "?")
+        click.echo(
+            f"  {s['stitch']:>6d}  {mm(s.get('entry_bite')):>10s}  {mm(s.get('exit_bite')):>9s}  "
+            f"{mm(s.get('entry_to_target')):>13s}  {mm(s.get('exit_to_target')):>12s}  {through}"
+        )
+    if all(s.get("track_offset") is None for s in stitches):
+        return
+    click.echo("passage      how the needle went through the wall (lower is better)")
+    click.echo("  stitch  off its track (mm)  swept (mm^2)  wound-edge stress (MPa)")
+
+    def scaled(value, factor: float, digits: int) -> str:
+        return "-" if value is None else f"{factor * value:.{digits}f}"
+
+    for s in stitches:
+        click.echo(
+            f"  {s['stitch']:>6d}  {scaled(s.get('track_offset'), 1e3, 2):>18s}  "
+            f"{scaled(s.get('swept_area'), 1e6, 1):>12s}  {scaled(s.get('wound_edge_stress'), 1e-6, 2):>23s}"
+        )
+
+
+@sessions.command("delete")
+@click.argument("uid")
+@click.option("--yes", is_flag=True, help="Do not ask for confirmation.")
+@user_errors
+def sessions_delete(uid: str, yes: bool) -> None:
+    """Delete a session's catalog rows and its stream files."""
+    import shutil
+
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        if not yes:
+            click.confirm(f"delete session {uid} and its files?", abort=True)
+        directory = row.directory
+        orm.delete(row)
+    if directory and is_session_dir(directory):
+        shutil.rmtree(directory, ignore_errors=True)
+    click.echo(f"session {uid} deleted")
+
+
+def is_session_dir(directory: str) -> bool:
+
+    from recorder.layout import is_session_directory
+
+    return is_session_directory(Path(directory))

@@ -1,0 +1,121 @@
+"""`vascsim score` and `vascsim report`: metrics and study reports."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from sessions.cli.base import (
+    analysis_options,
+    open_catalog,
+    print_json,
+    progress_bar,
+    stderr_console,
+    user_errors,
+)
+from sessions.status import SCORABLE
+
+
+@click.command()
+@click.argument("uids", nargs=-1)
+@click.option("--study", default=None, help="Score every complete session of this study.")
+@click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
+@user_errors
+def score(uids, study, as_json) -> None:
+    """(Re)compute every metric of the given sessions, or of a whole study."""
+    from sqlalchemy import select
+
+    from sessions.catalog import CatalogError
+    from sessions.models import Participant, Session, Study
+    from sessions.runner import score_session
+
+    catalog, home = open_catalog()
+    targets = list(uids)
+    if study:
+        with catalog.session() as orm:
+            catalog.study(orm, study)
+            targets += list(
+                orm.scalars(
+                    select(Session.uid)
+                    .join(Participant, Session.participant_id == Participant.id)
+                    .join(Study, Participant.study_id == Study.id)
+                    .where(
+                        Study.name == study,
+                        Session.status.in_(SCORABLE),
+                        Session.device != "jigsaws",
+                    )
+                )
+            )
+    if not targets:
+        raise CatalogError("nothing to score: give session ids or --study")
+    results = {}
+    with progress_bar() as progress:
+        task = progress.add_task("scoring", total=len(targets), last="")
+        for uid in targets:
+            results[uid] = score_session(catalog, uid, home)
+            progress.update(task, advance=1, last=uid)
+    if as_json:
+        print_json(results)
+    else:
+        click.echo(f"scored {len(results)} session(s)")
+
+
+@click.command()
+@click.option("--study", required=True, help="Study to report on.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Folder (default VASCSIM_HOME/reports/STUDY).",
+)
+@click.option("--groups", default=None, help="Override: the two groups compared, skilled first (a,b).")
+@click.option(
+    "--level", type=click.Choice(["participant", "trial"]), default=None, help="Override: analysis level."
+)
+@click.option("--metrics", "metric_names", default=None, help="Override: comma-separated primary metrics.")
+@click.option("--rule", default=None, help="Override: benchmark rule, mean, median or percentile:Q.")
+@click.option(
+    "--rating", default=None, help="Override: a continuous rating for concurrent validity, e.g. grs_total."
+)
+@click.option("--task", default=None, help="Override: the task whose sessions are analysed.")
+@click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
+@user_errors
+def report(study, out, groups, level, metric_names, rule, rating, task, as_json) -> None:
+    """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures).
+
+    The analysis is the one the study declared (`vascsim studies analysis STUDY` shows it), the
+    same the dashboard and the demo use. Options override it for this report only; the report
+    says which.
+    """
+
+    from metrics.report import write_report
+    from sessions.analysis import analyse_catalog_study
+
+    catalog, home = open_catalog()
+    overrides = analysis_options(groups, level, metric_names, rule)
+    if rating is not None:
+        overrides["rating_col"] = rating
+    if task is not None:
+        overrides["task"] = task
+    with stderr_console().status("analysing and writing the report..."):
+        analysis, source = analyse_catalog_study(catalog, study, overrides)
+        page = write_report(analysis, Path(out) if out else home / "reports" / study, title=f"Study {study}")
+    if as_json:
+        print_json(
+            {
+                "report": str(page),
+                "analysis_version": source.version,
+                "overridden": {k: {"declared": a, "used": b} for k, (a, b) in source.overridden.items()},
+                "validity": analysis.validity.table.to_dict(orient="records"),
+                "benchmarks": analysis.benchmarks.to_dict(orient="records"),
+                "proficiency": analysis.proficiency.to_dict(orient="records"),
+                "concurrent": None
+                if analysis.concurrent is None
+                else analysis.concurrent.table.to_dict(orient="records"),
+            }
+        )
+        return
+    for note in analysis.notes[:2]:
+        click.echo(note)
+    click.echo(f"report: {page}")

@@ -1,0 +1,139 @@
+"""`vascsim studies ...`: studies and their declared analysis."""
+
+from __future__ import annotations
+
+import click
+import pandas as pd
+
+from sessions.cli.base import (
+    analysis_options,
+    open_catalog,
+    print_frame,
+    print_json,
+    user_errors,
+)
+
+
+@click.group()
+def studies() -> None:
+    """Studies and courses in the catalog."""
+
+
+@studies.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def studies_list(as_json: bool) -> None:
+    """List studies with their participant and session counts."""
+
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        from sqlalchemy import select
+
+        from sessions.models import Study
+
+        rows = [
+            {
+                "study": s.name,
+                "participants": len(s.participants),
+                "sessions": sum(len(p.sessions) for p in s.participants),
+                "synthetic": any(p.synthetic for p in s.participants),
+                "description": s.description,
+            }
+            for s in orm.scalars(select(Study).order_by(Study.name))
+        ]
+    if as_json:
+        print_json(rows)
+        return
+    print_frame(
+        pd.DataFrame(rows, columns=["study", "participants", "sessions", "synthetic", "description"]),
+        "Studies",
+    )
+
+
+@studies.command("add")
+@click.argument("name")
+@click.option("--description", default="", help="Free text shown in listings and reports.")
+@user_errors
+def studies_add(name: str, description: str) -> None:
+    """Create a study (or course) called NAME."""
+    from sessions.catalog import CatalogError
+
+    catalog, _ = open_catalog()
+    with catalog.session() as orm:
+        from sqlalchemy import select
+
+        from sessions.models import Study
+
+        if orm.scalar(select(Study).where(Study.name == name)) is not None:
+            raise CatalogError(f"study {name!r} already exists")
+        catalog.study(orm, name, create=True, description=description)
+    click.echo(f"study {name} created")
+
+
+@studies.command("analysis")
+@click.argument("study")
+@click.option("--groups", default=None, help="The two groups compared, skilled first (a,b).")
+@click.option("--level", type=click.Choice(["participant", "trial"]), default=None, help="Analysis level.")
+@click.option("--metrics", "metric_names", default=None, help="Comma-separated primary metrics.")
+@click.option("--rule", default=None, help="Benchmark rule: mean, median or percentile:Q.")
+@click.option(
+    "--consecutive", type=int, default=None, help="Consecutive passes that make a trainee proficient."
+)
+@click.option("--rating", default=None, help="Continuous rating for concurrent validity, e.g. grs_total.")
+@click.option(
+    "--retention-baseline",
+    type=int,
+    default=None,
+    help="Retention: compare the delayed session with the mean of this many last practice sessions.",
+)
+@click.option("--by", "author", default=None, help="Who declares this version (default: the login name).")
+@click.option("--note", default="", help="Why this version.")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@user_errors
+def studies_analysis(
+    study, groups, level, metric_names, rule, consecutive, rating, retention_baseline, author, note, as_json
+) -> None:
+    """Show a study's declared analysis and its versions, or declare a new version.
+
+    With no option it prints what every report, the dashboard and exports use. Any option
+    declares a new version from the current one with that choice changed (recorded with who,
+    when and --note); earlier versions are kept.
+    """
+    import dataclasses
+    import getpass
+
+    from sessions.analysis import analysis_history, declare_analysis, declared_settings, settings_to_json
+
+    catalog, _ = open_catalog()
+    changes = analysis_options(groups, level, metric_names, rule, consecutive)
+    if rating is not None:
+        changes["rating_col"] = rating
+    if retention_baseline is not None:
+        changes["retention_baseline"] = retention_baseline
+    if changes:
+        current, _, _ = declared_settings(catalog, study)
+        version = declare_analysis(
+            catalog, study, dataclasses.replace(current, **changes), author or getpass.getuser(), note
+        )
+        click.echo(f"study {study!r}: analysis version {version} declared")
+    settings, version, who = declared_settings(catalog, study)
+    history = analysis_history(catalog, study)
+    if as_json:
+        print_json(
+            {"study": study, "version": version, "settings": settings_to_json(settings), "history": history}
+        )
+        return
+    click.echo(
+        f"study {study!r}: "
+        + (f"declared analysis version {version} (by {who})" if version else "no analysis declared; defaults")
+    )
+    for name, value in settings_to_json(settings).items():
+        if value is None:
+            value = (
+                "the discriminating metrics" if name == "benchmark_metrics" else "every metric with values"
+            )
+        elif isinstance(value, list):
+            value = ", ".join(value)
+        click.echo(f"  {name:20s} {value}")
+    for entry in history:
+        click.echo(f"  v{entry['version']} {entry['created_at']} {entry['author']}: {entry['note']}")
