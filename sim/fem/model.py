@@ -42,7 +42,7 @@ from sim.fem.assembly import (
 from sim.fem.condensation import condensed_inverse, node_dofs, sparse_cholesky
 from sim.fem.material import Material, MaterialSpec, describe_materials, element_lame
 from sim.fem.solution import ContactHandle, ContactSolution
-from sim.geometry import bounding_spheres, ray_may_hit, ray_triangle_distances, vertex_normals
+from sim.fem.surface import SurfaceGeometry
 from sim.mesh.tetmesh import TetMesh, signed_volumes
 
 # Penalty constant C = factor x the largest diagonal entry of K. The constraint
@@ -126,7 +126,8 @@ class TissueModel:
         self._column_budget = column_cache_bytes
         self._column_lock = threading.Lock()
         self._inverse_of: tuple[TissueModel, float] | None = None  # (base, s): K0 = s K0_base
-        self._depths: dict[int, float] = {}  # tissue depth (m) under surface nodes, as cast
+        self.surface = SurfaceGeometry(mesh)
+        """The surface's normals, element lookup and the tissue depth under each surface node."""
         self.column_solver: Callable[[NDArray[np.int64]], NDArray[np.float64]] | None = None
         """Solves on-demand columns in place of :meth:`solve_columns` (e.g. in a worker process)."""
 
@@ -467,7 +468,7 @@ class TissueModel:
     @property
     def vertex_normals(self) -> NDArray[np.float64]:
         """(N, 3) area-weighted outward normals at the nodes (zero off the exterior surface)."""
-        return self._vertex_normals
+        return self.surface.vertex_normals
 
     def compliance_block(self, nodes: ArrayLike) -> NDArray[np.float64]:
         """(3k, 3k) block of K0^-1 (m/N) at the nodes' dofs: displacement per unit nodal force
@@ -557,48 +558,32 @@ class TissueModel:
             "volume_change": float(deformed / self.mesh.volume - 1.0),
         }
 
-    # -- geometry helpers ------------------------------------------------------------
-    @cached_property
-    def _vertex_normals(self) -> NDArray[np.float64]:
-        return vertex_normals(self.mesh.points, self.mesh.surface_triangles)
-
+    # -- surface geometry and depth (sim.fem.surface), through the facade ---------------
     def warm_contact_caches(self) -> None:
         """Build the surface geometry a first contact needs (normals, bounding spheres for the
         tissue-depth cast), so the first contact of a run does not pay for it (a few ms at 10k nodes)."""
-        self._vertex_normals  # noqa: B018 - the cached properties do the work
-        self._surface_spheres  # noqa: B018
-        self._element_centre_tree  # noqa: B018
+        self.surface.warm()
 
     def elements_near(self, points: ArrayLike, radius: float) -> NDArray[np.int64]:
-        """Sorted ids of the elements whose centroid lies within ``radius`` (m) of any of ``points``
-        ((P, 3), m); the element nearest the first point when none does."""
-        tree = self._element_centre_tree
-        centres = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        found = tree.query_ball_point(centres, radius)
-        near = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
-        return near if near.size else np.array([int(tree.query(centres[0])[1])], dtype=np.int64)
-
-    @cached_property
-    def _element_centre_tree(self):
-        from scipy.spatial import cKDTree
-
-        return cKDTree(self.mesh.points[self.mesh.tets].mean(axis=1))
-
-    @cached_property
-    def _surface_spheres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return bounding_spheres(self.mesh.points[self.mesh.surface_triangles])
+        """See :meth:`sim.fem.surface.SurfaceGeometry.elements_near`."""
+        return self.surface.elements_near(points, radius)
 
     def tissue_depth(self, node: int) -> float:
         """Thickness of tissue (m) under a surface node, along its inward normal; cached per node
         (the column prefetcher casts ahead of contact, so a contact change rarely pays for it)."""
-        depth = self._depths.get(node)
-        if depth is None:
-            depth = self._depths[node] = self._cast_depth(node)
-        return depth
+        return self.surface.tissue_depth(node)
 
     def depth_under(self, nodes: NDArray[np.int64]) -> float:
         """Mean tissue depth (m) under contact nodes (:meth:`tissue_depth`, cached per node)."""
-        return float(np.mean([self.tissue_depth(int(n)) for n in nodes]))
+        return self.surface.depth_under(nodes)
+
+    def knows_depth(self, node: int) -> bool:
+        """Whether :meth:`tissue_depth` of ``node`` is cached."""
+        return self.surface.knows_depth(node)
+
+    def cast_depths(self, nodes: Iterable[int]) -> None:
+        """See :meth:`sim.fem.surface.SurfaceGeometry.cast_depths`."""
+        self.surface.cast_depths(nodes)
 
     # -- the Tissue protocol (sim.fem.tissue): one phase -----------------------------------
     @property
@@ -615,35 +600,6 @@ class TissueModel:
     def biphase(self) -> None:
         """The biphase law's parameters: none for one linear phase."""
         return None
-
-    def knows_depth(self, node: int) -> bool:
-        """Whether :meth:`tissue_depth` of ``node`` is cached."""
-        return node in self._depths
-
-    def cast_depths(self, nodes: Iterable[int]) -> None:
-        """Cast and cache :meth:`tissue_depth` under each node ahead of contact (0.1-0.3 ms a node).
-        A node with no depth (off the exterior surface, nothing opposite) is left uncached: a
-        contact there raises its error then, as it would have without this call."""
-        for node in nodes:
-            try:
-                self.tissue_depth(int(node))
-            except ModelError:
-                continue
-
-    def _cast_depth(self, node: int) -> float:
-        inward = -self._vertex_normals[node]
-        if not np.any(inward):
-            raise ModelError(f"node {node} is not on the exterior surface")
-        origin = self.mesh.points[node]
-        centres, radii = self._surface_spheres
-        near = ray_may_hit(origin, inward / np.linalg.norm(inward), centres, radii)
-        triangles = self.mesh.surface_triangles[near]
-        away = ~np.any(triangles == node, axis=1)
-        distances = ray_triangle_distances(origin, inward, self.mesh.points[triangles[away]])
-        depth = float(distances.min()) if distances.size else np.inf
-        if not np.isfinite(depth):
-            raise ModelError(f"no opposite surface found under node {node}")
-        return depth
 
 
 class _CachedColumns(NamedTuple):
