@@ -13,6 +13,7 @@ from sqlalchemy import select
 
 from metrics.proficiency import band_position
 from metrics.registry import REGISTRY, REGISTRY_VERSION
+from metrics.units import display_unit, in_display_units
 from sessions.catalog import Catalog
 from sessions.models import MetricResult, Participant, Session, StitchResult
 from sessions.status import SCORABLE
@@ -47,7 +48,8 @@ def expert_band(catalog: Catalog, study_id: int, task_id: int) -> dict[str, dict
 
 
 def against_band(values: dict[str, float | None], band: dict[str, dict]) -> list[dict]:
-    """One row per metric: value, unit, direction, the expert quartiles and ``versus_experts``.
+    """One row per metric: value, unit, direction, the expert quartiles and ``versus_experts`` (SI),
+    and the same in display units (``display_unit``, ``display``: value and quartiles).
 
     ``versus_experts`` is "better", "within" or "worse" than the experts' interquartile band by
     the metric's registry direction (a shorter task time than every expert is better), or None
@@ -63,14 +65,21 @@ def against_band(values: dict[str, float | None], band: dict[str, dict]) -> list
         position = None
         if finite and known and quartiles["expert_q1"] is not None:
             position = band_position(value, quartiles["expert_q1"], quartiles["expert_q3"], better)
+        unit = REGISTRY[name].unit if known else ""
         rows.append(
             {
                 "metric": name,
-                "unit": REGISTRY[name].unit if known else "",
+                "unit": unit,
                 "better": better,
                 "value": value if finite else None,
                 **quartiles,
                 "versus_experts": position,
+                # the same numbers in the units a surgeon reads (metrics.units), for every front-end
+                "display_unit": display_unit(unit),
+                "display": {
+                    key: in_display_units(v, unit)
+                    for key, v in (("value", value if finite else None), *quartiles.items())
+                },
             }
         )
     return rows

@@ -7,8 +7,8 @@ from pathlib import Path
 import click
 import pandas as pd
 
+from metrics.units import shown
 from sessions.cli.base import (
-    cell_text,
     open_catalog,
     print_frame,
     print_json,
@@ -127,7 +127,7 @@ def sessions_show(uid: str, as_json: bool) -> None:
             )
             for r in rows:
                 versus = r["versus_experts"] or ""
-                click.echo(f"  {r['metric']:28s} {cell_text(r['value']):>12s} {r['unit']:8s} {versus}")
+                click.echo(f"  {r['metric']:28s} {shown(r['value'], r['unit']):>14s}  {versus}")
         elif key == "versus_experts":
             continue
         elif key == "stitches":

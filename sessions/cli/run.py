@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import click
 
+from metrics.registry import REGISTRY
+from metrics.units import shown
 from sessions.cli.base import (
-    cell_text,
     open_catalog,
     print_json,
     stderr_console,
@@ -65,7 +66,8 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
         return
     click.echo(f"session {uid} ({participant}, trial {trial}) complete and scored")
     for name, value in values.items():
-        click.echo(f"  {name:28s} {cell_text(value)}")
+        unit = REGISTRY[name].unit if name in REGISTRY else ""
+        click.echo(f"  {name:28s} {shown(value, unit):>14s}")
 
 
 def _session_metrics(catalog, uid: str) -> dict:

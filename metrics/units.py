@@ -1,0 +1,48 @@
+"""SI inside, the units a surgeon reads at the edge: one conversion every front-end uses.
+
+Metrics are computed and stored in SI (m, m/s, m^2, Pa, N, s, deg). What a person reads is in
+millimetres, mm/s, mm^2 and kPa; forces stay in newtons (suture-needle forces are 0.1-3 N), times
+in seconds, angles in degrees. :func:`display_unit` and :func:`in_display_units` are the only
+place that says so: the CLI, the dashboard and the report call them, so a value reads the same
+everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+
+DISPLAY_UNITS: dict[str, tuple[str, float]] = {
+    "m": ("mm", 1e3),
+    "m/s": ("mm/s", 1e3),
+    "m^2": ("mm^2", 1e6),
+    "Pa": ("kPa", 1e-3),
+    "N": ("N", 1.0),
+    "N/s": ("N/s", 1.0),
+    "s": ("s", 1.0),
+    "deg": ("deg", 1.0),
+    "1": ("", 1.0),
+}
+"""SI unit -> (the unit shown, the factor from SI to it)."""
+
+
+def display_unit(unit: str) -> str:
+    """The unit a value of SI ``unit`` is shown in ("" for a count or a ratio)."""
+    return DISPLAY_UNITS.get(unit, (unit, 1.0))[0]
+
+
+def in_display_units(value: float | None, unit: str) -> float | None:
+    """``value`` (SI ``unit``) in its display unit; None for a missing or non-finite value."""
+    if value is None or not math.isfinite(value):
+        return None
+    return value * DISPLAY_UNITS.get(unit, (unit, 1.0))[1]
+
+
+def shown(value: float | None, unit: str, digits: int = 3) -> str:
+    """``value`` (SI ``unit``) as text in its display unit, ``digits`` significant figures and the
+    unit ("1.46 mm", "487 kPa", "3 deg"); "-" when there is none."""
+    converted = in_display_units(value, unit)
+    if converted is None:
+        return "-"
+    text = f"{converted:.{digits}g}"
+    label = display_unit(unit)
+    return f"{text} {label}" if label else text
