@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bisect
 import functools
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -416,15 +417,21 @@ def _needle_circle(needle: Needle) -> tuple[NDArray[np.float64], float, float]:
 def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Trajectory, float]:
     """Several stitches one after another: a trajectory and its total duration (s).
 
-    In the ``gap`` between two passes the jaws open, go to the needle's original
-    grip point and close on it again (so the next pass holds the needle as the
-    first did), then the next approach begins.
+    In the ``gap`` between two passes the jaws open, the hand moves to the needle's
+    original grip point and closes on it again (so the next pass holds the needle as
+    the first did), then carries it to where the next approach begins. Every move is
+    a smooth one (no pose jumps: a jump would be a tool and tip speed no hand makes).
     """
     if not passes:
         raise DeviceError("sequence_of_passes needs at least one pass")
     starts = np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]]).tolist()
     total = float(starts[-1] + passes[-1].duration)
     last = len(passes) - 1
+    # per gap: where the pass ends, the grip point, where the next approach starts
+    stops = [
+        (p.pose_and_grip(p.duration)[0], p.final_needle_pose, q.pose_and_grip(0.0)[0])
+        for p, q in itertools.pairwise(passes)
+    ]
 
     def trajectory(t: float) -> tuple[Pose, bool]:
         k = min(max(bisect.bisect_right(starts, t) - 1, 0), last)  # every haptic tick: plain floats
@@ -432,9 +439,36 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
         current = passes[k]
         if local <= current.duration:
             return current.pose_and_grip(local)
-        waited = local - current.duration
-        if waited < 0.2 * gap:
-            return current.pose_and_grip(current.duration)[0], False  # open the jaws
-        return current.final_needle_pose, waited >= 0.4 * gap  # at the grip point, then close
+        end, grip, following = stops[k]
+        phase = (local - current.duration) / gap
+        if phase < 0.2:
+            return end, False  # open the jaws
+        if phase < 0.4:
+            return blend_poses(end, grip, (phase - 0.2) / 0.2), False  # to the grip point, open
+        if phase < 0.5:
+            return grip, True  # close on the needle
+        return blend_poses(grip, following, (phase - 0.5) / 0.5), True  # carry it to the next approach
 
     return trajectory, total
+
+
+def blend_poses(start: Pose, stop: Pose, fraction: float) -> Pose:
+    """The pose ``fraction`` (0-1) of the way from ``start`` to ``stop`` along a smooth move: the
+    position on the straight line, the rotation about the one axis that turns start into stop,
+    both with zero speed at the ends (a cosine profile)."""
+    w = 0.5 - 0.5 * math.cos(math.pi * min(max(fraction, 0.0), 1.0))
+    relative = start.rotation.T @ stop.rotation
+    cosine = min(max((float(np.trace(relative)) - 1.0) / 2.0, -1.0), 1.0)
+    angle = math.acos(cosine)
+    axis = np.array(
+        [relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0], relative[1, 0] - relative[0, 1]]
+    )
+    if np.linalg.norm(axis) < 1e-9 and angle > 1.0:  # a half turn: the axis from (R + I) / 2
+        symmetric = (relative + np.eye(3)) / 2.0
+        axis = symmetric[:, int(np.argmax(np.diag(symmetric)))]
+    if angle < 1e-12:
+        rotation = start.rotation
+    else:
+        rotation = start.rotation @ rotation_about(axis / np.linalg.norm(axis), w * angle)
+    position = start.position + w * (stop.position - start.position)
+    return Pose.unchecked(position, rotation)

@@ -11,7 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim.devices import DeviceError, DeviceLostError, ReplayDevice, ScriptedDevice, SuturingPass
-from sim.devices.scripted import SuturingPassParameters, matrix_quaternion, quaternion_matrix
+from sim.devices.scripted import (
+    SuturingPassParameters,
+    matrix_quaternion,
+    quaternion_matrix,
+    sequence_of_passes,
+)
 from sim.devices.spacemouse import SpaceMouse, SpaceMouseDecoder
 from sim.devices.usb_discovery import identify, scan_usb
 from sim.fem import Material, TissueModel
@@ -271,3 +276,40 @@ def test_a_turn_about_a_fixed_axis_is_the_composed_rotation(axis, centre, start,
 def test_a_turn_needs_an_axis():
     with pytest.raises(NeedleError, match="non-zero axis"):
         TurnAbout([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], Pose.identity())
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    axis=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: sum(x * x for x in v) > 1e-4),
+    angle=st.floats(0.0, math.pi),
+    shift=st.tuples(*[st.floats(-0.05, 0.05)] * 3),
+    fraction=st.floats(0.0, 1.0),
+)
+def test_a_blended_pose_turns_about_one_axis_and_ends_where_it_should(axis, angle, shift, fraction):
+    """sim.devices.scripted.blend_poses: the ends exactly, a proper rotation between, its angle from
+    the start a share of the whole turn (half turns included)."""
+    from sim.devices.scripted import blend_poses
+
+    start = Pose.unchecked(np.zeros(3), rotation_about(np.array([0.0, 0.0, 1.0]), 0.3))
+    turn = rotation_about(np.asarray(axis) / np.linalg.norm(axis), angle)
+    stop = Pose.unchecked(np.asarray(shift), start.rotation @ turn)
+    np.testing.assert_allclose(blend_poses(start, stop, 0.0).rotation, start.rotation, atol=1e-12)
+    np.testing.assert_allclose(blend_poses(start, stop, 1.0).rotation, stop.rotation, atol=1e-9)
+    np.testing.assert_allclose(blend_poses(start, stop, 1.0).position, stop.position, atol=1e-15)
+    middle = blend_poses(start, stop, fraction).rotation
+    np.testing.assert_allclose(middle.T @ middle, np.eye(3), atol=1e-12)
+    turned = math.acos(min(max((np.trace(start.rotation.T @ middle) - 1) / 2, -1.0), 1.0))
+    assert turned == pytest.approx((0.5 - 0.5 * math.cos(math.pi * fraction)) * angle, abs=1e-6)
+
+
+def test_a_row_of_passes_never_jumps_between_stitches():
+    """Between two bites the hand moves smoothly: no step in holder position over any 1 ms tick is
+    larger than the passes themselves make (a jump was 3.2 m/s of recorded tip speed)."""
+    needle = Needle.curved()
+    passes = [
+        SuturingPass(needle, [0.0105, y, 0.0015], [0, 0, 1], [1, 0, 0]) for y in (0.003, 0.005, 0.007)
+    ]
+    trajectory, total = sequence_of_passes(passes)
+    positions = np.array([trajectory(t)[0].position for t in np.arange(0.0, total, 0.001)])
+    speeds = np.linalg.norm(np.diff(positions, axis=0), axis=1) / 0.001
+    assert speeds.max() < 0.1, speeds.max()  # m/s: a hand's speed, not a teleport
