@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from dashboard.errors import DashboardError, not_found
+from metrics.events import readable_events
 from metrics.replay.reference import SIGNALS, signal_of
 from metrics.streams import from_recorded
 from metrics.tissue import with_tissue_fields
@@ -85,17 +86,7 @@ class SignalCache:
                 "time": [round(float(t), 4) for t in times],
                 "values": [None if not np.isfinite(v) else round(float(v), 5) for v in peaks],
             }
-        for event in streams.events.itertuples():
-            angle = getattr(event, "entry_angle_deg", None)
-            out["events"].append(
-                {
-                    "time": round(float(event.time), 4),
-                    "kind": str(event.kind),
-                    "entry_angle_deg": None
-                    if angle is None or not np.isfinite(angle)
-                    else round(float(angle), 2),
-                }
-            )
+        out["events"] = readable_events(streams.events)
         return out
 
 

@@ -46,6 +46,23 @@ function cursorShape(t) {
   return { type: "line", xref: "x", yref: "paper", x0: t, x1: t, y0: 0, y1: 1, line: { color: "#d62728", width: 2 } };
 }
 
+// a filter by kind above the event list: every kind present, or one
+function eventFilter(list, events) {
+  const kinds = [...new Map(events.map((e) => [e.kind, e.name])).entries()];
+  if (kinds.length < 2) return;
+  const select = document.createElement("select");
+  select.id = "event-kind";
+  select.setAttribute("aria-label", "show events of kind");
+  select.add(new Option("all events", ""));
+  kinds.forEach(([kind, name]) => select.add(new Option(name, kind)));
+  select.addEventListener("change", () => {
+    list.querySelectorAll("li").forEach((item) => {
+      item.hidden = select.value !== "" && item.dataset.kind !== select.value;
+    });
+  });
+  list.parentNode.insertBefore(select, list);
+}
+
 async function drawSession() {
   const host = document.getElementById("signals");
   const video = document.getElementById("replay");
@@ -87,16 +104,26 @@ async function drawSession() {
   });
   (data.events || []).forEach((event) => {
     const item = document.createElement("li");
+    item.dataset.kind = event.kind;
     const button = document.createElement("button");
     button.type = "button";
     button.className = "event";
     button.dataset.time = event.time;
-    const angle = event.entry_angle_deg === null ? "" : " (entry " + event.entry_angle_deg + "°)";
-    button.textContent = event.time.toFixed(2) + " s: " + event.kind + angle;
+    const angle = event.detail ? " (" + event.detail + ")" : "";
+    const count = event.count ? " ×" + event.count : "";
+    button.textContent = event.time.toFixed(2) + " s: " + event.name + angle + count;
+    if (event.explanation) button.title = event.explanation;
     button.addEventListener("click", () => seek(event.time));
     item.appendChild(button);
+    if (event.explanation) {
+      const note = document.createElement("span");
+      note.className = "event-note";
+      note.textContent = " (" + event.explanation + ")";
+      item.appendChild(note);
+    }
     list.appendChild(item);
   });
+  eventFilter(list, data.events || []);
 
   function moveCursor(t) {
     host.dataset.cursor = t.toFixed(3);

@@ -1,0 +1,73 @@
+"""Session events in the words a supervisor reads: one name per kind, and the simulator's own
+checks collapsed into one line with a count and what they mean.
+
+The dashboard's event list (and anything else that lists events) takes them from
+:func:`readable_events`, so a kind reads the same everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+EVENT_NAMES: dict[str, str] = {
+    "contact_start": "needle touched the tissue",
+    "contact_end": "needle lifted off the tissue",
+    "pierce": "needle entered the tissue",
+    "exit": "needle came out",
+    "pull_through": "needle pulled through",
+    "release": "needle released",
+    "regrab": "needle re-grasped",
+    "implausible_hit": "needle body touched the tissue away from its tip",
+    "overstress": "tissue stress above the damage threshold",
+    "watchdog": "simulator fell behind (safety watchdog)",
+    "watchdog_recovered": "simulator caught up",
+    "force_clamped": "force to the device limited to its rating",
+    "nonfinite_force": "invalid force withheld from the device",
+    "device_lost": "device disconnected",
+    "layer_failed": "a simulator layer failed",
+    "stopped": "session stopped",
+    "queue_overflow": "recorder queue overflowed",
+    "marker": "marker",
+    "annotation": "annotation",
+}
+"""Every event kind the recorder stores, named for a person (tests check none is missing)."""
+
+COLLAPSED: dict[str, str] = {
+    "implausible_hit": "the simulator's plausibility check: the needle's body crossed the tissue surface "
+    "somewhere other than at its tip (usually a needle held too flat against the wall); listed once",
+    "force_clamped": "the force sent to the device was limited to what it can render safely; listed once",
+}
+"""Kinds that come in runs: one line with a count and this explanation instead of one line each."""
+
+
+def event_name(kind: str) -> str:
+    return EVENT_NAMES.get(kind, kind.replace("_", " "))
+
+
+def readable_events(events: pd.DataFrame) -> list[dict]:
+    """One entry per event in time order (time s, kind, name, the needle's angle to the surface's
+    normal in deg or None and that as ``detail`` text), the
+    :data:`COLLAPSED` kinds as one entry each at their first time with ``count`` and ``explanation``."""
+    out: list[dict] = []
+    collapsed: dict[str, dict] = {}  # kind -> its one entry in ``out``
+    for event in events.sort_values("time", kind="stable").itertuples():
+        kind = str(event.kind)
+        if kind in collapsed:
+            collapsed[kind]["count"] += 1
+            continue
+        angle = getattr(event, "entry_angle_deg", None)
+        angle = None if angle is None or not math.isfinite(angle) else round(float(angle), 1)
+        entry = {
+            "time": round(float(event.time), 4),
+            "kind": kind,
+            "name": event_name(kind),
+            "entry_angle_deg": angle,  # the needle's angle to the surface's normal where it met it
+            "detail": "" if angle is None else f"{angle:g} deg off perpendicular",
+        }
+        if kind in COLLAPSED:
+            entry.update(count=1, explanation=COLLAPSED[kind])
+            collapsed[kind] = entry
+        out.append(entry)
+    return out

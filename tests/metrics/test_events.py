@@ -1,0 +1,33 @@
+"""Session events named for a person (issue 25): every stored kind has a name; the simulator's own
+checks collapse into one line with a count and an explanation."""
+
+import pandas as pd
+
+from metrics.events import COLLAPSED, EVENT_NAMES, readable_events
+from recorder.schema import EVENT_KINDS
+
+
+def test_every_stored_event_kind_has_a_name():
+    assert set(EVENT_KINDS) <= set(EVENT_NAMES)
+    assert set(COLLAPSED) <= set(EVENT_NAMES)
+
+
+def test_a_run_of_plausibility_checks_is_one_line_with_its_count():
+    """25 implausible hits among a stitch's events (as seen in one demo session): one line."""
+    events = pd.DataFrame(
+        [{"time": 0.5, "kind": "contact_start", "entry_angle_deg": 2.04}, {"time": 0.8, "kind": "pierce"}]
+        + [{"time": 1.0 + 0.01 * k, "kind": "implausible_hit"} for k in range(25)]
+        + [{"time": 2.0, "kind": "exit"}]
+    )
+    readable = readable_events(events)
+    assert [e["name"] for e in readable] == [
+        "needle touched the tissue",
+        "needle entered the tissue",
+        "needle body touched the tissue away from its tip",
+        "needle came out",
+    ]
+    assert readable[0]["entry_angle_deg"] == 2.0 and readable[1]["entry_angle_deg"] is None
+    assert readable[0]["detail"] == "2 deg off perpendicular" and readable[1]["detail"] == ""
+    assert readable[2]["count"] == 25 and readable[2]["time"] == 1.0
+    assert "plausibility check" in readable[2]["explanation"]
+    assert "count" not in readable[3]
