@@ -9,6 +9,7 @@ from __future__ import annotations
 from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse, Response
+from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from sessions.catalog import AlreadyExists, Forbidden, NotFound, WrongState
@@ -72,37 +73,42 @@ def status_of(error: VascsimError) -> int:
     return 400
 
 
-def _answer(request: Request, status: int, message: str, headers: dict | None = None) -> Response:
+async def _answer(request: Request, status: int, message: str, headers: dict | None = None) -> Response:
     if request.url.path.startswith("/api") or request.url.path.startswith("/ingest"):
         return JSONResponse(error_body(status, message), status_code=status, headers=headers)
     if status == 401:
         return RedirectResponse(f"/login?next={request.url.path}", status_code=303)
+    from dashboard.auth import optional_viewer  # the page keeps its navigation and Sign out
+
+    try:
+        viewer = await run_in_threadpool(optional_viewer, request)
+    except Exception:  # an error page never fails for want of its header
+        viewer = None
     templates = request.app.state.templates
-    return templates.TemplateResponse(
-        request, "error.html", {"status": status, "message": message}, status_code=status, headers=headers
-    )
+    context = {"status": status, "message": message, "viewer": viewer}
+    return templates.TemplateResponse(request, "error.html", context, status_code=status, headers=headers)
 
 
 def install_error_handlers(app) -> None:
     async def dashboard_error(request: Request, error: DashboardError) -> Response:
         headers = {"Retry-After": str(getattr(error, "retry_after", 1))} if error.status == 429 else None
-        return _answer(request, error.status, error.message, headers)
+        return await _answer(request, error.status, error.message, headers)
 
     async def vascsim_error(request: Request, error: VascsimError) -> Response:
-        return _answer(request, status_of(error), str(error))
+        return await _answer(request, status_of(error), str(error))
 
     async def http_error(request: Request, error: StarletteHTTPException) -> Response:
-        return _answer(request, error.status_code, str(error.detail))
+        return await _answer(request, error.status_code, str(error.detail))
 
     async def invalid(request: Request, error: RequestValidationError) -> Response:
         problems = "; ".join(
             f"{'.'.join(str(p) for p in item.get('loc', ()))}: {item.get('msg', '')}"
             for item in error.errors()
         )
-        return _answer(request, 422, f"invalid request: {problems}"[:500])
+        return await _answer(request, 422, f"invalid request: {problems}"[:500])
 
     async def crashed(request: Request, error: Exception) -> Response:
-        return _answer(request, 500, "internal error; the server log has the details")
+        return await _answer(request, 500, "internal error; the server log has the details")
 
     app.add_exception_handler(DashboardError, dashboard_error)
     app.add_exception_handler(VascsimError, vascsim_error)

@@ -85,6 +85,9 @@ def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json)
     if as_json:
         print_json(summary)
     else:
-        click.echo(f"replay: {result.path} ({result.frames} frames, {result.frames_per_second:.0f} frames/s)")
+        click.echo(
+            f"replay: {result.path} ({result.frames} frames at {fps:g} frames/s of video; "
+            f"rendered at {result.frames_per_second:.0f} frames/s)"
+        )
         for path in result.stills:
             click.echo(f"  {path}")

@@ -185,3 +185,12 @@ def test_domain_errors_map_to_http_statuses_by_type_never_by_wording():
     assert status_of(AlreadyExists("study 'x' exists")) == status_of(AccountConflict("taken")) == 409
     assert status_of(WrongState("no free trial number after 20 attempts")) == 409
     assert status_of(CatalogError("no good: the request is malformed")) == 400
+
+
+def test_a_refused_page_keeps_the_navigation_and_sign_out(seeded, client_for):
+    """Issue 25, seen: the 403 page dropped the navigation and Sign out."""
+    client, _ = client_for("trainee")
+    refused = client.get("/admin")
+    assert refused.status_code == 403
+    assert 'id="sign-out"' in refused.text and 'href="/">Home</a>' in refused.text
+    assert "needs a different role" in refused.text
