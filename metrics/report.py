@@ -292,6 +292,7 @@ th { background: #f3f3f3; } td:first-child, th:first-child { text-align: left; }
 img { max-width: 100%; }
 </style></head><body>
 <h1>{{ title }}</h1>
+<p class="generated">{{ generated }}</p>
 {% if synthetic %}<p class="warning"><strong>Synthetic data.</strong> Some or all participants in this
 study are synthetic (scripted profiles run through the simulator), labelled so in the catalog. These numbers
 demonstrate the pipeline; they are not evidence about people.</p>{% endif %}
@@ -374,6 +375,20 @@ def _curves_for_reading(curves: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
+def generated_line() -> str:
+    """When and by what the report was made: the UTC time, the vascsim version and the metric
+    registry version (results of another registry version are not comparable)."""
+    from datetime import UTC, datetime
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        software = version("vascsim")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        software = "unknown (not installed)"
+    stamp = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    return f"Generated {stamp} by vascsim {software}, metric registry version {REGISTRY_VERSION}."
+
+
 def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vascsim study report") -> Path:
     """Write the report folder; returns the path of ``report.html`` (``report.md`` sits beside it)."""
     folder = Path(folder)
@@ -416,8 +431,10 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     trainees = analysis.trainees
     curves = analysis.learning_curves
 
+    generated = generated_line()
     context = {
         "title": title,
+        "generated": generated,
         "synthetic": analysis.synthetic,
         "method": _method_lines(analysis),
         "notes": notes,
@@ -439,7 +456,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     page = Environment(autoescape=True).from_string(TEMPLATE).render(**context)
     (folder / "report.html").write_text(page, encoding="utf-8")
 
-    lines = [f"# {title}", ""]
+    lines = [f"# {title}", "", generated, ""]
     if analysis.synthetic:
         lines += [
             "> **Synthetic data.** Some or all participants are synthetic scripted profiles; "

@@ -10,6 +10,7 @@ import json
 import sys
 from collections.abc import Callable
 from functools import wraps
+from pathlib import Path
 from typing import Any
 
 import click
@@ -142,3 +143,18 @@ def analysis_options(groups, level, metric_names, rule, consecutive=None) -> dic
     if metric_names is not None:
         options["metrics"] = tuple(part.strip() for part in metric_names.split(",") if part.strip())
     return {k: v for k, v in options.items() if v is not None}
+
+
+class MissingInput(VascsimError, FileNotFoundError):
+    """A file or folder named on the command line is not there (or is the other kind)."""
+
+
+def existing_path(path: str, what: str, folder: bool = False) -> Path:
+    """``path`` as a Path when it is an existing file (``folder``: directory); else a one-line
+    :class:`MissingInput` naming it (not click's usage text)."""
+    found = Path(path)
+    if folder and not found.is_dir():
+        raise MissingInput(f"{what} {path!r} is not a folder that exists; check the path")
+    if not folder and not found.is_file():
+        raise MissingInput(f"{what} {path!r} is not a file that exists; check the path")
+    return found

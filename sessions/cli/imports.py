@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from sessions.cli.base import (
+    existing_path,
     open_catalog,
     print_json,
     progress_bar,
@@ -23,7 +24,7 @@ def _pair(text: str, what: str, kind=int, count: int = 2) -> tuple:
 
 
 @click.command()
-@click.argument("images", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.argument("images", nargs=-1, required=True)
 @click.option(
     "-o", "--out", required=True, type=click.Path(dir_okay=False), help="Calibration JSON to write."
 )
@@ -45,6 +46,7 @@ def calibrate(images, out, squares, square_mm, marker_mm, dictionary) -> None:
 
     frames = []
     for path in images:
+        existing_path(path, "board photo")
         image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
         if image is None:
             raise MetricsError(f"{path} is not an image OpenCV can read")
@@ -58,8 +60,8 @@ def calibrate(images, out, squares, square_mm, marker_mm, dictionary) -> None:
 
 
 @click.command("import-video")
-@click.argument("video", type=click.Path(exists=True, dir_okay=False))
-@click.option("--camera", "camera_file", required=True, type=click.Path(exists=True, dir_okay=False),
+@click.argument("video")
+@click.option("--camera", "camera_file", required=True,
               help="Calibration JSON from `vascsim calibrate`.")  # fmt: skip
 @click.option("--study", required=True, help="Study to add the session to.")
 @click.option("--participant", required=True, help="Participant code (enrolled in the study).")
@@ -85,6 +87,8 @@ def import_video(
     from metrics.bench.tracking import ToolMarker
     from sessions.importing import import_bench_video
 
+    existing_path(video, "video")
+    existing_path(camera_file, "camera calibration")
     offset = tuple(v / 1e3 for v in _pair(tip_offset_mm, "--tip-offset-mm", float, 3))
     marker = ToolMarker(marker_id, marker_mm / 1e3, offset)
     catalog, home = open_catalog()
@@ -101,8 +105,8 @@ def import_video(
 
 
 @click.command("import")
-@click.argument("kinematics_dir", type=click.Path(exists=True, file_okay=False))
-@click.argument("meta_file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("kinematics_dir")
+@click.argument("meta_file")
 @click.option("--study", required=True, help="Study to import into (created if missing).")
 @user_errors
 def import_jigsaws(kinematics_dir: str, meta_file: str, study: str) -> None:
@@ -114,6 +118,8 @@ def import_jigsaws(kinematics_dir: str, meta_file: str, study: str) -> None:
     """
     from sessions.importing import import_jigsaws as run_import
 
+    existing_path(kinematics_dir, "kinematics folder", folder=True)
+    existing_path(meta_file, "meta file")
     catalog, _ = open_catalog()
     count = run_import(catalog, kinematics_dir, meta_file, study)
     click.echo(f"imported {count} JIGSAWS trial(s) into study {study}")

@@ -5,6 +5,7 @@ import pandas as pd
 import pytest
 
 from metrics import compute_session_metrics
+from metrics.registry import REGISTRY_VERSION
 from metrics.report import write_report
 from metrics.study import StudySettings, analyse_study
 from metrics.synthetic import synthetic_study
@@ -30,6 +31,11 @@ def test_report_files_and_synthetic_label(analysis, tmp_path):
     text = page.read_text()
     assert "Synthetic data" in text and "Analysis level: participant" in text
     assert "Synthetic data" in (folder / "report.md").read_text()
+    # issue 25, seen: the report said neither when it was made nor by which version
+    from importlib.metadata import version
+
+    stamp = f"by vascsim {version('vascsim')}, metric registry version {REGISTRY_VERSION}."
+    assert "Generated 20" in text and stamp in text and stamp in (folder / "report.md").read_text()
     validity = pd.read_csv(folder / "tables/construct_validity.csv")
     np.testing.assert_allclose(validity["auc"], analysis.validity.table["auc"])
     assert set(validity["metric"]) == set(PRIMARY)

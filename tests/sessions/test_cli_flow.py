@@ -68,7 +68,9 @@ def test_user_errors_are_one_line_and_change_nothing(home):
         assert result.output.count("\n") == 1
     assert json.loads(invoke("sessions", "list", "--json").stdout) == []
     missing = CliRunner().invoke(main, ["import", "/no/such/folder", "/no/meta.txt", "--study", "j"])
-    assert missing.exit_code == 2 and "does not exist" in missing.output
+    # issue 25, seen: a missing folder gave click's usage text and exit 2; now the project's one line
+    assert missing.exit_code == 1 and missing.output.count("\n") == 1
+    assert "kinematics folder '/no/such/folder' is not a folder that exists" in missing.output
 
 
 def test_bad_database_url_is_one_line(tmp_path, monkeypatch):
