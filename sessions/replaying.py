@@ -7,7 +7,7 @@ from pathlib import Path
 from sqlalchemy import select
 
 from recorder import open_session
-from sessions.catalog import Catalog, CatalogError
+from sessions.catalog import Catalog, CatalogError, NotFound
 from sessions.config import cache_dir
 from sessions.models import Participant, Session
 from sessions.status import SCORABLE
@@ -27,6 +27,29 @@ def _replayable(row: Session) -> None:
         raise CatalogError(f"session {row.uid} ran task {row.task.name!r}, which this vascsim cannot rebuild")
 
 
+def _versus_session(catalog: Catalog, orm, versus: str, study_id: int, task_id: int) -> Session:
+    """``--vs``: a session id, or a participant code of the session's study meaning that
+    participant's latest replayable session on the same task."""
+    found = orm.scalar(select(Session).where(Session.uid == versus))
+    if found is not None:
+        return found
+    latest = orm.scalar(
+        select(Session)
+        .join(Participant, Session.participant_id == Participant.id)
+        .where(
+            Participant.study_id == study_id,
+            Participant.code == versus,
+            Session.task_id == task_id,
+            Session.status.in_(REPLAYABLE),
+        )
+        .order_by(Session.started_at.desc(), Session.id.desc())
+        .limit(1)
+    )
+    if latest is None:
+        raise NotFound("session or participant with a session on this task", versus)
+    return latest
+
+
 def replay_inputs(
     catalog: Catalog, home: Path, uid: str, versus: str | None = None, versus_group: str | None = None
 ):
@@ -39,7 +62,7 @@ def replay_inputs(
         task, directory, study_id = row.task.name, row.directory, row.participant.study_id
         expert_dirs: list[str] = []
         if versus:
-            other = catalog.recorded_session(orm, versus)
+            other = _versus_session(catalog, orm, versus, study_id, row.task_id)
             _replayable(other)
             if other.task.name != task:
                 raise CatalogError(

@@ -24,7 +24,13 @@ def _video_size(_ctx, _param, value: str) -> tuple[int, int]:
 
 @click.command()
 @click.argument("session")
-@click.option("--vs", "versus", default=None, help="An expert session to compare with (ghosted or beside).")
+@click.option(
+    "--vs",
+    "versus",
+    default=None,
+    help="A session to compare with (ghosted or beside): its id, or a participant code of this "
+    "session's study for that participant's latest session on the same task.",
+)
 @click.option(
     "--vs-group",
     "versus_group",

@@ -131,7 +131,16 @@ def test_replay_against_the_expert_group(home, tmp_path):
     summary = json.loads(result.stdout)
     assert summary["experts"] == 2 and summary["frames"] > 60 and out.stat().st_size > 10_000
     assert {Path(p).name for p in summary["stills"]} >= {"insertion.png", "stress_insertion.exr"}
+    # --vs takes what the README says: a participant code means their latest session on the task
+    by_code = invoke(
+        "replay", trainee, "--vs", "E1", "--size", "320x180", "-o", str(tmp_path / "e1.mp4"), "--json"
+    )
+    assert by_code.exit_code == 0 and json.loads(by_code.stdout)["experts"] == 1, by_code.output
     for args, message in (
+        (
+            ("replay", trainee, "--vs", "NOBODY"),
+            "no session or participant with a session on this task 'NOBODY'",
+        ),
         (("replay", "S-NOPE"), "no session 'S-NOPE'"),
         (("replay", trainee, "--vs-group", "surgeons"), "no complete sessions of group 'surgeons'"),
         (("replay", trainee, "--vs", trainee, "--vs-group", "experts"), "either --vs SESSION or --vs-group"),
