@@ -21,6 +21,7 @@ from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
+from metrics.units import display_unit, in_display_units
 from metrics.validity import aggregate_by_participant
 
 FIGURE_FORMATS = ("png", "svg")
@@ -225,13 +226,19 @@ def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
     (read with :func:`compact_caption`)."""
     groups = analysis.settings.groups
     table = summary_table(analysis)
+    units = table["unit"].tolist()
+
+    def medians(group: str) -> list[str]:  # in the units a surgeon reads (metrics.units)
+        values = table[f"median_{group}"].tolist()
+        return [_short(in_display_units(v, u) if v == v else v) for v, u in zip(values, units, strict=True)]
+
     return pd.DataFrame(
         {
             "metric": table["metric"],
-            "unit": table["unit"],
+            "unit": [display_unit(u) for u in units],
             "better": table["better"],
-            str(groups[0]): [_short(v) for v in table[f"median_{groups[0]}"]],
-            str(groups[1]): [_short(v) for v in table[f"median_{groups[1]}"]],
+            str(groups[0]): medians(str(groups[0])),
+            str(groups[1]): medians(str(groups[1])),
             "AUC (95% CI)": [
                 auc_with_interval(*v) for v in table[["auc", "auc_ci_low", "auc_ci_high"]].to_numpy()
             ],
@@ -241,8 +248,8 @@ def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
     )
 
 
-def _short(value: float) -> str:
-    return "" if value != value else f"{value:.3g}"
+def _short(value: float | None) -> str:
+    return "" if value is None or value != value else f"{value:.3g}"
 
 
 def compact_caption(analysis: StudyAnalysis) -> str:

@@ -95,11 +95,17 @@ def stderr_console():
 
 
 def print_frame(frame, title: str, caption: str | None = None) -> None:
+    """A table of ``frame`` under ``title`` with ``caption`` after it, every line within the console's
+    width (80 columns when not a terminal): names and values are never cut."""
     from rich import box
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True)
+    # the title and caption are wrapped at the console's width as text (a table title is centred
+    # over the table and cropped where the table is narrower than it)
+    console = Console()
+    console.print(title, style="italic", overflow="fold")
+    table = Table(box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True)
     for k, column in enumerate(frame.columns):
         # names are never cut and no value ends in an ellipsis: a short value keeps its width, a long
         # one wraps at its spaces ("0.83" over "(0.61-0.95)")
@@ -108,7 +114,9 @@ def print_frame(frame, title: str, caption: str | None = None) -> None:
         table.add_column(str(column), no_wrap=k == 0, overflow="fold", min_width=min(widest, max(short, 4)))
     for row in frame.itertuples(index=False):
         table.add_row(*[cell_text(v) for v in row])
-    Console().print(table)
+    console.print(table)
+    if caption:
+        console.print(caption, style="dim", overflow="fold")
 
 
 def cell_text(value) -> str:

@@ -76,7 +76,7 @@ def demo(small: bool, as_json: bool) -> None:
     )
     print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)")
     for note in validity.notes + analysis.notes:
-        click.echo(f"note: {note}")
+        click.echo(click.wrap_text(f"note: {note}", 80, subsequent_indent="      "))
     click.echo(f"composite score: {composite_summary(validity.composite)}")
     if result.final is not None:
         click.echo(final_task_line(result.final, result.final_report))
