@@ -49,6 +49,15 @@ class NewUser(BaseModel):
     participant_ids: list[Annotated[int, Field(ge=1, le=2_147_483_647)]] = Field(
         default_factory=list, max_length=100
     )
+    participants: list[Annotated[str, Field(min_length=3, max_length=200)]] = Field(
+        default_factory=list, max_length=100, description="trainees: participants as STUDY:CODE"
+    )
+
+
+class LinkedParticipants(BaseModel):
+    participants: list[Annotated[str, Field(min_length=3, max_length=200)]] = Field(
+        max_length=100, description="the trainee's participants as STUDY:CODE (replaces the links)"
+    )
 
 
 class UserChange(BaseModel):
@@ -325,21 +334,26 @@ def live_station(request: Request, station: str, session_id: str, viewer: Watche
 
 
 # -- administration ---------------------------------------------------------------------
-def _user_record(user: User, linked: list[int]) -> dict:
+def _user_record(user: User, linked: list[tuple[int, str]]) -> dict:
     return {
         "id": user.id,
         "username": user.username,
         "role": user.role,
         "active": user.active,
         "created_at": user.created_at,
-        "participant_ids": linked,
+        "participant_ids": [pid for pid, _ in linked],
+        "participants": [code for _, code in linked],  # STUDY:CODE, as a supervisor knows them
     }
 
 
-def _linked(orm, user_id: int) -> list[int]:
-    return list(
-        orm.scalars(select(Participant.id).where(Participant.user_id == user_id).order_by(Participant.id))
-    )
+def _linked(orm, user_id: int) -> list[tuple[int, str]]:
+    rows = orm.execute(
+        select(Participant.id, Study.name, Participant.code)
+        .join(Study, Participant.study_id == Study.id)
+        .where(Participant.user_id == user_id)
+        .order_by(Study.name, Participant.code)
+    ).all()
+    return [(pid, f"{study}:{code}") for pid, study, code in rows]
 
 
 @router.get("/users", summary="Accounts (admin)")
@@ -353,12 +367,33 @@ def users(request: Request, viewer: Admin) -> list[dict]:
 @router.post("/users", status_code=201, summary="Create an account (admin)", responses=CONFLICT)
 def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
     with _state(request).catalog.session() as orm:
-        user = accounts.create_user(orm, body.username, body.password, body.role)
+        catalog = _state(request).catalog
+        # every participant is resolved before the account exists: an unknown code creates nothing
+        chosen = accounts.participants_by_code(orm, catalog, body.participants)
         for participant_id in body.participant_ids:
             participant = orm.get(Participant, participant_id)
             if participant is None:
                 raise not_found(f"participant {participant_id}")
+            chosen.append(participant)
+        user = accounts.create_user(orm, body.username, body.password, body.role)
+        for participant in chosen:
             accounts.link_participant(orm, user, participant)
+        orm.flush()
+        return _user_record(user, _linked(orm, user.id))
+
+
+@router.put(
+    "/users/{user_id}/participants",
+    summary="Set the participants a trainee account sees, by STUDY:CODE (admin)",
+    responses=CONFLICT,
+)
+def set_user_participants(request: Request, user_id: Id, body: LinkedParticipants, viewer: Admin) -> dict:
+    with _state(request).catalog.session() as orm:
+        user = orm.get(User, user_id)
+        if user is None:
+            raise not_found(f"user {user_id}")
+        chosen = accounts.participants_by_code(orm, _state(request).catalog, body.participants)
+        accounts.set_participants(orm, user, chosen)
         orm.flush()
         return _user_record(user, _linked(orm, user.id))
 

@@ -15,13 +15,14 @@ from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
 from dashboard import queries
-from dashboard.api import Id, NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
+from dashboard.api import Id, LinkedParticipants, NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
 from dashboard.api import change_user as api_change_user
 from dashboard.api import create_station as api_create_station
 from dashboard.api import create_study as api_create_study
 from dashboard.api import create_user as api_create_user
 from dashboard.api import live as api_live
 from dashboard.api import revoke_station as api_revoke_station
+from dashboard.api import set_user_participants as api_set_user_participants
 from dashboard.api import stations as api_stations
 from dashboard.api import users as api_users
 from dashboard.auth import (
@@ -33,7 +34,7 @@ from dashboard.auth import (
     optional_viewer,
     require,
 )
-from dashboard.errors import DashboardError
+from dashboard.errors import DashboardError, status_of
 from dashboard.signals import replay_video
 from recorder.layout import SAMPLES_FILE
 from sessions.models import ROLES, Participant
@@ -185,9 +186,21 @@ def _admin_page(request: Request, viewer: Viewer, message: str | None = None, to
         users=api_users(request, viewer),
         stations=api_stations(request, viewer),
         roles=ROLES,
+        participant_codes=_participant_codes(request),
         message=message,
         token=token,
     )
+
+
+def _participant_codes(request: Request) -> list[str]:
+    """Every participant as STUDY:CODE, for the account form's picker."""
+    from sessions.models import Participant, Study
+
+    with request.app.state.catalog.session() as orm:
+        rows = orm.execute(
+            select(Study.name, Participant.code).join(Participant, Participant.study_id == Study.id)
+        ).all()
+    return sorted(f"{study}:{code}" for study, code in rows)
 
 
 @router.get("/admin", response_class=HTMLResponse)
@@ -199,7 +212,8 @@ def _admin_action(request: Request, viewer: Viewer, action, done: str) -> Respon
     try:
         result = action()
     except (VascsimError, ValidationError) as error:
-        status = getattr(error, "status", 400 if isinstance(error, VascsimError) else 422)
+        status = getattr(error, "status", None)
+        status = status or (status_of(error) if isinstance(error, VascsimError) else 422)
         if isinstance(error, ValidationError):
             message = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in error.errors())
         else:
@@ -216,18 +230,37 @@ def admin_create_user(
     viewer: Admin,
     username: Annotated[str, Form(max_length=64)],
     password: Annotated[str, Form(max_length=1024)],
-    role: Annotated[str, Form(max_length=16)],
-    participant_ids: Annotated[str, Form(max_length=500)] = "",
+    role: Annotated[str, Form(max_length=16)] = "",
+    participants: Annotated[str, Form(max_length=2000)] = "",
 ) -> Response:
     def create():
-        ids = [int(p) for p in participant_ids.replace(",", " ").split() if p.isdigit()]
         if role not in ROLES:
-            raise DashboardError(422, f"role {role!r} is not one of {', '.join(ROLES)}")
+            raise DashboardError(422, f"choose a role: one of {', '.join(ROLES)}")
+        chosen = _written_participants(participants)
         return api_create_user(
-            request, NewUser(username=username, password=password, role=role, participant_ids=ids), viewer
+            request, NewUser(username=username, password=password, role=role, participants=chosen), viewer
         )
 
     return _admin_action(request, viewer, create, f"created user {username!r}")
+
+
+def _written_participants(text: str) -> list[str]:
+    """STUDY:CODE entries from a form field, separated by commas or spaces."""
+    return [part for part in text.replace(",", " ").split() if part]
+
+
+@router.post("/admin/users/{user_id}/participants", response_class=HTMLResponse)
+def admin_link_participants(
+    request: Request,
+    user_id: Id,
+    viewer: Admin,
+    participants: Annotated[str, Form(max_length=2000)] = "",
+) -> Response:
+    def link():
+        body = LinkedParticipants(participants=_written_participants(participants))
+        return api_set_user_participants(request, user_id, body, viewer)
+
+    return _admin_action(request, viewer, link, "participants linked")
 
 
 @router.post("/admin/users/{user_id}", response_class=HTMLResponse)

@@ -119,6 +119,27 @@ def link_participant(orm: OrmSession, user: User, participant: Participant) -> N
     participant.user_id = user.id
 
 
+def set_participants(orm: OrmSession, user: User, participants: list[Participant]) -> None:
+    """Make ``participants`` exactly the ones this trainee account sees (links can be changed later)."""
+    for linked in orm.scalars(select(Participant).where(Participant.user_id == user.id)):
+        if linked not in participants:
+            linked.user_id = None
+    for participant in participants:
+        link_participant(orm, user, participant)
+
+
+def participants_by_code(orm: OrmSession, catalog, written: list[str]) -> list[Participant]:
+    """Participants written ``STUDY:CODE`` (the codes a supervisor knows), each resolved or refused:
+    a wrong form is an AccountError, an unknown study or code the catalog's NotFound."""
+    found = []
+    for text in written:
+        study_name, separator, code = text.strip().rpartition(":")
+        if not separator or not study_name or not code:
+            raise AccountError(f"participant {text!r} must be written STUDY:CODE, e.g. synthetic-demo:T02")
+        found.append(catalog.participant(orm, catalog.study(orm, study_name), code))
+    return found
+
+
 # -- signed-in browsers -------------------------------------------------------------------
 def start_login(orm: OrmSession, user: User, lifetime: timedelta) -> tuple[str, str]:
     """(cookie token, CSRF token) of a new sign-in; expired sign-ins of everybody are removed."""

@@ -194,3 +194,36 @@ def test_a_refused_page_keeps_the_navigation_and_sign_out(seeded, client_for):
     assert refused.status_code == 403
     assert 'id="sign-out"' in refused.text and 'href="/">Home</a>' in refused.text
     assert "needs a different role" in refused.text
+
+
+def test_admin_links_trainee_accounts_by_study_and_code_and_refuses_what_does_not_resolve(seeded, client_for):
+    """Issue 25, seen: linking asked for internal ids ("e.g. 12, 13"), and typing the code a supervisor
+    knows created the account with no link and no error. Now: STUDY:CODE, refused when it does not
+    resolve (and no account is made), links editable later, codes shown."""
+    client, csrf = client_for("admin")
+
+    def form(url, **fields):
+        return client.post(url, data={"csrf_token": csrf, **fields})
+
+    account = {"username": "ana", "password": PASSWORD, "role": "trainee"}
+    unknown = form("/admin/users", **account, participants="course:T9999")
+    assert (
+        unknown.status_code == 404
+        and "no participant &#39;T9999&#39; in study &#39;course&#39;" in unknown.text
+    )
+    bare = form("/admin/users", **account, participants="T0003")
+    assert bare.status_code == 400 and "must be written STUDY:CODE" in bare.text
+    no_role = form("/admin/users", **{**account, "role": ""}, participants="course:T0003")
+    assert no_role.status_code == 422 and "choose a role" in no_role.text
+    assert "ana" not in {u["username"] for u in client.get("/api/users").json()}  # nothing was made
+    made = form("/admin/users", **account, participants="course:T0003")
+    assert made.status_code == 200 and "created user &#39;ana&#39;" in made.text
+    users = {u["username"]: u for u in client.get("/api/users").json()}
+    assert users["ana"]["participants"] == ["course:T0003"]
+    relinked = form(f"/admin/users/{users['ana']['id']}/participants", participants="course:T0004")
+    assert relinked.status_code == 200, relinked.text
+    users = {u["username"]: u for u in client.get("/api/users").json()}
+    assert users["ana"]["participants"] == ["course:T0004"]  # T0003 unlinked
+    page = client.get("/admin").text
+    assert 'value="course:T0004"' in page and "e.g. 12, 13" not in page
+    assert '<option value="" disabled selected>choose a role</option>' in page  # never admin by default
