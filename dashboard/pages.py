@@ -129,7 +129,8 @@ def home(request: Request) -> Response:
 def study_page(request: Request, study_id: Id, viewer: Staff) -> Response:
     state = request.app.state
     overview = queries.study_overview(state.catalog, state.analyses, viewer, study_id)
-    return render(request, "study.html", viewer, overview, overview=overview)
+    after = queries.ATTENTION_AFTER_TRIALS
+    return render(request, "study.html", viewer, overview, overview=overview, attention_after=after)
 
 
 @router.get("/studies/{study_id}/validity", response_class=HTMLResponse)

@@ -123,6 +123,7 @@ def _latest_scores(analysis) -> dict[str, dict]:
         latest[code] = {
             "latest_session": table.at[last, "session_id"],
             "latest_trial": int(table.at[last, "trial"]),
+            "latest_phase": str(table.at[last, "phase"] or "practice"),
             "latest_passed": bool(passed.loc[last]),
             "passes": int(passed.loc[rows.index].sum()),
         }
@@ -134,12 +135,20 @@ def _attention_reasons(row: dict, trainees: pd.DataFrame | None) -> list[str]:
         return []
     record = trainees.loc[row["code"]]
     reasons = []
-    if not bool(record["proficient"]) and int(record["practice_sessions"]) >= ATTENTION_AFTER_TRIALS:
+    row["proficient"] = bool(record["proficient"])
+    trials = record.get("trials_to_proficiency")
+    known = trials is not None and trials == trials  # NaN: not reached
+    row["proficient_at"] = int(trials) if row["proficient"] and known else None
+    if not row["proficient"] and int(record["practice_sessions"]) >= ATTENTION_AFTER_TRIALS:
         reasons.append(f"not proficient after {int(record['practice_sessions'])} practice sessions")
-    if "retention_passed" in record.index and record["retention_passed"] is False:
-        reasons.append("retention session below the benchmark")
-    if row.get("latest_passed") is False and "latest_trial" in row:
-        reasons.append(f"latest session (trial {row['latest_trial']}) below the benchmark")
+    kept = record["retention_passed"] if "retention_passed" in record.index else None
+    retention = kept is not None and not pd.isna(kept) and not bool(kept)  # numpy's False is not False
+    if retention:
+        reasons.append("the delayed retention session was worse than the benchmark")
+    latest_practice = row.get("latest_phase", "practice") != "retention"
+    if row.get("latest_passed") is False and "latest_trial" in row and latest_practice:
+        trial = row["latest_trial"]
+        reasons.append(f"the latest practice session (trial {trial}) was worse than the benchmark")
     return reasons
 
 

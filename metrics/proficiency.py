@@ -23,6 +23,7 @@ import pandas as pd
 
 from metrics.registry import REGISTRY
 from metrics.streams import MetricsError
+from metrics.units import shown
 
 
 def _rule_value(values: np.ndarray, rule: str, better: str) -> float:
@@ -83,12 +84,12 @@ def proficiency_benchmarks(
 
 
 def pass_condition(benchmark: float, better: str, unit: str) -> str:
-    """What passing means, by direction: "<= 3.04 deg" for lower-is-better, ">= 0.8" for higher."""
+    """What passing means, by direction, in display units: "<= 3.04 deg" for lower-is-better,
+    ">= 0.8" for higher, "<= 0.173 mm" for a distance kept in metres."""
     if math.isnan(benchmark):
         return "no benchmark (no expert values)"
     sign = "<=" if better == "lower" else ">="
-    shown = "" if unit in ("", "1") else f" {unit}"
-    return f"{sign} {benchmark:.3g}{shown}"
+    return f"{sign} {shown(benchmark, unit)}"  # in the units a surgeon reads (metrics.units)
 
 
 def assess_proficiency(table: pd.DataFrame, benchmarks: pd.DataFrame) -> pd.DataFrame:

@@ -227,3 +227,32 @@ def test_admin_links_trainee_accounts_by_study_and_code_and_refuses_what_does_no
     page = client.get("/admin").text
     assert 'value="course:T0004"' in page and "e.g. 12, 13" not in page
     assert '<option value="" disabled selected>choose a role</option>' in page  # never admin by default
+
+
+def test_needs_attention_says_why_and_tells_retention_from_practice():
+    """Issue 25, seen: all six trainees listed, three of them proficient, because each one's latest
+    session was the retention trial; and a failed retention (numpy's False) was never listed."""
+    import numpy as np
+    import pandas as pd
+
+    from dashboard.queries import _attention_reasons
+
+    trainees = pd.DataFrame(
+        {
+            "proficient": [True, False],
+            "trials_to_proficiency": [5.0, np.nan],
+            "practice_sessions": [6, 6],
+            "retention_passed": np.array([False, True]),
+        },
+        index=["T04", "T01"],
+    )
+    proficient = {"code": "T04", "latest_trial": 7, "latest_phase": "retention", "latest_passed": False}
+    assert _attention_reasons(proficient, trainees) == [
+        "the delayed retention session was worse than the benchmark"
+    ]
+    assert proficient["proficient"] is True and proficient["proficient_at"] == 5
+    struggling = {"code": "T01", "latest_trial": 6, "latest_phase": "practice", "latest_passed": False}
+    assert _attention_reasons(struggling, trainees) == [
+        "not proficient after 6 practice sessions",
+        "the latest practice session (trial 6) was worse than the benchmark",
+    ]
