@@ -14,6 +14,18 @@ from sessions.cli.base import (
 from sessions.cli.recorded import final_task_line
 
 
+def proficiency_rule(analysis) -> str:
+    """The rule the proficiency table applies, and what retention compares, in one caption."""
+    settings = analysis.settings
+    benchmarked = ", ".join(analysis.benchmarks["metric"]) if len(analysis.benchmarks) else "none"
+    return (
+        f"Proficient: {settings.consecutive_passes} practice sessions in a row that pass every benchmark "
+        f"(rule {settings.benchmark_rule} of the experts' medians; benchmarked: {benchmarked}). Retention: "
+        "the delayed session passes every benchmark too; a trainee who has not reached them in practice "
+        "cannot keep them."
+    )
+
+
 @click.command()
 @click.option(
     "--small",
@@ -74,7 +86,7 @@ def demo(small: bool, as_json: bool) -> None:
         f"Construct validity, {groups[0]} vs {groups[1]}, participant level (SYNTHETIC participants)",
         compact_caption(analysis),
     )
-    print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)")
+    print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)", proficiency_rule(analysis))
     for note in validity.notes + analysis.notes:
         click.echo(click.wrap_text(f"note: {note}", 80, subsequent_indent="      "))
     click.echo(f"composite score: {composite_summary(validity.composite)}")
