@@ -40,28 +40,36 @@ def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
     return Simulation(tissue, Needle.curved(), device, forces=forces, region_forces=by_region), duration
 
 
-def convergence() -> None:
-    """The interrupted stitch's needle force at fixed depths on its mesh and two refinements (cells
-    0.3, 0.22, 0.17 mm; the wound's gap 0.1 mm in all three, the finest grid's limit)."""
+def convergence(task: str = "interrupted-stitch") -> None:
+    """A vessel task's needle force at fixed depths on its mesh and two refinements (cells 0.3, 0.22,
+    0.17 mm; the wound's gap 0.1 mm in all three, the finest grid's limit). The diseased wall is
+    pressed at its second bite, in the calcified plaque, with the plaque's moduli and forces."""
     import dataclasses
 
-    from sessions.tasks import stitch_region_nodes, task_mesh, task_spec
+    from sessions.tasks import region_presets, stitch_region_nodes, task_mesh, task_spec
     from sim.experiments import kernel_indentation_curve
     from sim.fem import BiphaseTissue
 
-    base, preset = task_spec("interrupted-stitch"), task_preset("interrupted-stitch")
+    base, preset = task_spec(task), task_preset(task)
+    regions = region_presets(task)
+    entry, normal, _ = base.more_bites[0] if regions else base.bites()[0]
+    forces = next(iter(regions.values())).forces if regions else preset.forces
     for divisions in ([30, 5, 34], [40, 7, 45], [52, 9, 58]):
         wound = {**base.parameters["wound"], "gap_m": 1e-4}
-        spec = dataclasses.replace(
-            base, parameters={**base.parameters, "divisions": divisions, "wound": wound}
-        )
+        refined = {**base.parameters, "divisions": divisions, "wound": wound}
+        if "calcification" in refined:  # the plaque through the whole wall at every refinement
+            refined["calcification"] = {**refined["calcification"], "layers": list(range(divisions[1]))}
+        spec = dataclasses.replace(base, parameters=refined)
         mesh = task_mesh(spec)
         fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
         candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
-        tissue = BiphaseTissue.build(mesh, fixed, preset.biphase, contact_nodes=candidates)
-        curve = kernel_indentation_curve(tissue, preset.forces, spec.entry, spec.normal, [0.0, 2e-4, 4e-4])
-        forces = ", ".join(f"{f:.4f}" for f in curve.force[1:])
-        print(f"divisions {divisions} ({mesh.n_nodes} nodes): force at 0.2 / 0.4 mm {forces} N", flush=True)
+        by_region = {name: p.biphase for name, p in regions.items()}
+        tissue = BiphaseTissue.build(
+            mesh, fixed, preset.biphase, region_parameters=by_region, contact_nodes=candidates
+        )
+        curve = kernel_indentation_curve(tissue, forces, entry, normal, [0.0, 2e-4, 4e-4])
+        shown = ", ".join(f"{f:.4f}" for f in curve.force[1:])
+        print(f"divisions {divisions} ({mesh.n_nodes} nodes): force at 0.2 / 0.4 mm {shown} N", flush=True)
 
 
 def main() -> None:
@@ -70,11 +78,16 @@ def main() -> None:
     )
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument(
-        "--convergence", action="store_true", help="the interrupted stitch's mesh convergence"
+        "--convergence",
+        nargs="?",
+        const="interrupted-stitch",
+        default=None,
+        metavar="TASK",
+        help="a vessel task's mesh convergence (default interrupted-stitch; diseased-wall: in the plaque)",
     )
     args = parser.parse_args()
     if args.convergence:
-        convergence()
+        convergence(args.convergence)
         return
     for task in TASKS:
         with tempfile.TemporaryDirectory() as folder:
