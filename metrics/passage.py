@@ -23,6 +23,7 @@ free frame before the next stitch's pierce (the last stitch: to the end). Per st
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -46,9 +47,18 @@ def stitch_frames(frames: NeedleFrames, pierce_times: NDArray[np.float64]) -> li
     return [slice(a, b) for a, b in zip(starts, [*starts[1:], len(frames.times)], strict=True)]
 
 
-def nearest_on_curve(vertices: NDArray[np.float64], point: NDArray[np.float64]) -> tuple[float, float, bool]:
-    """(distance (m) from ``point`` to the polyline, arc length from vertex 0 to the nearest point
-    (m), whether the nearest point is the polyline's last vertex)."""
+class CurvePoint(NamedTuple):
+    """The point of a polyline nearest a given point."""
+
+    distance: float  # m, from the given point
+    arc: float  # m, arc length from vertex 0
+    past_tail: bool  # the nearest point is the polyline's last vertex
+    point: NDArray[np.float64]  # the nearest point itself (m)
+    direction: NDArray[np.float64]  # unit direction of the polyline there (zero on a null segment)
+
+
+def nearest_point(vertices: NDArray[np.float64], point: NDArray[np.float64]) -> CurvePoint:
+    """The point of the polyline ``vertices`` nearest ``point``."""
     a, b = vertices[:-1], vertices[1:]
     ab = b - a
     lengths2 = np.einsum("ij,ij->i", ab, ab)
@@ -56,8 +66,17 @@ def nearest_on_curve(vertices: NDArray[np.float64], point: NDArray[np.float64]) 
     closest = a + t[:, None] * ab
     distances = np.linalg.norm(closest - point, axis=1)
     k = int(np.argmin(distances))
-    arc = float(np.sqrt(lengths2[:k]).sum() + t[k] * math.sqrt(lengths2[k]))
-    return float(distances[k]), arc, bool(k == len(ab) - 1 and t[k] >= 1.0)
+    length = math.sqrt(lengths2[k])
+    arc = float(np.sqrt(lengths2[:k]).sum() + t[k] * length)
+    direction = ab[k] / length if length > 0 else np.zeros(3)
+    return CurvePoint(float(distances[k]), arc, bool(k == len(ab) - 1 and t[k] >= 1.0), closest[k], direction)
+
+
+def nearest_on_curve(vertices: NDArray[np.float64], point: NDArray[np.float64]) -> tuple[float, float, bool]:
+    """(distance (m) from ``point`` to the polyline, arc length from vertex 0 to the nearest point
+    (m), whether the nearest point is the polyline's last vertex)."""
+    nearest = nearest_point(vertices, point)
+    return nearest.distance, nearest.arc, nearest.past_tail
 
 
 def track_and_sweep(
@@ -70,37 +89,17 @@ def track_and_sweep(
         if frames.state[k] not in IN_WALL:
             previous = None
             continue
-        vertices = frames.needle[k]
-        distance, arc, past_tail = nearest_on_curve(vertices, entry)
-        if past_tail:
+        nearest = nearest_point(frames.needle[k], entry)
+        if nearest.past_tail:
             previous = None
             continue
-        offsets.append(distance)
-        crossing = _point_at_arc(vertices, arc)
-        inside = min(arc, chord) if math.isfinite(chord) else arc
-        if previous is not None:
-            moved = crossing - previous
-            area += float(np.linalg.norm(moved - _along(vertices, arc, moved))) * inside
-        previous = crossing
+        offsets.append(nearest.distance)
+        inside = min(nearest.arc, chord) if math.isfinite(chord) else nearest.arc
+        if previous is not None:  # the crossing's movement across the needle (sliding along it is free)
+            moved = nearest.point - previous
+            area += float(np.linalg.norm(moved - (moved @ nearest.direction) * nearest.direction)) * inside
+        previous = nearest.point
     return (float(np.mean(offsets)) if offsets else math.nan), area
-
-
-def _point_at_arc(vertices: NDArray[np.float64], arc: float) -> NDArray[np.float64]:
-    steps = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
-    ends = np.cumsum(steps)
-    k = min(int(np.searchsorted(ends, arc)), len(steps) - 1)
-    start = ends[k] - steps[k]
-    t = 0.0 if steps[k] == 0 else (arc - start) / steps[k]
-    return vertices[k] + t * (vertices[k + 1] - vertices[k])
-
-
-def _along(vertices: NDArray[np.float64], arc: float, movement: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The part of ``movement`` along the needle at arc length ``arc`` (sliding through its own hole)."""
-    steps = np.diff(vertices, axis=0)
-    lengths = np.linalg.norm(steps, axis=1)
-    k = min(int(np.searchsorted(np.cumsum(lengths), arc)), len(steps) - 1)
-    direction = steps[k] / lengths[k] if lengths[k] > 0 else np.zeros(3)
-    return (movement @ direction) * direction
 
 
 def wound_edge_elements(mesh) -> NDArray[np.int64]:
