@@ -102,24 +102,20 @@ def track_and_sweep(
     return (float(np.mean(offsets)) if offsets else math.nan), area
 
 
-def wound_edge_elements(mesh) -> NDArray[np.int64]:
-    """Elements under the exterior triangles that lie wholly on the wound's cut faces (empty when
-    the mesh has no wound)."""
-    sets = [mesh.node_sets[name] for name in ("wound_a", "wound_b") if name in mesh.node_sets]
-    if not sets:
-        return np.zeros(0, dtype=np.int64)
-    on_edge = np.isin(mesh.surface_triangles, np.concatenate(sets)).all(axis=1)
-    return np.unique(mesh.surface_elements[on_edge])
-
-
 class WoundEdgeStress:
     """Peak von Mises stress (Pa) of a tissue's wound-edge elements under recorded drives."""
 
     def __init__(self, tissue) -> None:
         from sim.fem.fields import TissueFieldReplay
 
-        self.elements = wound_edge_elements(tissue.mesh)
+        self.elements = tissue.mesh.wound_edge_elements
         self._replay = TissueFieldReplay(tissue, elements=self.elements) if self.elements.size else None
+
+    def stress(self, nodes: NDArray, drive: NDArray, tip_speed: float, share: float) -> NDArray:
+        """Von Mises stress (Pa) of each of :attr:`elements` under one drive of the tissue."""
+        if self._replay is None:
+            return np.zeros(0)
+        return self._replay.stress(nodes, drive, tip_speed, share)
 
     def peak(self, frames: NeedleFrames, window: slice) -> float:
         if self._replay is None:

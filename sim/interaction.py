@@ -3,8 +3,9 @@
 Three entry points, called by the multi-rate loop at their own rates:
 
 - :meth:`NeedleInteraction.hold` (haptic rate): the holder's pose and grip; the
-  needle follows a closed grip, stays where it was when released, and is
-  re-grabbed when the grip closes near it.
+  needle follows a closed grip; released in the wall it settles where the wall
+  no longer pushes it sideways (at the FEM rate), released in the air it stays
+  where it was; it is re-grabbed when the grip closes near it.
 - :meth:`NeedleInteraction.graphics_step` (graphics rate): global CD of the whole
   needle against the collision mesh; promotes the triangle the tip first
   crosses to local CD, detects the exit through the far wall or the wound edge,
@@ -51,7 +52,7 @@ from sim.collision.mesh import CollisionMesh, TriangleContact, segment_ends
 from sim.errors import VascsimError
 from sim.fem import Tissue
 from sim.fem.fields import LocalStress, contact_depth
-from sim.needle import Needle, Pose
+from sim.needle import Needle, Pose, rotation_about
 from sim.needle_forces import NeedleForces
 from sim.needle_load import KernelLoad, kernel_factory
 
@@ -65,6 +66,7 @@ EVENT_KINDS = (
     "regrab",
     "implausible_hit",
     "overstress",
+    "edge_overstress",
 )
 
 
@@ -200,13 +202,17 @@ class NeedleInteraction:
         """Largest von Mises stress (Pa) within 1 mm of the contact at the last FEM step (nan when free)."""
         self.stretch = math.nan
         """The stretch statistic 1 + |d| / h at the last FEM step (nan when free)."""
+        self.wound_edge_stress = math.nan
+        """Largest von Mises stress (Pa) of the wound's cut-face elements within 3 mm of the contact
+        at the last FEM step (nan when free, without live stress, or with no wound edge near)."""
         self.live_stress = True
         """Whether each FEM step computes the local stress. Its operator is built per contact change
         from rows of the load nodes' whole K0^-1 columns (1-3 ms on the 10k artery once they are
         cached; the real-time runtime's prefetcher solves them ahead of the needle)."""
         self._stress: LocalStress | None = None
         self._stress_key: tuple[int, ...] = ()
-        self._overstressed = False
+        self._overstressed = self._edge_overstressed = False
+        self._settled_at = 0.0  # FEM time of the last step that moved a released needle
         self._wall_path = math.inf  # straight-line length through the wall from the entry (m)
         self._deepest = 0.0  # deepest tip depth reached into the wall since piercing (m)
         self.collision = collision or CollisionMesh(tissue.mesh)
@@ -232,6 +238,14 @@ class NeedleInteraction:
         self._pose_geometry = (np.zeros((0, 3)), np.zeros(3))
         self.tip_speed = 0.0
 
+    @property
+    def watched_edge_elements(self) -> NDArray[np.int64]:
+        """The wound-edge elements whose stress :attr:`wound_edge_stress` is the largest of (those
+        within 3 mm of the current contact; empty when free or without live stress)."""
+        if self._stress is None or self.state == "free":
+            return np.zeros(0, dtype=np.int64)
+        return self._stress.watched
+
     def forces_at(self, triangle: int) -> NeedleForces:
         """The needle forces of the wall region under surface triangle ``triangle`` (the region of
         the element the face belongs to): puncture, passage and damage follow the region entered."""
@@ -248,6 +262,7 @@ class NeedleInteraction:
         self.holder_pose = holder_pose
         if self.grasped and not grip_closed:
             self.grasped = False
+            self._settled_at = time  # the wall starts pushing the needle back from here
             events.append(
                 NeedleEvent("release", time, tip_speed=self.tip_speed, detail=f"state {self.state}")
             )
@@ -465,35 +480,50 @@ class NeedleInteraction:
         self._fem_time = time
         if self.state == "free" or not self.contacts:
             self.last_contact = None
-            self.local_stress = self.stretch = math.nan
+            self.local_stress = self.stretch = self.wound_edge_stress = math.nan
+            self._check_stress(time, None)
             return FemStep.untouched()
         vertices = self.needle_vertices()
+        if not self.grasped and self.state != "contact":
+            vertices = self._settle_released(vertices, time)
         tip = vertices[0]
         step = self._contact_step(time, tip) if self.state == "contact" else self._pierced_step(vertices)
         if self.state == "free":  # the tip was withdrawn this step
-            self.local_stress = self.stretch = math.nan
+            self.local_stress = self.stretch = self.wound_edge_stress = math.nan
         elif len(step.contact_nodes) == 0:  # in the wall's state but no longer held (being pulled clear)
-            self.local_stress, self.stretch = 0.0, 1.0
-        return self._check_stress(time, step)
-
-    def _check_stress(self, time: float, step: FemStep) -> FemStep:
-        """An ``overstress`` event when the local stress first rises past the damage threshold."""
-        limit = self.forces.damage_stress
-        over = limit is not None and self.local_stress >= limit
-        if over and not self._overstressed:
-            contact = self.contacts[0] if self.contacts else None
-            step.events.append(
-                NeedleEvent(
-                    "overstress",
-                    time,
-                    -1 if contact is None else contact.triangle,
-                    (math.nan,) * 3 if contact is None else tuple(contact.barycentric),
-                    tip_speed=self.tip_speed,
-                    detail=f"local stress {self.local_stress / 1e6:.2f} MPa over {limit / 1e6:.2f} MPa",
-                )
-            )
-        self._overstressed = over
+            self.local_stress, self.stretch, self.wound_edge_stress = 0.0, 1.0, math.nan
+        self._check_stress(time, step)
         return step
+
+    def _check_stress(self, time: float, step: FemStep | None) -> None:
+        """An ``overstress`` event when the local stress first rises past the damage threshold, an
+        ``edge_overstress`` event when the wound edge's does past its own (added to ``step``)."""
+        forces = self.forces
+        checks = (
+            ("overstress", "local stress", self.local_stress, forces.damage_stress, "_overstressed"),
+            (
+                "edge_overstress",
+                "wound-edge stress",
+                self.wound_edge_stress,
+                forces.edge_damage_stress,
+                "_edge_overstressed",
+            ),
+        )
+        for kind, what, stress, limit, flag in checks:
+            over = limit is not None and stress >= limit  # nan compares False: below
+            if over and not getattr(self, flag) and step is not None:
+                contact = self.contacts[0] if self.contacts else None
+                step.events.append(
+                    NeedleEvent(
+                        kind,
+                        time,
+                        -1 if contact is None else contact.triangle,
+                        (math.nan,) * 3 if contact is None else tuple(contact.barycentric),
+                        tip_speed=self.tip_speed,
+                        detail=f"{what} {stress / 1e6:.2f} MPa over {limit / 1e6:.2f} MPa",
+                    )
+                )
+            setattr(self, flag, over)
 
     def _let_go(self, time: float, kind: str, contact: TriangleContact, detail: str) -> NeedleEvent:
         """Back to the free state, and the event saying where the tissue let go of the needle."""
@@ -585,15 +615,50 @@ class NeedleInteraction:
         self._nodal_stress(all_nodes, reactions, points, np.array([o for _, o in crossings]))
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
 
+    def _settle_released(self, vertices: NDArray, time: float) -> NDArray:
+        """A released needle in the wall is held by nothing but the tissue: it moves (rigid) towards
+        where the wall's sideways load on it vanishes, the wall's holes where its crossings are, with
+        the wall's damped recoil (time constant ``recoil_time``). One crossing: a translation across
+        the needle; two: that plus the smallest rotation taking the needle's chord between its
+        crossings onto the chord between the holes. Along itself the needle does not move (friction
+        holds it). Returns the moved vertices."""
+        tangent = self.tip_tangent()
+        points, targets = [], []
+        for contact in self.contacts:
+            point = self._needle_point_at_plane(vertices, contact)
+            if point is None or not self._holds(contact, point):
+                continue
+            offset = point - contact.point
+            points.append(point)
+            targets.append(point - (offset - offset.dot(tangent) * tangent))
+        elapsed = time - self._settled_at
+        self._settled_at = time
+        if not points or not elapsed > 0:
+            return vertices
+        share = -math.expm1(-elapsed / self.forces.recoil_time)  # of the way there, this step
+        centre, goal = np.mean(points, axis=0), np.mean(targets, axis=0)
+        rotation = np.eye(3)
+        if len(points) >= 2:
+            chord, wanted = points[-1] - points[0], targets[-1] - targets[0]
+            axis = np.cross(chord, wanted)
+            sine = float(np.linalg.norm(axis))
+            if sine > 1e-15:
+                rotation = rotation_about(axis, share * math.atan2(sine, float(chord @ wanted)))
+        pose = self.needle_pose
+        moved = centre + share * (goal - centre)
+        self.needle_pose = Pose(rotation @ (pose.position - centre) + moved, rotation @ pose.rotation)
+        return self.needle_vertices()
+
     def _nodal_stress(self, nodes: NDArray, reactions: NDArray, points: list, displacements: NDArray) -> None:
         """Local stress and stretch of the barycentric rule's nodal forces (operator per contact set)."""
         if not self.live_stress:
-            self.local_stress = math.nan
+            self.local_stress = self.wound_edge_stress = math.nan
         else:
             if self._stress is None or self._stress_key != tuple(nodes.tolist()):
-                self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points)
+                edge = self.tissue.mesh.wound_edge_elements
+                self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points, watched=edge)
                 self._stress_key = tuple(nodes.tolist())
-            self.local_stress = self._stress.maximum(reactions.reshape(-1))
+            self.local_stress, self.wound_edge_stress = self._stress.maxima(reactions.reshape(-1))
         depth = contact_depth(self.tissue, self.contacts[0].nodes)
         self.stretch = 1.0 + float(np.linalg.norm(displacements, axis=1).max()) / depth
 
@@ -641,9 +706,10 @@ class NeedleInteraction:
         kernel_forces = load.elastic_forces(displacements, share) + extra_forces
         reactions = load.nodal_forces(kernel_forces)
         self.last_contact = (load.nodes, load.equivalent_drive(reactions, share))
-        self.local_stress = (
-            math.nan if self._stress is None else self._stress.maximum(kernel_forces.reshape(-1))
-        )
+        if self._stress is None:
+            self.local_stress = self.wound_edge_stress = math.nan
+        else:
+            self.local_stress, self.wound_edge_stress = self._stress.maxima(kernel_forces.reshape(-1))
         self.stretch = 1.0 + float(np.sqrt(np.einsum("ij,ij->i", total, total).max())) / (
             load.depth if math.isfinite(load.depth) else contact_depth(self.tissue, load.nodes)
         )

@@ -61,6 +61,11 @@ class NeedleForces:
     viscous_coefficient: viscous friction (N s/m) along the needle.
     damage_stress: local von Mises stress (Pa) whose first crossing is an ``overstress`` event
         (None: no events); a relative measure of load in this phenomenological model.
+    recoil_time: time constant (s) with which the wall pushes a released needle back to where it no
+        longer loads the wall sideways (the tissue's damped elastic recoil).
+    edge_damage_stress: von Mises stress (Pa) of the wound's cut-face elements whose first crossing
+        is an ``edge_overstress`` event (None: no events): a bite too near the edge, or a needle
+        levered towards it, tearing the edge.
     """
 
     load: str = "kernel"
@@ -75,11 +80,13 @@ class NeedleForces:
     stick_speed: float = 1e-4
     viscous_coefficient: float = 0.5
     damage_stress: float | None = None
+    edge_damage_stress: float | None = None
+    recoil_time: float = 0.03
 
     def __post_init__(self) -> None:
         if self.load not in LOAD_MODELS:
             raise NeedleForcesError(f"load must be one of {', '.join(LOAD_MODELS)}; got {self.load!r}")
-        positive = ("kernel_radius", "stick_speed", "emergence_ramp", "lateral_scale")
+        positive = ("kernel_radius", "stick_speed", "emergence_ramp", "lateral_scale", "recoil_time")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -88,10 +95,10 @@ class NeedleForces:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise NeedleForcesError(f"{name} must be zero or a positive number; got {value}")
-        if self.damage_stress is not None and not (
-            math.isfinite(self.damage_stress) and self.damage_stress > 0
-        ):
-            raise NeedleForcesError(f"damage_stress must be positive (Pa) or None; got {self.damage_stress}")
+        for name in ("damage_stress", "edge_damage_stress"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise NeedleForcesError(f"{name} must be positive (Pa) or None; got {value}")
         if self.puncture_force is not None and not (
             math.isfinite(self.puncture_force) and self.puncture_force > 0
         ):

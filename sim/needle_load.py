@@ -117,8 +117,12 @@ class KernelLoad:
         return share + (1.0 - share) * self._stiff_scale
 
     def local_stress(self, tissue: Tissue) -> LocalStress:
-        """The local-stress operator of these kernels (within 1 mm of their points), per kernel force."""
-        return LocalStress(tissue, self.nodes, self.soft.force_map, [k.point for k in self.kernels])
+        """The local-stress operator of these kernels (within 1 mm of their points), per kernel force,
+        watching the wound's edge elements near them too."""
+        points = [k.point for k in self.kernels]
+        return LocalStress(
+            tissue, self.nodes, self.soft.force_map, points, watched=tissue.mesh.wound_edge_elements
+        )
 
     def nodal_forces(self, kernel_forces: NDArray[np.float64]) -> NDArray[np.float64]:
         """(k, 3) forces (N) on :attr:`nodes` for the kernels' forces (m, 3)."""

@@ -45,7 +45,7 @@ _ARTERY = TissuePreset(
     "beyond 15 % indentation strain; puncture 0.8 N, emergence 0.4 N, cutting 0.2 N, friction "
     "0.03 N/mm.",
     BiphaseParameters(soft_modulus=300e3, stiff_modulus=6e6, poisson_ratio=0.45, strain_limit=0.12),
-    NeedleForces(damage_stress=8e5),
+    NeedleForces(damage_stress=8e5, edge_damage_stress=6e5),
     {
         "soft_modulus": "chosen: the low-strain (elastin) modulus of arterial wall is of the order of "
         "100-500 kPa in uniaxial tests; 300 kPa with the stiff phase puts 0.8 N at about 1 mm depth",
@@ -64,6 +64,10 @@ _ARTERY = TissuePreset(
         "damage_stress": "chosen: about twice the largest local stress of a perpendicular expert pass "
         "(0.42 MPa), so a well-made stitch never crosses it and levering (1.8 MPa) or a 25 deg entry "
         "(1.2 MPa) does; a relative threshold of this force law, not a measured tissue strength",
+        "edge_damage_stress": "chosen: about twice the wound-edge stress of an expert bite 1.5 mm from "
+        "the edge (0.28 MPa), so bites 0.6-1.0 mm from it (0.37-0.48 MPa) do not cross it and "
+        "levering (0.91 MPa; 2.1 MPa 0.6 mm from the edge) does; below the 1-2 MPa circumferential "
+        "tensile strength reported for porcine arteries, as a tear starts before the wall fails",
     },
 )
 
@@ -78,12 +82,14 @@ _CALCIFIED = TissuePreset(
         cutting_force=0.35,
         friction_per_length=120.0,
         damage_stress=1.6e6,
+        edge_damage_stress=1.2e6,
     ),
     {
         "moduli": "chosen: calcified plaque is reported from tens of MPa upwards, beyond what a linear "
         "phase can carry; four times the artery keeps the E2/E1 ratio (one shared factorisation)",
         "puncture_force": "chosen at the top of the 0.3-1.5 N band",
-        "damage_stress": "chosen: twice the artery's, as its puncture force is about twice",
+        "damage_stress, edge_damage_stress": "chosen: twice the artery's, as its puncture force is "
+        "about twice",
     },
 )
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import bisect
 import functools
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -74,6 +73,14 @@ class ScriptedDevice:
 
     def write_force(self, force: NDArray[np.float64]) -> None:
         self.forces.append(self._now, force)
+
+    def see_needle(self, needle_pose: Callable[[], Pose] | None) -> None:
+        """Let a trajectory that can look (a :class:`SuturingPass`, :func:`sequence_of_passes`) see
+        where the needle is: the simulated-time loop passes the interaction's needle pose."""
+        owner = getattr(self.trajectory, "__self__", self.trajectory)
+        hook = getattr(self.trajectory, "see_needle", None) or getattr(owner, "see_needle", None)
+        if hook is not None:
+            hook(needle_pose)
 
     def close(self) -> None:
         """Nothing to release."""
@@ -305,6 +312,24 @@ class SuturingPass:
         )
         self._pull_time = math.radians(self.p.pull_arc_deg) / self._omega
         self.duration = self.p.approach_time + self._insert_time + self.p.regrab_time + self._pull_time
+        self._sees: Callable[[], Pose] | None = None
+        self._correction: Pose | None = None  # where the needle lay at the re-grasp against the plan
+
+    def see_needle(self, needle_pose: Callable[[], Pose] | None) -> None:
+        """Let the hand see the needle (``needle_pose()``: its world pose; holder frame = needle frame
+        while held). A needle released in the wall settles where the wall holds it, so a hand that
+        sees goes for the needle's tip where it lies and pulls it on along the needle's own curve
+        from there; without it (``None``) the hand follows its plan, the needle where it let go."""
+        self._sees, self._correction = needle_pose, None
+
+    def _where_the_needle_lies(self) -> Pose | None:
+        """The rigid move from the planned released needle to the one the hand sees (None: blind)."""
+        if self._correction is not None:
+            return self._correction
+        if self._sees is None:
+            return None
+        released, _ = self._release
+        return self._sees().compose(released.inverse())
 
     @property
     def phases(self) -> dict[str, tuple[float, float]]:
@@ -366,10 +391,10 @@ class SuturingPass:
     def final_needle_pose(self) -> Pose:
         """Where the needle is at the end of the pull (the holder's frame at the original grip)."""
         released, _ = self._release
+        centre = self._released_centre
         turn = rotation_about(self.axis, self._omega * (self.duration - self.phases["pull"][0]))
-        return Pose.unchecked(
-            self.centre + turn @ (released.position - self.centre), turn @ released.rotation
-        )
+        planned = Pose.unchecked(centre + turn @ (released.position - centre), turn @ released.rotation)
+        return planned if self._correction is None else self._correction.compose(planned)
 
     @functools.cached_property
     def _release(self) -> tuple[Pose, NDArray[np.float64]]:
@@ -382,16 +407,30 @@ class SuturingPass:
 
     def _regrab_and_pull(self, t: float, start: float, stop: float) -> tuple[Pose, bool]:
         released, tip = self._release
+        seen = self._where_the_needle_lies()
         if t < stop:  # jaws open, travel from the grip point to the needle's tip, close on arrival
             w = (t - start) / (stop - start)
-            return Pose.unchecked((1 - w) * released.position + w * tip, released.rotation), w >= 0.98
-        return self._pull.pose(self._omega * (t - stop)), True
+            closing = w >= 0.98
+            if seen is None:
+                return Pose.unchecked((1 - w) * released.position + w * tip, released.rotation), closing
+            if closing and self._sees is not None:
+                self._correction = seen  # the jaws close on the needle where it lies now
+            target = seen.compose(Pose.unchecked(tip, released.rotation))
+            return blend_poses(released, target, w), closing
+        pose = self._pull.pose(self._omega * (t - stop))
+        return pose if seen is None else seen.compose(pose), True
+
+    @functools.cached_property
+    def _released_centre(self) -> NDArray[np.float64]:
+        """The centre of the needle's circle where it was released (moved by a pushing hand's push)."""
+        inserted = math.radians(self.p.insertion_arc_deg)
+        return self.centre + (1 - self.p.wrist_rotation) * self.radius * inserted * self.tangent
 
     @functools.cached_property
     def _pull(self) -> TurnAbout:
-        """The holder, closed on the released needle's tip, turned on along the needle's curve."""
+        """The holder, closed on the released needle's tip, turned on along the needle's own curve."""
         released, tip = self._release
-        return TurnAbout(self.axis, self.centre, Pose.unchecked(tip, released.rotation))
+        return TurnAbout(self.axis, self._released_centre, Pose.unchecked(tip, released.rotation))
 
 
 def _unit(v: ArrayLike) -> NDArray[np.float64]:
@@ -427,11 +466,15 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
     starts = np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]]).tolist()
     total = float(starts[-1] + passes[-1].duration)
     last = len(passes) - 1
-    # per gap: where the pass ends, the grip point, where the next approach starts
-    stops = [
-        (p.pose_and_grip(p.duration)[0], p.final_needle_pose, q.pose_and_grip(0.0)[0])
-        for p, q in itertools.pairwise(passes)
-    ]
+    stops: dict[int, tuple[Pose, Pose, Pose]] = {}
+
+    def gap_stops(k: int) -> tuple[Pose, Pose, Pose]:
+        """Where pass k ends, the grip point, where the next approach starts (once pass k is done: a
+        hand that sees re-grasped the needle where it lay)."""
+        if k not in stops:
+            p, q = passes[k], passes[k + 1]
+            stops[k] = (p.pose_and_grip(p.duration)[0], p.final_needle_pose, q.pose_and_grip(0.0)[0])
+        return stops[k]
 
     def trajectory(t: float) -> tuple[Pose, bool]:
         k = min(max(bisect.bisect_right(starts, t) - 1, 0), last)  # every haptic tick: plain floats
@@ -439,7 +482,7 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
         current = passes[k]
         if local <= current.duration:
             return current.pose_and_grip(local)
-        end, grip, following = stops[k]
+        end, grip, following = gap_stops(k)
         phase = (local - current.duration) / gap
         if phase < 0.2:
             return end, False  # open the jaws
@@ -449,6 +492,12 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
             return grip, True  # close on the needle
         return blend_poses(grip, following, (phase - 0.5) / 0.5), True  # carry it to the next approach
 
+    def see_needle(needle_pose: Callable[[], Pose] | None) -> None:
+        for one in passes:
+            one.see_needle(needle_pose)
+        stops.clear()
+
+    trajectory.see_needle = see_needle  # type: ignore[attr-defined]
     return trajectory, total
 
 
@@ -457,16 +506,18 @@ def blend_poses(start: Pose, stop: Pose, fraction: float) -> Pose:
     position on the straight line, the rotation about the one axis that turns start into stop,
     both with zero speed at the ends (a cosine profile)."""
     w = 0.5 - 0.5 * math.cos(math.pi * min(max(fraction, 0.0), 1.0))
+    if w >= 1.0:
+        return stop
     relative = start.rotation.T @ stop.rotation
-    cosine = min(max((float(np.trace(relative)) - 1.0) / 2.0, -1.0), 1.0)
-    angle = math.acos(cosine)
     axis = np.array(
         [relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0], relative[1, 0] - relative[0, 1]]
     )
+    # atan2 of sine and cosine: acos alone loses small angles (1e-9 rad rounds to 0)
+    angle = math.atan2(0.5 * float(np.linalg.norm(axis)), (float(np.trace(relative)) - 1.0) / 2.0)
     if np.linalg.norm(axis) < 1e-9 and angle > 1.0:  # a half turn: the axis from (R + I) / 2
         symmetric = (relative + np.eye(3)) / 2.0
         axis = symmetric[:, int(np.argmax(np.diag(symmetric)))]
-    if angle < 1e-12:
+    if angle < 1e-15:
         rotation = start.rotation
     else:
         rotation = start.rotation @ rotation_about(axis / np.linalg.norm(axis), w * angle)

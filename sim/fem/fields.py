@@ -12,6 +12,8 @@ costs six sparse solves plus array arithmetic, and gives exactly what
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -267,6 +269,10 @@ def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):
 LOCAL_STRESS_RADIUS = 1e-3
 """Elements whose centroid lies within 1 mm of a contact (the needle's force kernel) are "local"."""
 
+WOUND_EDGE_RADIUS = 3e-3
+"""The wound-edge elements whose centroid lies within 3 mm of a contact are watched live (a bite is
+1-2 mm from the edge; farther edge elements carry a fraction of the load)."""
+
 
 class LocalStress:
     """The largest von Mises stress (Pa) of the elements near a contact, for any load on its nodes.
@@ -278,7 +284,7 @@ class LocalStress:
     (q right-hand sides), then each FEM step is a (6E x q) product and a maximum.
     """
 
-    __slots__ = ("_operator", "elements")
+    __slots__ = ("_operator", "_split", "elements", "watched")
 
     def __init__(
         self,
@@ -287,21 +293,30 @@ class LocalStress:
         force_map: NDArray[np.float64],
         centres: ArrayLike,
         radius: float = LOCAL_STRESS_RADIUS,
+        watched: ArrayLike | None = None,
     ) -> None:
         model = _phases(tissue)[0]
         mesh = model.mesh
         ids = np.asarray(nodes, dtype=np.int64).ravel()
         force_map = np.asarray(force_map, dtype=np.float64).reshape(3 * len(ids), -1)
         self.elements = model.elements_near(centres, radius)
+        self.watched = np.zeros(0, dtype=np.int64)
+        """Elements of ``watched`` (e.g. the wound's edge) within :data:`WOUND_EDGE_RADIUS` of the
+        contact, whose stress :meth:`maxima` reports apart from the local elements'."""
+        if watched is not None and len(watched):
+            near = model.elements_near(centres, WOUND_EDGE_RADIUS)
+            self.watched = np.intersect1d(near, np.asarray(watched, dtype=np.int64))
+        self._split = len(self.elements)
+        elements = np.concatenate([self.elements, self.watched])
         # displacement per unit generalised force, at the local elements' nodes only: rows of the
         # load nodes' cached K0^-1 columns (prefetched in real time), else one q-column solve
-        local, tets = np.unique(mesh.tets[self.elements], return_inverse=True)
+        local, tets = np.unique(mesh.tets[elements], return_inverse=True)
         dofs = (3 * local[:, None] + np.arange(3)).ravel()
         columns = model.load_response(ids, force_map, dofs).reshape(len(local), 3, -1)
         tets = tets.reshape(-1, 4)
-        grad = np.einsum("maiq,maj->mijq", columns[tets], model._gradients[self.elements])
+        grad = np.einsum("maiq,maj->mijq", columns[tets], model._gradients[elements])
         strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
-        lam, mu = (values[self.elements] for values in model.lame)
+        lam, mu = (values[elements] for values in model.lame)
         trace = np.einsum("miiq->mq", strain)
         stress = 2 * mu[:, None, None, None] * strain
         for i in range(3):
@@ -317,5 +332,14 @@ class LocalStress:
 
     def maximum(self, forces: NDArray[np.float64]) -> float:
         """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""
+        return self.maxima(forces)[0]
+
+    def maxima(self, forces: NDArray[np.float64]) -> tuple[float, float]:
+        """(local, watched): the largest von Mises stress (Pa) of the local elements and of the
+        watched ones (nan without any) for the generalised forces (q,)."""
         values = self._operator.dot(forces).reshape(-1, 6)
-        return float(np.sqrt(np.einsum("ij,ij->i", values, values).max()))
+        squares = np.einsum("ij,ij->i", values, values)
+        split = self._split
+        local = float(np.sqrt(squares[:split].max())) if split else 0.0
+        watched = float(np.sqrt(squares[split:].max())) if len(squares) > split else math.nan
+        return local, watched

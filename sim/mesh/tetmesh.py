@@ -129,6 +129,16 @@ class TetMesh:
         return _frozen(triangle_normals(self.points, self.surface_triangles))
 
     @cached_property
+    def wound_edge_elements(self) -> NDArray[np.int64]:
+        """Sorted ids of the elements under exterior triangles lying wholly on the wound's cut faces
+        (node sets ``wound_a``/``wound_b``); empty when the mesh has no wound."""
+        sets = [self.node_sets[name] for name in ("wound_a", "wound_b") if name in self.node_sets]
+        if not sets:
+            return _frozen(np.zeros(0, dtype=np.int64))
+        on_edge = np.isin(self.surface_triangles, np.concatenate(sets)).all(axis=1)
+        return _frozen(np.unique(self.surface_elements[on_edge]))
+
+    @cached_property
     def surface_nodes(self) -> NDArray[np.int64]:
         """Sorted ids of the nodes on the exterior surface."""
         return _frozen(np.unique(self.surface_triangles))

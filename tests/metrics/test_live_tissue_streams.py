@@ -88,3 +88,55 @@ def test_levering_raises_an_overstress_event(wall, tmp_path):
         events[name] = [e.kind for e in simulation.run_simulated(suturing.duration).events]
     assert "overstress" not in events["expert"]
     assert "overstress" in events["lever"]
+
+
+def _bite(task: str, parameters: SuturingPassParameters, nearer_edge: float = 0.0):
+    """A scripted bite on ``task``'s vessel, ``nearer_edge`` (m) closer to the wound than its mark."""
+    spec = task_spec(task)
+    entry = np.asarray(spec.entry) + nearer_edge * np.asarray(spec.bite_direction)
+    radius = float(np.linalg.norm(spec.entry[:2]))
+    entry[:2] *= radius / np.linalg.norm(entry[:2])  # back onto the adventitia
+    normal = np.array([entry[0], entry[1], 0.0]) / radius
+    towards_wound = np.array([normal[1], -normal[0], 0.0])
+    return SuturingPass(Needle.curved(), entry, normal, towards_wound, parameters)
+
+
+def test_the_wound_edge_stress_is_live_and_a_levered_bite_near_the_edge_raises_edge_overstress():
+    """The interrupted stitch watches the wound's cut faces within 3 mm of the needle each FEM step:
+    the live value equals the edge-only replay of the step's drive (the metric's path) on the same
+    elements; an expert bite 1.5 mm from the edge stays under the preset's threshold, a levered bite
+    0.6 mm from it crosses it once (an ``edge_overstress`` event)."""
+    from metrics.passage import WoundEdgeStress
+    from sessions.tasks import task_simulation
+
+    replay = WoundEdgeStress(tissue_for("interrupted-stitch", None))
+    results = {}
+    for name, parameters, nearer in (
+        ("expert", SuturingPassParameters(), 0.0),
+        ("levered near the edge", SuturingPassParameters(wrist_rotation=0.4), 0.9e-3),
+    ):
+        suturing = _bite("interrupted-stitch", parameters, nearer)
+        simulation = task_simulation("interrupted-stitch", ScriptedDevice(suturing.pose_and_grip))
+        interaction = simulation.interaction
+        checked, peaks = [], []
+        fem_step = interaction.fem_step
+
+        def watched_step(time, fem_step=fem_step, interaction=interaction, checked=checked, peaks=peaks):
+            step = fem_step(time)
+            peaks.append(interaction.wound_edge_stress)
+            if interaction.last_contact is not None and len(checked) < 5 and time > 1.2:
+                nodes, drive = interaction.last_contact
+                stress = replay.stress(nodes, drive, interaction.tip_speed, interaction.soft_share)
+                watched = np.isin(replay.elements, interaction.watched_edge_elements)
+                checked.append((interaction.wound_edge_stress, float(stress[watched].max())))
+            return step
+
+        interaction.fem_step = watched_step
+        events = [e.kind for e in simulation.run_simulated(suturing.duration).events]
+        results[name] = (events, np.nanmax(peaks), checked)
+    expert, levered = results["expert"], results["levered near the edge"]
+    assert expert[2] and levered[2]
+    for live, replayed in expert[2] + levered[2]:
+        assert live == pytest.approx(replayed, rel=1e-9)
+    assert "edge_overstress" not in expert[0] and expert[1] < 0.6e6
+    assert levered[0].count("edge_overstress") >= 1 and levered[1] > 0.6e6

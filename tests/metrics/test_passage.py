@@ -15,7 +15,6 @@ from metrics.passage import (
     nearest_on_curve,
     passage_columns,
     track_and_sweep,
-    wound_edge_elements,
 )
 from metrics.streams import NeedleFrames
 from tests.metrics.test_placement import WALL, at_node, bite, event, streams_of
@@ -120,7 +119,7 @@ def test_wound_edge_stress_is_the_full_replay_at_the_cut_faces_and_grows_nearer_
     from sim.fem.fields import TissueFieldReplay
 
     mesh = wound_patch.mesh
-    edge = wound_edge_elements(mesh)
+    edge = mesh.wound_edge_elements
     cut = np.isin(mesh.surface_triangles, np.r_[mesh.node_sets["wound_a"], mesh.node_sets["wound_b"]])
     assert edge.size and set(edge) == set(mesh.surface_elements[cut.all(axis=1)])
     outer = mesh.node_sets["outer"]

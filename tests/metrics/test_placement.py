@@ -250,7 +250,10 @@ def test_the_arteriotomy_closure_row_is_segmented_and_its_spacing_scored(tmp_pat
     assert trainee["spacing_error"] > expert["spacing_error"] and trainee["entry_to_target"] > 0.0005, trainee
     # how the needle went through the wall, from the recorded scene: the expert turns it along its curve
     assert expert["back_wall_catches"] == 0 and expert["extra_punctures"] == 0
-    assert expert["needle_track_offset"] < 0.0003 < trainee["needle_track_offset"], (expert, trainee)
+    # (a needle let go in the wall settles where the wall holds it and the hand re-grasps it there:
+    # the expert's track stays within 0.05 mm of its hole, a first-day trainee's levers it sideways)
+    offsets = (expert["needle_track_offset"], trainee["needle_track_offset"])
+    assert offsets[0] < 0.05e-3 and offsets[1] > 3 * offsets[0], (expert, trainee)
     assert expert["tissue_swept_area"] < trainee["tissue_swept_area"]
     assert 1e5 < expert["wound_edge_stress"] < trainee["wound_edge_stress"], (expert, trainee)
 
