@@ -19,7 +19,7 @@ from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_foun
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
-from sessions import accounts
+from sessions import accounts, ratings
 from sessions.models import Participant, Session, StationToken, Study, User
 from sessions.status import SessionStatus
 
@@ -68,6 +68,14 @@ class UserChange(BaseModel):
 
 class NewStation(BaseModel):
     station: str = Field(min_length=1, max_length=64, pattern=accounts.STATION_PATTERN.pattern)
+
+
+class NewRating(BaseModel):
+    instrument: Literal["GRS", "OSATS"]
+    scores: dict[
+        Annotated[str, Field(min_length=1, max_length=64)], Annotated[int, Field(strict=True, ge=1, le=5)]
+    ] = Field(max_length=10, description="every item of the instrument, each a whole score 1-5")
+    replace: bool = Field(default=False, description="replace the caller's earlier rating of the session")
 
 
 class NewStudy(BaseModel):
@@ -254,6 +262,33 @@ def video(request: Request, uid: str, viewer: Anyone) -> FileResponse:
             f"`vascsim replay {uid} --vs-group experts`",
         )
     return FileResponse(path, media_type="video/mp4" if path.suffix == ".mp4" else "video/webm")
+
+
+@router.get(
+    "/sessions/{uid}/ratings", summary="A session's ratings: rater, instrument, items and total (staff)"
+)
+def session_ratings(request: Request, uid: str, viewer: Staff) -> list[dict]:
+    _directory(request, viewer, uid)
+    return ratings.session_ratings(_state(request).catalog, uid)
+
+
+@router.post(
+    "/sessions/{uid}/ratings",
+    status_code=201,
+    summary="Rate a session with GRS or OSATS (staff; the rater is the caller)",
+    responses=CONFLICT,
+)
+def rate_session(request: Request, uid: str, body: NewRating, viewer: Staff) -> dict:
+    _directory(request, viewer, uid)
+    rating = ratings.add_rating(
+        _state(request).catalog, uid, viewer.username, body.instrument, body.scores, body.replace
+    )
+    return {
+        "rater": rating.rater,
+        "instrument": rating.instrument.name,
+        "scores": rating.scores,
+        "total": rating.total,
+    }
 
 
 @router.get("/sessions/{uid}/files/{name}", response_class=FileResponse, summary="Download a stream file")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import secrets
 from contextlib import asynccontextmanager
 from pathlib import Path
 
@@ -10,7 +11,7 @@ from fastapi.responses import FileResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
-from dashboard import api, pages
+from dashboard import api, pages, rating_pages
 from dashboard.analysis import AnalysisCache
 from dashboard.auth import LoginRateLimiter
 from dashboard.errors import install_error_handlers
@@ -70,6 +71,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
     app.state.signals = SignalCache(settings.home)
     app.state.login_limiter = LoginRateLimiter(settings.login_attempts, settings.login_window_s)
     app.state.templates = Jinja2Templates(directory=str(HERE / "templates"))
+    app.state.blind_key = secrets.token_bytes(32)  # blinded rating's session names (dashboard.rating_pages)
     install_error_handlers(app)
 
     @app.middleware("http")
@@ -83,6 +85,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
 
     app.include_router(api.router)
     app.include_router(pages.router)
+    app.include_router(rating_pages.router)
     bundle = plotly_bundle()
 
     @app.get("/static/vendor/plotly.min.js", include_in_schema=False)

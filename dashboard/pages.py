@@ -38,6 +38,7 @@ from dashboard.errors import DashboardError, status_of
 from dashboard.signals import replay_video
 from recorder.layout import SAMPLES_FILE
 from sessions.models import ROLES, Participant
+from sessions.ratings import session_ratings
 from sim.errors import VascsimError
 
 router = APIRouter(include_in_schema=False)
@@ -154,8 +155,16 @@ def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
     has_video = replay_video(state.settings.home, uid) is not None
     has_samples = any(f["name"] == SAMPLES_FILE for f in detail["files"])
     data = {"uid": uid, "has_video": has_video, "has_samples": has_samples}
+    ratings = session_ratings(state.catalog, uid) if viewer.role in STAFF else []
     return render(
-        request, "session.html", viewer, data, detail=detail, has_video=has_video, has_samples=has_samples
+        request,
+        "session.html",
+        viewer,
+        data,
+        detail=detail,
+        has_video=has_video,
+        has_samples=has_samples,
+        ratings=ratings,
     )
 
 

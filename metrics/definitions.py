@@ -463,6 +463,20 @@ def time_above_strain_limit(context: SessionContext) -> float:
     return float(np.sum(dt[above]))
 
 
+@metric(
+    "wound_edge_tears",
+    unit="1",
+    definition="Times the wound edge was stressed past the tissue's damage threshold (edge_overstress "
+    "events: a bite too near the edge, or a needle levered towards it): a tear risk, a never event.",
+    streams=("events",),
+    better=LOWER,
+    reference="vascsim tissue model, edge_damage_stress (docs/tissue-model.md)",
+    group="tissue",
+)
+def wound_edge_tears(context: SessionContext) -> float:
+    return float(np.sum(context.streams.events["kind"].to_numpy() == "edge_overstress"))
+
+
 # -- subordinate hand ----------------------------------------------------------------
 def _insertion_mask(context: SessionContext):
     if not context.insertions:

@@ -5,7 +5,13 @@ Benchmark rules (per metric, from one value per expert: the median of their sess
 - ``"mean"``: the expert mean (Gallagher et al. 2005, Ann Surg 241:364): a trainee
   passes a metric when at least as good as the average expert;
 - ``"median"``: the expert median;
-- ``"percentile:Q"``: the value that Q % of experts reach, e.g. ``"percentile:80"``.
+- ``"percentile:Q"``: the value that Q % of experts reach, e.g. ``"percentile:80"``;
+- ``"mean+sd:K"``: K standard deviations from the expert mean on the worse side (Lap
+  Mentor's "expert mean + 2 SD": ``"mean+sd:2"``);
+- ``"trimmed:P"``: the expert mean with P % cut from each end (robust to one outlying expert);
+- ``"contrasting"``: the contrasting-groups mark (:func:`metrics.statistics.contrasting_groups_mark`):
+  where the normal fits of the experts' values and the unskilled group's (each trainee's first
+  practice session) cross.
 
 A session passes a metric when its value is on the better side of (or equal to) the
 benchmark; it passes overall when it passes every benchmarked metric it has. A
@@ -20,33 +26,53 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from metrics.registry import REGISTRY
+from metrics.statistics import contrasting_groups_mark
 from metrics.streams import MetricsError
 from metrics.units import shown
 
+RULE_FORMS = "'mean', 'median', 'percentile:Q', 'mean+sd:K', 'trimmed:P' or 'contrasting'"
 
-def _rule_value(values: np.ndarray, rule: str, better: str) -> float:
+
+def _share(rule: str, low: float, high: float, what: str) -> float:
+    try:
+        share = float(rule.split(":", 1)[1])
+    except ValueError:
+        share = math.nan
+    if not low <= share <= high or (share == low and what != "a number of SDs"):
+        raise MetricsError(f"{rule.split(':')[0]} rule needs {what} in ({low:g}, {high:g}]; got {rule!r}")
+    return share
+
+
+def rule_value(values: np.ndarray, rule: str, better: str, unskilled: np.ndarray | None = None) -> float:
+    """The pass mark of ``rule`` from the experts' ``values`` (one per expert); ``"contrasting"``
+    needs the unskilled group's ``unskilled`` values too."""
     if rule == "mean":
         return float(np.mean(values))
     if rule == "median":
         return float(np.median(values))
     if rule.startswith("percentile:"):
-        try:
-            share = float(rule.split(":", 1)[1])
-        except ValueError:
-            share = math.nan
-        if not 0 < share <= 100:
-            raise MetricsError(f"percentile rule needs a share in (0, 100]; got {rule!r}")
+        share = _share(rule, 0.0, 100.0, "a share")
         # the value that share % of experts reach: worse-side quantile
         q = share / 100 if better == "lower" else 1 - share / 100
         return float(np.quantile(values, q))
-    raise MetricsError(f"benchmark rule must be 'mean', 'median' or 'percentile:Q'; got {rule!r}")
+    if rule.startswith("mean+sd:"):
+        k = _share(rule, 0.0, 10.0, "a number of SDs")
+        spread = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+        return float(np.mean(values)) + (k if better == "lower" else -k) * spread
+    if rule.startswith("trimmed:"):
+        cut = _share(rule, 0.0, 49.0, "a percentage cut from each end")
+        return float(stats.trim_mean(values, cut / 100))
+    if rule == "contrasting":
+        return contrasting_groups_mark(values, np.zeros(0) if unskilled is None else unskilled)
+    raise MetricsError(f"benchmark rule must be {RULE_FORMS}; got {rule!r}")
 
 
 def check_rule(rule: str) -> None:
     """MetricsError unless ``rule`` is a benchmark rule this module knows."""
-    _rule_value(np.array([1.0, 2.0]), rule, "lower")
+    rule_value(np.array([1.0, 2.0]), rule, "lower", np.array([3.0, 5.0]))
 
 
 def proficiency_benchmarks(
@@ -63,13 +89,18 @@ def proficiency_benchmarks(
     if experts.empty:
         raise MetricsError(f"no sessions with {group_col} == {expert_group!r} to set benchmarks from")
     per_expert = experts.groupby(cluster_col)[list(metrics)].median()
+    first = table[table[group_col] != expert_group]
+    if "trial" in first.columns:  # the unskilled group of contrasting groups: each trainee's first session
+        first = first.sort_values("trial", kind="stable").groupby(cluster_col).head(1)
+    per_novice = first.groupby(cluster_col)[list(metrics)].median()
     rows = []
     for name in metrics:
         if name not in REGISTRY:
             raise MetricsError(f"unknown metric {name!r}: benchmarks need the registry's direction")
         better = REGISTRY[name].better
         values = per_expert[name].dropna().to_numpy()
-        benchmark = _rule_value(values, rule, better) if values.size else math.nan
+        novices = per_novice[name].dropna().to_numpy()
+        benchmark = rule_value(values, rule, better, novices) if values.size else math.nan
         rows.append(
             {
                 "metric": name,

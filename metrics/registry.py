@@ -18,7 +18,7 @@ from metrics.streams import MetricsError
 if TYPE_CHECKING:
     from metrics.context import SessionContext
 
-REGISTRY_VERSION = "6"
+REGISTRY_VERSION = "7"
 
 LOWER, HIGHER = "lower", "higher"
 

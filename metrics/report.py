@@ -21,7 +21,7 @@ from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
-from metrics.units import display_unit, in_display_units
+from metrics.units import display_unit, in_display_units, interval_text
 from metrics.validity import aggregate_by_participant
 
 FIGURE_FORMATS = ("png", "svg")
@@ -178,9 +178,16 @@ def _markdown_table(frame: pd.DataFrame) -> str:
 
 
 def _html_table(frame: pd.DataFrame) -> Markup:
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
+    """Numbers right-aligned, text (names, rules, conditions, yes/no) left-aligned."""
+    numeric = [
+        pd.api.types.is_numeric_dtype(frame[c]) and not pd.api.types.is_bool_dtype(frame[c]) for c in frame
+    ]
+    align = ["" if is_number else ' class="text"' for is_number in numeric]
+    head = "".join(f"<th{a}>{html.escape(str(c))}</th>" for c, a in zip(frame.columns, align, strict=True))
     body = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(_fmt(v))}</td>" for v in row) + "</tr>"
+        "<tr>"
+        + "".join(f"<td{a}>{html.escape(_fmt(v))}</td>" for v, a in zip(row, align, strict=True))
+        + "</tr>"
         for row in frame.itertuples(index=False)
     )
     return Markup(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
@@ -294,7 +301,7 @@ TEMPLATE = """<!doctype html>
 body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
 table { border-collapse: collapse; font-size: 0.85em; margin: 1em 0; }
 th, td { border: 1px solid #ccc; padding: 0.25em 0.5em; text-align: right; }
-th { background: #f3f3f3; } td:first-child, th:first-child { text-align: left; }
+th { background: #f3f3f3; } td:first-child, th:first-child, td.text, th.text { text-align: left; }
 .warning { background: #fff3cd; border: 1px solid #e0c060; padding: 0.6em 1em; }
 img { max-width: 100%; }
 </style></head><body>
@@ -319,6 +326,22 @@ demonstrate the pipeline; they are not evidence about people.</p>{% endif %}
 {{ concurrent_table }}{% endif %}
 <h2>Proficiency benchmarks</h2>
 {{ benchmark_table }}
+{% if standards %}<h2>Standard setting: how often each pass mark misjudges</h2>
+<ul>{% for note in standards.notes %}<li>{{ note }}</li>{% endfor %}</ul>
+{{ standards.marks }}
+<h3>Leaving one expert out (rule '{{ standards.rule }}')</h3>
+<p>How many trainees change status (proficient or not) when the benchmarks are set without one expert,
+and the largest shift in trials-to-proficiency among those proficient both ways.</p>
+{{ standards.loo }}
+<h3>What each rule does to the course</h3>
+{{ standards.rules }}{% endif %}
+{% if reliability %}<h2>Reliability</h2>
+<ul>{% for note in reliability.notes %}<li>{{ note }}</li>{% endfor %}</ul>
+<h3>Test-retest (benchmarked metrics)</h3>
+{{ reliability.retest }}
+<p>{{ reliability.consistency }}</p>
+{% for name, table in reliability.raters %}<h3>Inter-rater agreement: {{ name }}</h3>
+{{ table }}{% endfor %}{% endif %}
 <h2>Trainees</h2>
 {{ trainee_table }}
 {% for path in learning %}<p><img src="{{ path }}" alt="learning curve"></p>{% endfor %}
@@ -329,6 +352,113 @@ demonstrate the pipeline; they are not evidence about people.</p>{% endif %}
 <p>Tables as CSV: {% for name in csv %}<a href="tables/{{ name }}">{{ name }}</a> {% endfor %}</p>
 </body></html>
 """
+
+
+def standards_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
+    """The standard-setting tables as shown: marks in display units, rates in % with intervals."""
+    standards = analysis.standards
+    if standards is None:
+        return {}
+    marks = standards.misclassification
+    shown = marks[
+        ["metric", "rule", "pass_if", "false_pass_shown", "false_fail_shown", "unskilled", "skilled"]
+    ]
+    shown = shown.rename(
+        columns={
+            "pass_if": "passes if",
+            "false_pass_shown": "false pass (trainees' first session)",
+            "false_fail_shown": "false fail (experts)",
+            "unskilled": "trainees judged",
+            "skilled": "experts judged",
+        }
+    )
+    loo = standards.leave_one_expert_out
+    loo = (
+        pd.DataFrame()
+        if loo is None
+        else loo.rename(
+            columns={
+                "left_out": "expert left out",
+                "status_changed": "trainees changing status",
+                "changed": "who",
+                "largest_shift": "largest shift (sessions)",
+                "mean_shift": "mean shift (sessions)",
+            }
+        )
+    )
+    rules = standards.rule_comparison.rename(
+        columns={"proficient": "trainees proficient", "median_trials": "median trials to proficiency"}
+    )
+    return {"marks": shown, "loo": loo, "rules": rules}
+
+
+def reliability_tables(analysis: StudyAnalysis) -> tuple[pd.DataFrame, str, list[tuple[str, pd.DataFrame]]]:
+    """(test-retest of the benchmarked metrics, the composite's internal consistency as a sentence,
+    inter-rater tables per instrument), as shown."""
+    reliability = analysis.reliability
+    if reliability is None:
+        return pd.DataFrame(), "", []
+    chosen = set(analysis.benchmarks["metric"])
+    retest = reliability.test_retest[reliability.test_retest["metric"].isin(chosen)]
+    retest = pd.DataFrame(
+        {
+            "metric": retest["metric"],
+            "participants": retest["participants"],
+            "ICC(3,1) (95 % CI), reading": [
+                interval_text(v, lo, hi, r)
+                for v, lo, hi, r in zip(
+                    retest["icc"], retest["ci_low"], retest["ci_high"], retest["reading"], strict=True
+                )
+            ],
+        }
+    )
+    alpha = reliability.internal_consistency
+    if alpha is None:
+        consistency = "Internal consistency: needs at least two benchmarked metrics."
+    else:
+        consistency = (
+            "Internal consistency of the benchmarked metrics as one composite (participants' medians, "
+            "z-scored, oriented so higher is better): Cronbach's alpha "
+            f"{interval_text(alpha.value, alpha.ci_low, alpha.ci_high, alpha.reading)} over {alpha.items} "
+            f"metrics and {alpha.subjects} participants."
+        )
+    raters = []
+    for name, table in reliability.raters.items():
+        raters.append(
+            (
+                name,
+                pd.DataFrame(
+                    {
+                        "item": table["item"],
+                        "sessions (all raters)": table["sessions"],
+                        "raters": table["block_raters"],
+                        "ICC(2,1) (95 % CI), reading": [
+                            interval_text(v, lo, hi, r)
+                            for v, lo, hi, r in zip(
+                                table["icc21"],
+                                table["icc21_low"],
+                                table["icc21_high"],
+                                table["reading"],
+                                strict=True,
+                            )
+                        ],
+                        "ICC(2,k) (95 % CI)": [
+                            interval_text(v, lo, hi)
+                            for v, lo, hi in zip(
+                                table["icc2k"], table["icc2k_low"], table["icc2k_high"], strict=True
+                            )
+                        ],
+                        "Krippendorff's alpha (95 % CI)": [
+                            interval_text(v, lo, hi)
+                            for v, lo, hi in zip(
+                                table["alpha"], table["alpha_low"], table["alpha_high"], strict=True
+                            )
+                        ],
+                    }
+                ),
+            )
+        )
+    return retest, consistency, raters
 
 
 def _method_lines(analysis: StudyAnalysis) -> list[str]:
@@ -359,8 +489,19 @@ def _method_lines(analysis: StudyAnalysis) -> list[str]:
         "Composite: weighted mean of z-scores, weights = rank-biserial correlation with the skilled group, "
         "all fitted without the left-out participant (leave-one-participant-out).",
         f"Benchmarks: rule '{s.benchmark_rule}' over {s.skilled_group} participants' medians; a session "
-        "passes when every benchmarked metric is at least as good; proficient after "
-        f"{s.consecutive_passes} consecutive passes.",
+        "passes when every benchmarked metric is at least as good"
+        + (
+            " and no safety event happened (a back-wall catch, a torn wound edge, a force clamped to the "
+            "device's rating: non-compensatory mode)"
+            if s.non_compensatory
+            else ""
+        )
+        + "; proficient after "
+        + (
+            f"{s.consecutive_passes} passes in a row."
+            if s.progression_window is None
+            else f"{s.consecutive_passes} passes among the last {s.progression_window} sessions."
+        ),
         "Retention: each trainee's last retention-phase session against the mean of their last "
         f"{s.retention_baseline} practice sessions, per benchmarked metric by its direction; retained "
         "when that session passes the benchmarks.",
@@ -416,6 +557,15 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     concurrent = analysis.concurrent
     if concurrent is not None:
         csv["concurrent_validity.csv"] = concurrent.table
+    if analysis.standards is not None:
+        csv["standard_setting.csv"] = analysis.standards.misclassification
+        csv["rule_comparison.csv"] = analysis.standards.rule_comparison
+        if analysis.standards.leave_one_expert_out is not None:
+            csv["leave_one_expert_out.csv"] = analysis.standards.leave_one_expert_out
+    if analysis.reliability is not None:
+        csv["test_retest.csv"] = analysis.reliability.test_retest
+        for name, table in analysis.reliability.raters.items():
+            csv[f"inter_rater_{name.lower()}.csv"] = table
     if analysis.validity.composite is not None:
         csv["composite_scores.csv"] = analysis.validity.composite.scores
         csv["composite_weights.csv"] = analysis.validity.composite.weights.rename_axis("metric").reset_index()
@@ -439,7 +589,30 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     curves = analysis.learning_curves
 
     generated = generated_line()
+    standards = standards_tables(analysis)
+    retest, consistency, raters = reliability_tables(analysis)
     context = {
+        "standards": (
+            {
+                "notes": analysis.standards.notes,
+                "rule": analysis.settings.benchmark_rule,
+                "marks": _html_table(standards["marks"]),
+                "loo": _html_table(standards["loo"]),
+                "rules": _html_table(standards["rules"]),
+            }
+            if standards
+            else None
+        ),
+        "reliability": (
+            {
+                "notes": analysis.reliability.notes,
+                "retest": _html_table(retest),
+                "consistency": consistency,
+                "raters": [(name, _html_table(table)) for name, table in raters],
+            }
+            if analysis.reliability is not None
+            else None
+        ),
         "title": title,
         "generated": generated,
         "synthetic": analysis.synthetic,
@@ -488,6 +661,17 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         lines += ["## Concurrent validity", "", *[f"- {n}" for n in concurrent.notes], ""]
         lines += [_markdown_table(concurrent.table), ""]
     lines += ["## Proficiency benchmarks", "", _markdown_table(analysis.benchmarks), ""]
+    if standards:
+        lines += ["## Standard setting: how often each pass mark misjudges", ""]
+        lines += [*[f"- {n}" for n in analysis.standards.notes], "", _markdown_table(standards["marks"]), ""]
+        lines += [f"### Leaving one expert out (rule '{analysis.settings.benchmark_rule}')", ""]
+        lines += [_markdown_table(standards["loo"]), "", "### What each rule does to the course", ""]
+        lines += [_markdown_table(standards["rules"]), ""]
+    if analysis.reliability is not None:
+        lines += ["## Reliability", "", *[f"- {n}" for n in analysis.reliability.notes], ""]
+        lines += ["### Test-retest (benchmarked metrics)", "", _markdown_table(retest), "", consistency, ""]
+        for name, table in raters:
+            lines += [f"### Inter-rater agreement: {name}", "", _markdown_table(table), ""]
     lines += ["## Trainees", "", _markdown_table(trainees), ""]
     lines += [f"![learning curve]({p})" for p in learning] + [""]
     lines += ["## Learning-curve fits", "", _markdown_table(_curves_for_reading(curves)), ""]

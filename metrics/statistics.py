@@ -323,3 +323,41 @@ def bootstrap_auc(
             aucs[b] = (ranks[: x.size].sum() - x.size * (x.size + 1) / 2) / (x.size * y.size)
     low, high = np.quantile(aucs, [tail, 1.0 - tail])
     return float(low), float(high)
+
+
+def wilson_interval(successes: int, total: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson's score interval of a proportion (nan, nan without trials)."""
+    if total == 0:
+        return math.nan, math.nan
+    z = float(stats.norm.ppf(0.5 + confidence / 2))
+    p = successes / total
+    centre = (p + z * z / (2 * total)) / (1 + z * z / total)
+    half = z * math.sqrt(p * (1 - p) / total + z * z / (4 * total * total)) / (1 + z * z / total)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def contrasting_groups_mark(skilled: ArrayLike, unskilled: ArrayLike) -> float:
+    """The contrasting-groups pass mark (Livingston & Zieky 1982; in simulation e.g. Jørgensen et al.
+    2018, Adv Simul 3:5): where the normal fits of the two groups' values cross, between their
+    means (nan when either group has fewer than 2 values or the means coincide). Equal spreads:
+    the midpoint of the means."""
+    a, b = np.asarray(skilled, dtype=np.float64), np.asarray(unskilled, dtype=np.float64)
+    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+    if len(a) < 2 or len(b) < 2:
+        return math.nan
+    m1, m2 = float(a.mean()), float(b.mean())
+    s1, s2 = float(a.std(ddof=1)), float(b.std(ddof=1))
+    if m1 == m2:
+        return math.nan
+    low, high = min(m1, m2), max(m1, m2)
+    if s1 <= 0 or s2 <= 0 or math.isclose(s1, s2, rel_tol=1e-9):
+        return 0.5 * (m1 + m2)
+    # log N(x; m1, s1) = log N(x; m2, s2):  a x^2 + b x + c = 0
+    qa = 1 / (2 * s2**2) - 1 / (2 * s1**2)
+    qb = m1 / s1**2 - m2 / s2**2
+    qc = m2**2 / (2 * s2**2) - m1**2 / (2 * s1**2) + math.log(s2 / s1)
+    roots = np.roots([qa, qb, qc])
+    between = [float(r.real) for r in roots if abs(r.imag) < 1e-12 and low <= r.real <= high]
+    if not between:
+        return 0.5 * (m1 + m2)
+    return min(between, key=lambda r: abs(r - 0.5 * (m1 + m2)))

@@ -1,4 +1,5 @@
-"""A whole study's analysis: construct validity, benchmarks, proficiency, learning curves, retention.
+"""A whole study's analysis: construct validity, benchmarks, proficiency, learning curves, retention,
+reliability and standard setting (:mod:`metrics.evidence`).
 
 Input is the per-session metrics table (``compute_session_metrics``) with the
 columns ``participant_id``, a group label, ``trial`` (1-based order of a
@@ -8,16 +9,18 @@ participant's sessions) and optionally ``phase`` (``"practice"`` or ``"retention
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from metrics.concurrent import ConcurrentValidityResult, concurrent_validity
+from metrics.evidence import Reliability, StandardSetting, reliability_evidence, standard_setting
 from metrics.learning import cusum, fit_learning_curve, retention
-from metrics.proficiency import assess_proficiency, proficiency_benchmarks, trials_to_proficiency
+from metrics.proficiency import assess_proficiency, proficiency_benchmarks
 from metrics.registry import REGISTRY
+from metrics.standards import non_compensatory_passes, progression_reached
 from metrics.streams import MetricsError
 from metrics.validity import ConstructValidityResult, construct_validity
 
@@ -35,6 +38,8 @@ class StudySettings:
     benchmark_rule: str = "mean"
     benchmark_metrics: tuple[str, ...] | None = None  # default: the discriminating metrics
     consecutive_passes: int = 2
+    progression_window: int | None = None  # N of the last M sessions (M); None: N in a row
+    non_compensatory: bool = False  # safety events (metrics.standards.SAFETY_METRICS) fail a session
     retention_baseline: int = (
         2  # retention: the last delayed session against the mean of this many last practice ones
     )
@@ -60,6 +65,8 @@ class StudyAnalysis:
     synthetic: bool = False
     notes: list[str] = field(default_factory=list)
     concurrent: ConcurrentValidityResult | None = None
+    reliability: Reliability | None = None
+    standards: StandardSetting | None = None
 
 
 def practice_mask(table: pd.DataFrame) -> pd.Series:
@@ -87,9 +94,23 @@ def sessions_of_task(table: pd.DataFrame, task: str | None) -> pd.DataFrame:
     return table[table["task"] == task].reset_index(drop=True)
 
 
-def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) -> StudyAnalysis:
-    """Everything the study report shows, from one table of per-session metrics."""
+def session_judge(settings: StudySettings) -> Callable[[pd.DataFrame, pd.DataFrame], pd.DataFrame]:
+    """How a session is judged against the benchmarks: every benchmarked metric (compensation
+    impossible either way), plus, in non-compensatory mode, no safety event."""
+    return non_compensatory_passes if settings.non_compensatory else assess_proficiency
+
+
+def analyse_study(
+    table: pd.DataFrame, settings: StudySettings | None = None, ratings: pd.DataFrame | None = None
+) -> StudyAnalysis:
+    """Everything the study report shows, from one table of per-session metrics (and the study's
+    ratings, long: session_id, rater, instrument, item, score)."""
     settings = settings or StudySettings()
+    if settings.progression_window is not None and settings.progression_window < settings.consecutive_passes:
+        raise MetricsError(
+            f"progression window {settings.progression_window} is shorter than the "
+            f"{settings.consecutive_passes} passes it must hold"
+        )
     if "trial" not in table.columns:
         raise MetricsError(
             "the sessions table needs a 'trial' column (1-based order of each participant's sessions)"
@@ -129,7 +150,8 @@ def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) ->
         settings.cluster_col,
         settings.benchmark_rule,
     )
-    proficiency = assess_proficiency(table, benchmarks)
+    judge = session_judge(settings)
+    proficiency = judge(table, benchmarks)
     proficiency.insert(0, "session_id", table["session_id"])
     trainees, curves = _per_trainee(table, practice, proficiency, benchmarks, settings)
     synthetic = (
@@ -149,8 +171,36 @@ def analyse_study(table: pd.DataFrame, settings: StudySettings | None = None) ->
                 settings.n_boot,
                 settings.seed,
             )
+    in_practice = table[practice]
+    if ratings is not None and "session_id" in ratings.columns:
+        ratings = ratings[ratings["session_id"].isin(set(table["session_id"]))]
+    reliability = reliability_evidence(
+        in_practice, validity.table["metric"].tolist(), chosen, settings.cluster_col, ratings
+    )
+    standards = standard_setting(
+        in_practice,
+        chosen,
+        settings.benchmark_rule,
+        settings.group_col,
+        settings.skilled_group,
+        settings.cluster_col,
+        settings.consecutive_passes,
+        settings.progression_window,
+        judge,
+    )
     return StudyAnalysis(
-        settings, table, validity, benchmarks, proficiency, trainees, curves, synthetic, notes, concurrent
+        settings,
+        table,
+        validity,
+        benchmarks,
+        proficiency,
+        trainees,
+        curves,
+        synthetic,
+        notes,
+        concurrent,
+        reliability,
+        standards,
     )
 
 
@@ -161,7 +211,7 @@ def _per_trainee(table, practice, proficiency, benchmarks, settings):
         in_practice = rows_of[practice.loc[rows_of.index]]
         delayed = rows_of[~practice.loc[rows_of.index]]
         passed = proficiency.loc[in_practice.index, "passed"].to_numpy(dtype=bool)
-        reached = trials_to_proficiency(passed, settings.consecutive_passes)
+        reached = progression_reached(passed, settings.consecutive_passes, settings.progression_window)
         chart = cusum(~passed, settings.cusum_p0, settings.cusum_p1)
         record = {
             "participant_id": participant,

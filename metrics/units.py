@@ -46,3 +46,13 @@ def shown(value: float | None, unit: str, digits: int = 3) -> str:
     text = f"{converted:.{digits}g}"
     label = display_unit(unit)
     return f"{text} {label}" if label else text
+
+
+def interval_text(value: float, low: float, high: float, reading: str = "") -> str:
+    """ "0.82 (0.55 to 0.94), good": an estimate with its interval as a person reads it."""
+    if not math.isfinite(value):
+        return "not estimable"
+    text = f"{value:.2f}"
+    if math.isfinite(low) and math.isfinite(high):
+        text += f" ({low:.2f} to {high:.2f})"
+    return f"{text}, {reading}" if reading else text

@@ -33,6 +33,8 @@ DECLARABLE = (
     "benchmark_rule",
     "benchmark_metrics",
     "consecutive_passes",
+    "progression_window",
+    "non_compensatory",
     "retention_baseline",
     "rating_col",
     "learning_model",
@@ -75,6 +77,16 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise CatalogError(f"{what}: {name} must be a whole number >= 1; got {value!r}")
             values[name] = value
+        elif name == "progression_window":
+            if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
+                raise CatalogError(
+                    f"{what}: progression_window must be a whole number >= 1 or null; got {value!r}"
+                )
+            values[name] = value
+        elif name == "non_compensatory":
+            if not isinstance(value, bool):
+                raise CatalogError(f"{what}: non_compensatory must be true or false; got {value!r}")
+            values[name] = value
         elif name in ("rating_col", "task"):
             if value is not None and (not isinstance(value, str) or not value):
                 raise CatalogError(f"{what}: {name} must be a name or null; got {value!r}")
@@ -100,6 +112,11 @@ def _check(settings: StudySettings, what: str) -> None:
         raise CatalogError(f"{what}: groups must name two different groups; got {list(settings.groups)!r}")
     if settings.skilled_group not in settings.groups:
         raise CatalogError(f"{what}: skilled_group {settings.skilled_group!r} is not one of the groups")
+    if settings.progression_window is not None and settings.progression_window < settings.consecutive_passes:
+        raise CatalogError(
+            f"{what}: progression_window ({settings.progression_window}) must be at least consecutive_passes "
+            f"({settings.consecutive_passes}): N passes among the last M sessions"
+        )
     if settings.level not in ("participant", "trial"):
         raise CatalogError(f"{what}: level must be 'participant' or 'trial'; got {settings.level!r}")
     try:
@@ -206,7 +223,9 @@ def analyse_catalog_study(
             if getattr(settings, k) != getattr(merged, k)
         }
         settings = merged
-    analysis = analyse_study(table, settings)
+    from sessions.ratings import study_ratings
+
+    analysis = analyse_study(table, settings, study_ratings(catalog, study_name))
     stale = stale_sessions(catalog, study_name)
     if stale:
         analysis.notes.insert(
@@ -230,8 +249,9 @@ def analyse_catalog_study(
     if len(tasks) > 1:
         others = ", ".join(t for t in tasks if t != settings.task)
         analysis.notes.insert(
-            1, f"Task: {settings.task} (trials count per task); the study's other task(s), {others}, "
-            "are analysed on their own (--task)."
+            1,
+            f"Task: {settings.task} (trials count per task); the study's other task(s), {others}, "
+            "are analysed on their own (--task).",
         )
     if overridden:
         analysis.notes.insert(

@@ -9,11 +9,13 @@ script (:mod:`dashboard.cli`), so this package never imports the web stack.
 from __future__ import annotations
 
 from sessions.cli import (
+    benchmark,
     demo,
     devices,
     exchange,
     imports,
     participants,
+    ratings,
     recorded,
     recovery,
     replay,
@@ -37,6 +39,7 @@ for command in (
     replay.replay,
     studies.studies,
     participants.participants,
+    ratings.ratings,
     tasks.tasks,
     tissue.indentation,
     devices.devices,
@@ -48,5 +51,6 @@ for command in (
     imports.import_video,
     imports.import_jigsaws,
     users.users,
+    benchmark.benchmark,
 ):
     main.add_command(command)

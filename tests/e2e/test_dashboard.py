@@ -176,3 +176,63 @@ def test_trainee_cannot_reach_another_trainees_session(demo_site):
         assert page.goto(f"{base}/sessions/{own}").status == 200
         page.click("#sign-out")
         page.wait_for_url(f"{base}/login")
+
+
+@pytest.mark.slow
+def test_a_blinded_rater_rates_a_session_without_learning_whose_it_is(demo_site):
+    """The study's rating queue and form show neither participant, group, trial nor session id (in the
+    text, the page source or the video's address); the stored rating names the signed-in rater; a
+    second rating of the same session is refused unless it replaces the first; a trainee cannot rate."""
+    base, ids, own, other = demo_site
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1366, "height": 900})
+        failures = []
+        page.on("pageerror", lambda error: failures.append(str(error)))
+        _sign_in(page, base, "supervisor")
+        page.goto(f"{base}/studies/{ids['study']}")
+        page.click("#rating-queue")
+        page.wait_for_load_state("networkidle")
+        hidden = (own, other, "T01", "T02", "E01", "E02", "trainee", "expert")
+        queue = page.content()
+        assert not any(word in queue for word in hidden), [w for w in hidden if w in queue]
+        assert "0 of" in page.inner_text("main")
+        page.locator("#queue a").first.click()
+        page.wait_for_load_state("networkidle")
+        form_page = page.content()
+        assert not any(word in form_page for word in hidden), [w for w in hidden if w in form_page]
+        assert page.locator("#rating-form fieldset").count() == 6  # GRS: six items
+        for fieldset in page.locator("#rating-form fieldset").all():
+            fieldset.locator("input[value='4']").check()
+        blinded_address = page.url
+        page.click("#submit-rating")
+        page.wait_for_load_state("networkidle")
+        assert "Rating stored." in page.inner_text("main") and "1 of" in page.inner_text("main")
+        page.goto(blinded_address)  # the same session again
+        for fieldset in page.locator("#rating-form fieldset").all():
+            fieldset.locator("input[value='2']").check()
+        page.click("#submit-rating")
+        page.wait_for_load_state("networkidle")
+        assert "already rated" in page.inner_text("#rating-error")
+        page.check("input[name=replace]")
+        for fieldset in page.locator("#rating-form fieldset").all():
+            fieldset.locator("input[value='2']").check()
+        page.click("#submit-rating")
+        page.wait_for_load_state("networkidle")
+        assert "Rating stored." in page.inner_text("main")
+        assert page.goto(f"{base}/rate/{'0' * 24}").status == 404
+        assert not failures, failures
+        trainee = browser.new_page()
+        _sign_in(trainee, base, "trainee")
+        assert trainee.goto(f"{base}/studies/{ids['study']}/rate").status == 403
+        assert trainee.goto(blinded_address).status == 403
+    # the first session of the queue may be any of the study's; a rating of it was stored by the rater
+    from sessions.catalog import Catalog
+    from sessions.models import Rating
+
+    catalog = Catalog(ids["url"])
+    with catalog.session() as orm:
+        stored = orm.execute(
+            select(Rating.rater, Rating.item, Rating.score).where(Rating.item == "total")
+        ).all()
+    catalog.close()
+    assert stored == [("supervisor", "total", 12.0)]  # replaced: six items of 2

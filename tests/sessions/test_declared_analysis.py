@@ -228,7 +228,7 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
     _cli(home, "score", "--study", DEMO_STUDY)
     listed = json.loads(_cli(home, "sessions", "list", "--json").stdout)
     assert all(r["metrics"] == "current" for r in listed), listed
-    assert REGISTRY_VERSION == "6"
+    assert REGISTRY_VERSION == "7"
     catalog.close()
 
 
