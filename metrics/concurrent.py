@@ -41,8 +41,10 @@ class ConcurrentValidityResult:
 
 
 def _ranked(values: np.ndarray) -> np.ndarray:
+    """Centred ranks of unit length (NaN for a constant column, which has no rank order)."""
     ranks = stats.rankdata(values)
-    return (ranks - ranks.mean()) / np.sqrt(np.sum((ranks - ranks.mean()) ** 2))
+    spread = np.sqrt(np.sum((ranks - ranks.mean()) ** 2))
+    return (ranks - ranks.mean()) / spread if spread > 0 else np.full(len(ranks), math.nan)
 
 
 def permutation_spearman(x: Sequence[float], y: Sequence[float], seed: int = 0) -> tuple[float, float]:

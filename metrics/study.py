@@ -24,6 +24,10 @@ from metrics.standards import non_compensatory_passes, progression_reached
 from metrics.streams import MetricsError
 from metrics.validity import ConstructValidityResult, construct_validity
 
+RATING_COLUMNS = ("grs_total", "osats_total")
+"""Rating totals the catalog adds to a study's table (sessions.runner): concurrent validity uses the
+first present when the analysis declares no rating column."""
+
 
 @dataclass(frozen=True)
 class StudySettings:
@@ -158,13 +162,22 @@ def analyse_study(
         bool(table["synthetic"].fillna(False).astype(bool).any()) if "synthetic" in table.columns else False
     )
     concurrent = None
-    if settings.rating_col is not None:
-        if settings.rating_col not in table.columns or table[settings.rating_col].notna().sum() == 0:
-            notes.append(f"No concurrent validity: no session has a value in '{settings.rating_col}'.")
+    rating_col = settings.rating_col
+    if rating_col is None:  # ratings in the table (the catalog's GRS/OSATS totals): use them, and say so
+        found = [c for c in RATING_COLUMNS if c in table.columns and table.loc[practice, c].notna().any()]
+        if found:
+            rating_col = found[0]
+            notes.append(
+                f"Concurrent validity against '{rating_col}' (each session's total, mean over its raters), "
+                "the study's ratings; no rating column was declared."
+            )
+    if rating_col is not None:
+        if rating_col not in table.columns or table[rating_col].notna().sum() == 0:
+            notes.append(f"No concurrent validity: no session has a value in '{rating_col}'.")
         else:
             concurrent = concurrent_validity(
                 table[practice],
-                settings.rating_col,
+                rating_col,
                 settings.cluster_col,
                 validity.table["metric"].tolist(),
                 settings.alpha,

@@ -21,6 +21,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from sqlalchemy import select
 
 from metrics.report import write_report
@@ -70,6 +71,7 @@ class DemoSize:
     practice_sessions: int = 5
     retention: bool = True
     closures: bool = True  # each participant closes the arteriotomy once, after practice
+    ratings: bool = True  # two synthetic raters score every session with the GRS
 
     @property
     def sessions(self) -> int:
@@ -87,6 +89,44 @@ class DemoResult:
     sessions: int
     final: StudyAnalysis | None = None  # the final task's analysis (None without closures)
     final_report: Path | None = None
+
+
+SYNTHETIC_RATERS = (("synthetic rater A", 0.0), ("synthetic rater B", -0.4))
+"""The demo's raters and their leniency (B scores 0.4 points lower on every item): synthetic, and named so."""
+
+
+def synthetic_ratings(catalog: Catalog, runs: list, seed: int) -> int:
+    """Each session scored with the GRS by the two synthetic raters: every item is the session's
+    motion skill on the 1-5 scale (1 + 4 x skill) plus the rater's leniency and the rater's own noise
+    (SD 0.6 per item), rounded and kept within 1-5. Stored as any rating is (checked against the
+    instrument); returns how many ratings."""
+    from metrics.instruments import GRS
+    from sessions.models import Participant, Session, Study, Task
+    from sessions.ratings import checked_rating, store_ratings
+
+    with catalog.session() as orm:
+        rows = orm.execute(
+            select(Session.uid, Participant.code, Task.name, Session.trial, Session.phase)
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(Study, Participant.study_id == Study.id)
+            .join(Task, Session.task_id == Task.id)
+            .where(Study.name == DEMO_STUDY)
+        ).all()
+    uids = {(code, task, trial, phase): uid for uid, code, task, trial, phase in rows}
+    rng = np.random.default_rng(seed)
+    ratings = []
+    for plan, skills, _ in runs:
+        uid = uids.get((plan.participant, plan.task, plan.trial, plan.phase))
+        if uid is None:
+            continue
+        for rater, leniency in SYNTHETIC_RATERS:
+            level = 1.0 + 4.0 * skills[0] + leniency
+            scores = {
+                item: int(np.clip(round(level + rng.normal(0.0, 0.6)), GRS.low, GRS.high))
+                for item in GRS.item_names
+            }
+            ratings.append(checked_rating(uid, rater, GRS.name, scores))
+    return store_ratings(catalog, ratings)
 
 
 def _reset_study(catalog: Catalog, name: str) -> None:
@@ -187,6 +227,8 @@ def run_demo(
     for plan in _run_all(catalog, home, runs, workers):
         if advance is not None:
             advance(f"{plan.participant} {plan.task} trial {plan.trial} ({plan.phase})")
+    if size.ratings:
+        synthetic_ratings(catalog, runs, seed)
     declare_analysis(
         catalog, DEMO_STUDY, DEMO_ANALYSIS, author="vascsim demo", note="declared before the data"
     )

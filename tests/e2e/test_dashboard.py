@@ -232,7 +232,9 @@ def test_a_blinded_rater_rates_a_session_without_learning_whose_it_is(demo_site)
     catalog = Catalog(ids["url"])
     with catalog.session() as orm:
         stored = orm.execute(
-            select(Rating.rater, Rating.item, Rating.score).where(Rating.item == "total")
+            select(Rating.rater, Rating.item, Rating.score).where(
+                Rating.item == "total", Rating.rater == "supervisor"
+            )
         ).all()
     catalog.close()
     assert stored == [("supervisor", "total", 12.0)]  # replaced: six items of 2

@@ -10,7 +10,7 @@ import re
 import pytest
 from click.testing import CliRunner
 from fastapi.testclient import TestClient
-from sqlalchemy import select
+from sqlalchemy import delete, func, select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
@@ -25,7 +25,7 @@ from sessions.analysis import (
 from sessions.catalog import Catalog, CatalogError
 from sessions.cli import main
 from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY, DemoSize, run_demo
-from sessions.models import Participant, Study
+from sessions.models import Participant, Session, Study
 from tests.dashboard.conftest import sign_in
 
 PASSWORD = "correct horse battery"
@@ -59,6 +59,30 @@ def test_the_demo_declares_its_analysis(demo):
     catalog, _ = demo
     settings, version, author = declared_settings(catalog, DEMO_STUDY)
     assert version == 1 and author == "vascsim demo" and settings == DEMO_ANALYSIS
+
+
+def test_the_demo_rates_every_session_with_two_synthetic_raters_and_reports_every_strand(demo):
+    """Two synthetic raters (named so) score every demo session with the GRS; the analysis every
+    front-end uses then carries inter-rater agreement, concurrent validity against the GRS total,
+    test-retest and standard setting."""
+    from sessions.models import Rating
+    from sessions.ratings import study_ratings
+
+    catalog, _ = demo
+    ratings = study_ratings(catalog, DEMO_STUDY)
+    totals = ratings[ratings["item"] == "total"]
+    with catalog.session() as orm:
+        sessions = orm.scalar(select(func.count(Session.id)))
+        assert orm.scalar(select(func.count(Rating.id))) == sessions * 2 * 7  # six items and the total
+    assert set(totals["rater"]) == {"synthetic rater A", "synthetic rater B"}
+    assert totals.groupby("session_id")["rater"].nunique().eq(2).all() and len(totals) == 2 * sessions
+    analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    agreement = analysis.reliability.raters["GRS"].set_index("item")
+    assert agreement.loc["total", "block_raters"] == 2 and agreement.loc["total", "icc21"] > 0.5
+    assert analysis.concurrent is not None and analysis.concurrent.rating_col == "grs_total"
+    assert set(analysis.standards.misclassification["rule"]) >= {"contrasting", "mean+sd:2"}
+    assert len(analysis.standards.leave_one_expert_out) == 3  # one row per expert
+    assert analysis.reliability.test_retest["participants"].max() == 6
 
 
 def test_cli_report_api_and_pages_agree_on_benchmarks_and_every_pass(demo):
@@ -241,6 +265,7 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
 
     catalog, home = demo
     with catalog.session() as orm:
+        orm.execute(delete(Rating))  # the demo's synthetic raters: this test rates on its own
         rows = orm.execute(
             select(Session.id, Participant.group_label)
             .join(Participant, Session.participant_id == Participant.id)
