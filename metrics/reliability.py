@@ -160,48 +160,68 @@ def _iccs(x: NDArray[np.float64], confidence: float) -> dict[str, Icc]:
 
 
 # -- Krippendorff's alpha ---------------------------------------------------------------------------------
-def _coincidences(data: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(values, o): the distinct values and the coincidence matrix of a raters x units table."""
+def _unit_counts(data: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(values, counts): the distinct values and, per unit of a raters x units table, how many raters
+    gave each value ((units, values); units with fewer than two values dropped: they say nothing
+    about agreement)."""
     values = np.unique(data[np.isfinite(data)])
-    o = np.zeros((len(values), len(values)))
-    for unit in data.T:
-        present = unit[np.isfinite(unit)]
-        m = len(present)
-        if m < 2:
-            continue  # a unit one rater saw says nothing about agreement
-        counts = np.bincount(np.searchsorted(values, present), minlength=len(values)).astype(np.float64)
-        o += (np.outer(counts, counts) - np.diag(counts)) / (m - 1)
-    return values, o
+    present = np.isfinite(data)
+    index = np.searchsorted(values, np.where(present, data, values[0] if len(values) else 0.0))
+    counts = np.zeros((data.shape[1], len(values)))
+    units = np.broadcast_to(np.arange(data.shape[1]), data.shape)
+    np.add.at(counts, (units[present], index[present]), 1.0)
+    return values, counts[counts.sum(axis=1) >= 2]
+
+
+def _coincidence_matrices(counts: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(draws, V, V) coincidence matrices of (draws, units, V) count tables:
+    o[c, k] = sum over units of n_uc (n_uk - [c == k]) / (m_u - 1)."""
+    weighted = counts / (counts.sum(axis=2, keepdims=True) - 1.0)
+    o = np.einsum("buc,buk->bck", counts, weighted)
+    diagonal = np.arange(counts.shape[2])
+    o[:, diagonal, diagonal] -= weighted.sum(axis=1)
+    return o
 
 
 def _distances(values: NDArray[np.float64], totals: NDArray[np.float64], level: str) -> NDArray[np.float64]:
-    """delta^2 between every pair of values at the measurement ``level``."""
-    c, k = np.meshgrid(values, values, indexing="ij")
+    """(draws, V, V) delta^2 between every pair of values at the measurement ``level`` (``totals``:
+    (draws, V) marginal counts, which the ordinal distance depends on)."""
+    c, k = values[:, None], values[None, :]
     if level == "nominal":
-        return (c != k).astype(np.float64)
-    if level == "interval":
-        return (c - k) ** 2
-    if level == "ratio":
+        fixed = (c != k).astype(np.float64)
+    elif level == "interval":
+        fixed = (c - k) ** 2
+    elif level == "ratio":
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.nan_to_num(((c - k) / (c + k)) ** 2)
-    # ordinal: the values' ranks through the marginal counts between them
-    cumulative = np.concatenate([[0.0], np.cumsum(totals)])
-    i, j = np.meshgrid(np.arange(len(values)), np.arange(len(values)), indexing="ij")
-    low, high = np.minimum(i, j), np.maximum(i, j)
-    between = cumulative[high + 1] - cumulative[low]
-    return (between - (totals[i] + totals[j]) / 2) ** 2
+            fixed = np.nan_to_num(((c - k) / (c + k)) ** 2)
+    else:  # ordinal: the values' ranks through the marginal counts between them
+        cumulative = np.concatenate([np.zeros((len(totals), 1)), np.cumsum(totals, axis=1)], axis=1)
+        i, j = np.indices((len(values), len(values)))
+        low, high = np.minimum(i, j), np.maximum(i, j)
+        between = cumulative[:, high + 1] - cumulative[:, low]
+        return (between - (totals[:, i] + totals[:, j]) / 2) ** 2
+    return np.broadcast_to(fixed, (len(totals), *fixed.shape))
 
 
-def _alpha_of(data: NDArray[np.float64], level: str) -> float:
-    values, o = _coincidences(data)
-    totals = o.sum(axis=1)
-    n = totals.sum()
-    if n <= 1 or len(values) < 2:
-        return math.nan  # no pairable values, or everyone used one value: alpha undefined
+def _alphas(values: NDArray[np.float64], counts: NDArray[np.float64], level: str) -> NDArray[np.float64]:
+    """Krippendorff's alpha of each of a batch of (units, V) count tables ((draws,); nan where
+    undefined: no pairable values, or everyone used one value)."""
+    o = _coincidence_matrices(counts)
+    totals = o.sum(axis=2)
+    n = totals.sum(axis=1)
     delta = _distances(values, totals, level)
-    observed = float(np.sum(o * delta))
-    expected = float(np.sum(np.outer(totals, totals) * delta)) / (n - 1)
-    return 1.0 - observed / expected if expected > 0 else math.nan
+    observed = np.einsum("bck,bck->b", o, delta)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        expected = np.einsum("bc,bk,bck->b", totals, totals, delta) / (n - 1)
+        alpha = 1.0 - observed / expected
+    defined = (n > 1) & (np.count_nonzero(totals, axis=1) >= 2) & (expected > 0)
+    return np.where(defined, alpha, math.nan)
+
+
+def _alpha_of(values: NDArray[np.float64], counts: NDArray[np.float64], level: str) -> float:
+    if len(counts) == 0 or len(values) == 0:
+        return math.nan
+    return float(_alphas(values, counts[None], level)[0])
 
 
 @dataclass(frozen=True)
@@ -237,21 +257,18 @@ def krippendorff_alpha(
     data = np.asarray(reliability_data, dtype=np.float64)
     if data.ndim != 2:
         raise MetricsError(f"Krippendorff's alpha needs a raters x units table; got {data.ndim} dimension(s)")
-    pairable = np.isfinite(data).sum(axis=0) >= 2
-    value = _alpha_of(data, level)
+    values, counts = _unit_counts(data)
+    value = _alpha_of(values, counts, level)
     low = high = math.nan
-    if resamples and math.isfinite(value) and pairable.sum() >= 2:
+    if resamples and math.isfinite(value) and len(counts) >= 2:
         rng = np.random.default_rng(seed)
-        kept = data[:, pairable]
-        draws = [
-            _alpha_of(kept[:, rng.integers(0, kept.shape[1], kept.shape[1])], level) for _ in range(resamples)
-        ]
-        finite = np.array([d for d in draws if math.isfinite(d)])
+        draws = _alphas(values, counts[rng.integers(0, len(counts), (resamples, len(counts)))], level)
+        finite = draws[np.isfinite(draws)]
         if len(finite):
             tail = (1 - confidence) / 2
             low, high = (float(x) for x in np.quantile(finite, [tail, 1 - tail]))
     raters = int(np.any(np.isfinite(data), axis=1).sum())
-    return KrippendorffAlpha(level, value, low, high, int(pairable.sum()), raters)
+    return KrippendorffAlpha(level, value, low, high, len(counts), raters)
 
 
 # -- internal consistency -----------------------------------------------------------------------------------
