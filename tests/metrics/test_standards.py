@@ -1,6 +1,7 @@
 """Standard setting: pass-mark rules, contrasting groups, out-of-sample misclassification, the
 Luursema sensitivity and MScore-style non-compensatory progression, on hand-worked cases."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -168,3 +169,48 @@ def test_a_participant_no_mark_can_be_set_for_is_not_counted_as_passing_or_faili
     )
     assert result.skilled == 0 and math.isnan(result.false_fail)
     assert result.unskilled == 3 and result.false_pass == 0.0
+
+
+def test_a_declared_non_compensatory_study_fails_sessions_with_never_events_and_counts_n_of_m():
+    """analyse_study with non_compensatory: T1's third and fourth sessions beat the benchmark but the
+    third caught the back wall, so T1 is not proficient by two in a row; with "2 of the last 3" T1
+    is proficient at session 4 (sessions 2 and 4 pass)."""
+    from metrics.study import StudySettings, analyse_study
+
+    rows = []
+    for name, times in (("E1", [10, 10]), ("E2", [11, 11]), ("E3", [12, 12])):
+        for k, t in enumerate(times):
+            rows.append({"participant_id": name, "label": "expert", "trial": k + 1, "task_time": t})
+    for k, (t, caught) in enumerate([(30, 0), (10, 0), (10, 1), (10, 0)]):
+        rows.append(
+            {
+                "participant_id": "T1",
+                "label": "trainee",
+                "trial": k + 1,
+                "task_time": t,
+                "back_wall_catches": caught,
+            }
+        )
+    for k, t in enumerate([30, 25, 20, 18]):
+        rows.append(
+            {
+                "participant_id": "T2",
+                "label": "trainee",
+                "trial": k + 1,
+                "task_time": t,
+                "back_wall_catches": 0,
+            }
+        )
+    table = pd.DataFrame(rows).assign(session_id=lambda t: [f"s{k}" for k in range(len(t))])
+    base = StudySettings(metrics=("task_time",), benchmark_metrics=("task_time",), n_boot=50)
+    compensatory = analyse_study(table, base)
+    strict = analyse_study(table, dataclasses.replace(base, non_compensatory=True))
+    windowed = analyse_study(table, dataclasses.replace(base, non_compensatory=True, progression_window=3))
+    t1 = table.index[table.participant_id == "T1"]
+    assert strict.proficiency.loc[t1, "passed"].tolist() == [False, True, False, True]
+    assert compensatory.proficiency.loc[t1, "passed"].tolist() == [False, True, True, True]
+    reached = {name: a.trainees.set_index("participant_id").loc["T1", "trials_to_proficiency"] for name, a in
+               (("compensatory", compensatory), ("strict", strict), ("windowed", windowed))}  # fmt: skip
+    assert reached["compensatory"] == 3 and pd.isna(reached["strict"]) and reached["windowed"] == 4
+    with pytest.raises(MetricsError, match="progression window"):
+        analyse_study(table, dataclasses.replace(base, progression_window=1))
