@@ -15,7 +15,13 @@ from dashboard.access import owned_participant, owned_session, owned_study, sess
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
 from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.report import composite_summary, participant_medians, summary_table
+from metrics.report import (
+    composite_summary,
+    participant_medians,
+    reliability_tables,
+    standards_tables,
+    summary_table,
+)
 from metrics.study import practice_mask
 from sessions.catalog import Catalog
 from sessions.models import Annotation, Participant, Session, Study, Task, User
@@ -280,7 +286,19 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         for metric in metrics
     }
     practice = analysis.sessions[practice_mask(analysis.sessions)]
+    retest, consistency, raters = reliability_tables(analysis)  # the report's own tables
     return {
+        "standards": {
+            "notes": analysis.standards.notes if analysis.standards else [],
+            "rule": settings.benchmark_rule,
+            "tables": {name: _shown(frame) for name, frame in standards_tables(analysis).items()},
+        },
+        "reliability": {
+            "notes": analysis.reliability.notes if analysis.reliability else [],
+            "retest": _shown(retest),
+            "consistency": consistency,
+            "raters": [{"instrument": name, "table": _shown(frame)} for name, frame in raters],
+        },
         "study": info,
         "groups": list(settings.groups),
         "level": analysis.validity.level,
@@ -302,6 +320,16 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         "boxes": boxes,
         "roc": [c for c in (roc_points(medians, m, skilled) for m in metrics) if c is not None],
         "registry_version": REGISTRY_VERSION,
+    }
+
+
+def _shown(frame: pd.DataFrame) -> dict:
+    """A table as the page shows it: its column names and rows of display text."""
+    from metrics.report import table_text
+
+    return {
+        "columns": [str(c) for c in frame.columns],
+        "rows": [[table_text(v) for v in row] for row in frame.itertuples(index=False)],
     }
 
 

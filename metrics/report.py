@@ -160,7 +160,7 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
     return [_save(figure, folder, "learning_curves")]
 
 
-def _fmt(value) -> str:
+def table_text(value) -> str:
     if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
         return ""
     if isinstance(value, bool | np.bool_):
@@ -173,7 +173,7 @@ def _fmt(value) -> str:
 def _markdown_table(frame: pd.DataFrame) -> str:
     header = "| " + " | ".join(map(str, frame.columns)) + " |"
     rule = "| " + " | ".join("---" for _ in frame.columns) + " |"
-    body = ["| " + " | ".join(_fmt(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    body = ["| " + " | ".join(table_text(v) for v in row) + " |" for row in frame.itertuples(index=False)]
     return "\n".join([header, rule, *body])
 
 
@@ -186,7 +186,7 @@ def _html_table(frame: pd.DataFrame) -> Markup:
     head = "".join(f"<th{a}>{html.escape(str(c))}</th>" for c, a in zip(frame.columns, align, strict=True))
     body = "".join(
         "<tr>"
-        + "".join(f"<td{a}>{html.escape(_fmt(v))}</td>" for v, a in zip(row, align, strict=True))
+        + "".join(f"<td{a}>{html.escape(table_text(v))}</td>" for v, a in zip(row, align, strict=True))
         + "</tr>"
         for row in frame.itertuples(index=False)
     )

@@ -113,6 +113,15 @@ def report(study, out, groups, level, metric_names, rule, rating, task, as_json)
                 "concurrent": None
                 if analysis.concurrent is None
                 else analysis.concurrent.table.to_dict(orient="records"),
+                "standard_setting": None
+                if analysis.standards is None
+                else analysis.standards.misclassification.to_dict(orient="records"),
+                "test_retest": None
+                if analysis.reliability is None
+                else analysis.reliability.test_retest.to_dict(orient="records"),
+                "inter_rater": {}
+                if analysis.reliability is None
+                else {k: v.to_dict(orient="records") for k, v in analysis.reliability.raters.items()},
             }
         )
         return

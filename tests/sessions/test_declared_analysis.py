@@ -120,6 +120,19 @@ def test_cli_report_api_and_pages_agree_on_benchmarks_and_every_pass(demo):
             (b["metric"], b["pass_if"].replace(">", "&gt;").replace("<", "&lt;"))
             for b in report["benchmarks"]
         ]
+        # standard setting and inter-rater agreement: the same numbers in the CLI and the dashboard
+        validity = client.get(f"/api/studies/{study_id}/validity").json()
+        marks = validity["standards"]["tables"]["marks"]
+        cli_marks = report["standard_setting"]
+        assert len(marks["rows"]) == len(cli_marks) > 0
+        column = marks["columns"].index("false fail (experts)")
+        for row, cli in zip(marks["rows"], cli_marks, strict=True):
+            assert row[column] == cli["false_fail_shown"]
+        total = next(r for r in report["inter_rater"]["GRS"] if r["item"] == "total")
+        shown_total = validity["reliability"]["raters"][0]["table"]["rows"][-1]
+        assert shown_total[0] == "total" and shown_total[3].startswith(f"{total['icc21']:.2f}")
+        page = client.get(f"/studies/{study_id}/validity").text
+        assert 'id="standard-setting"' in page and "Inter-rater agreement: GRS" in page
 
 
 def test_an_override_is_for_one_run_and_is_named(demo):
