@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Request
@@ -88,53 +89,92 @@ def _chosen(name: str | None) -> str:
         raise DashboardError(422, str(error)) from None
 
 
+@dataclass(frozen=True)
+class _Target:
+    """What a rating page is about and where it leads: blinded (by token) or open (by id)."""
+
+    uid: str
+    blind: bool
+    action: str  # where the form posts
+    back: str  # where "Back" and a stored rating lead
+    task: str
+    video: str | None  # the replay's address, or None when none is rendered
+    who: dict | None = None  # participant, group and trial (open rating only)
+
+
+def _blinded(request: Request, viewer: Viewer, token: str) -> _Target:
+    uid, study_id, task = _unblind(request, viewer, token)
+    has_video = replay_video(request.app.state.settings.home, uid) is not None
+    video = f"/rate/{token}/video" if has_video else None
+    return _Target(uid, True, f"/rate/{token}", f"/studies/{study_id}/rate", task, video)
+
+
+def _open(request: Request, viewer: Viewer, uid: str) -> _Target:
+    with request.app.state.catalog.session() as orm:
+        row = access.owned_session(orm, viewer, uid)
+        participant = orm.get(Participant, row.participant_id)
+        task = orm.get(Task, row.task_id).name
+        who = {
+            "code": participant.code,
+            "group": participant.group_label,
+            "trial": row.trial,
+            "id": participant.id,
+        }
+    has_video = replay_video(request.app.state.settings.home, uid) is not None
+    video = f"/api/sessions/{uid}/video" if has_video else None
+    return _Target(uid, False, f"/sessions/{uid}/rate", f"/sessions/{uid}", task, video, who)
+
+
 def _form_page(
     request: Request,
     viewer: Viewer,
-    *,
-    uid: str,
-    blind: bool,
-    action: str,
-    back: str,
-    task: str,
+    target: _Target,
     instrument_name: str,
-    video: str | None,
-    message: str | None = None,
-    status: int = 200,
-    who: dict | None = None,
+    problem: VascsimError | None = None,
 ) -> Response:
-    mine = [r for r in session_ratings(request.app.state.catalog, uid) if r["rater"] == viewer.username]
+    mine = [
+        r for r in session_ratings(request.app.state.catalog, target.uid) if r["rater"] == viewer.username
+    ]
     page = render(
         request,
         "rate.html",
         viewer,
-        blind=blind,
-        action=action,
-        back=back,
-        task=task,
+        blind=target.blind,
+        action=target.action,
+        back=target.back,
+        task=target.task,
         instrument=INSTRUMENTS[instrument_name],
         instruments=list(INSTRUMENTS),
-        video=video,
-        message=message,
+        video=target.video,
+        message=None if problem is None else str(problem),
         mine=[r for r in mine if r["instrument"] == instrument_name],
-        who=who,
+        who=target.who,
     )
-    page.status_code = status
+    if problem is not None:
+        page.status_code = status_of(problem)
     return page
 
 
-async def _submitted(request: Request, viewer: Viewer, uid: str, instrument_name: str) -> str | None:
-    """Store the posted rating; the error message when refused (nothing stored), else None."""
+async def _submit(
+    request: Request, viewer: Viewer, target: _Target, instrument: str | None, done: str
+) -> Response:
+    """Store the posted rating and go to ``done``; refused (nothing stored), the form again with why."""
+    chosen = _chosen(instrument)
     form = await request.form()
-    spec = INSTRUMENTS[instrument_name]
+    spec = INSTRUMENTS[chosen]
     scores = {name: form.get(name) for name in spec.item_names if form.get(name) not in (None, "")}
     try:
         add_rating(
-            request.app.state.catalog, uid, viewer.username, spec.name, scores, form.get("replace") == "yes"
+            request.app.state.catalog,
+            target.uid,
+            viewer.username,
+            spec.name,
+            scores,
+            form.get("replace") == "yes",
         )
     except VascsimError as error:
-        return str(error) if status_of(error) != 404 else "session not found"
-    return None
+        return _form_page(request, viewer, target, chosen, error)
+    return RedirectResponse(done, status_code=303)
 
 
 @router.get("/studies/{study_id}/rate", response_class=HTMLResponse)
@@ -150,44 +190,15 @@ def rating_queue(request: Request, study_id: int, viewer: Staff, rated: str | No
 
 @router.get("/rate/{token}", response_class=HTMLResponse)
 def blinded_form(request: Request, token: str, viewer: Staff, instrument: str | None = None) -> Response:
-    uid, study_id, task = _unblind(request, viewer, token)
-    has_video = replay_video(request.app.state.settings.home, uid) is not None
-    return _form_page(
-        request,
-        viewer,
-        uid=uid,
-        blind=True,
-        action=f"/rate/{token}",
-        back=f"/studies/{study_id}/rate",
-        task=task,
-        instrument_name=_chosen(instrument),
-        video=f"/rate/{token}/video" if has_video else None,
-    )
+    return _form_page(request, viewer, _blinded(request, viewer, token), _chosen(instrument))
 
 
 @router.post("/rate/{token}", response_class=HTMLResponse)
 async def blinded_submit(
     request: Request, token: str, viewer: Staff, instrument: str | None = None
 ) -> Response:
-    uid, study_id, task = _unblind(request, viewer, token)
-    chosen = _chosen(instrument)
-    problem = await _submitted(request, viewer, uid, chosen)
-    if problem is None:
-        return RedirectResponse(f"/studies/{study_id}/rate?rated=1", status_code=303)
-    has_video = replay_video(request.app.state.settings.home, uid) is not None
-    return _form_page(
-        request,
-        viewer,
-        uid=uid,
-        blind=True,
-        action=f"/rate/{token}",
-        back=f"/studies/{study_id}/rate",
-        task=task,
-        instrument_name=chosen,
-        video=f"/rate/{token}/video" if has_video else None,
-        message=problem,
-        status=400 if "already rated" not in problem else 409,
-    )
+    target = _blinded(request, viewer, token)
+    return await _submit(request, viewer, target, instrument, f"{target.back}?rated=1")
 
 
 @router.get("/rate/{token}/video")
@@ -199,57 +210,12 @@ def blinded_video(request: Request, token: str, viewer: Staff) -> FileResponse:
     return FileResponse(path, media_type="video/mp4" if path.suffix == ".mp4" else "video/webm")
 
 
-def _open_context(request: Request, viewer: Viewer, uid: str) -> tuple[str, dict]:
-    with request.app.state.catalog.session() as orm:
-        row = access.owned_session(orm, viewer, uid)
-        participant = orm.get(Participant, row.participant_id)
-        task = orm.get(Task, row.task_id)
-        who = {
-            "code": participant.code,
-            "group": participant.group_label,
-            "trial": row.trial,
-            "id": participant.id,
-        }
-        return task.name, who
-
-
 @router.get("/sessions/{uid}/rate", response_class=HTMLResponse)
 def open_form(request: Request, uid: str, viewer: Staff, instrument: str | None = None) -> Response:
-    task, who = _open_context(request, viewer, uid)
-    has_video = replay_video(request.app.state.settings.home, uid) is not None
-    return _form_page(
-        request,
-        viewer,
-        uid=uid,
-        blind=False,
-        action=f"/sessions/{uid}/rate",
-        back=f"/sessions/{uid}",
-        task=task,
-        instrument_name=_chosen(instrument),
-        video=f"/api/sessions/{uid}/video" if has_video else None,
-        who=who,
-    )
+    return _form_page(request, viewer, _open(request, viewer, uid), _chosen(instrument))
 
 
 @router.post("/sessions/{uid}/rate", response_class=HTMLResponse)
 async def open_submit(request: Request, uid: str, viewer: Staff, instrument: str | None = None) -> Response:
-    task, who = _open_context(request, viewer, uid)
-    chosen = _chosen(instrument)
-    problem = await _submitted(request, viewer, uid, chosen)
-    if problem is None:
-        return RedirectResponse(f"/sessions/{uid}", status_code=303)
-    has_video = replay_video(request.app.state.settings.home, uid) is not None
-    return _form_page(
-        request,
-        viewer,
-        uid=uid,
-        blind=False,
-        action=f"/sessions/{uid}/rate",
-        back=f"/sessions/{uid}",
-        task=task,
-        instrument_name=chosen,
-        video=f"/api/sessions/{uid}/video" if has_video else None,
-        message=problem,
-        status=400 if "already rated" not in problem else 409,
-        who=who,
-    )
+    target = _open(request, viewer, uid)
+    return await _submit(request, viewer, target, instrument, target.back)

@@ -389,3 +389,25 @@ def rater_agreement(ratings: pd.DataFrame, instrument_name: str, confidence: flo
         row["reading"] = agreement_band(float(row["icc21"]))  # type: ignore[arg-type]
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def agreement_shown(table: pd.DataFrame, compact: bool = False) -> pd.DataFrame:
+    """:func:`rater_agreement`'s table as a person reads it: each estimate with its interval (and
+    Koo & Li's reading for ICC(2,1)); ``compact`` (80 columns) leaves ICC(2,k) out."""
+    from metrics.units import interval_text
+
+    def estimates(key: str, reading: bool = False) -> list[str]:
+        readings = table["reading"] if reading else [""] * len(table)
+        columns = zip(table[key], table[f"{key}_low"], table[f"{key}_high"], readings, strict=True)
+        return [interval_text(v, lo, hi, r) for v, lo, hi, r in columns]
+
+    shown = {
+        "item": table["item"],
+        "sessions" if compact else "sessions (all raters)": table["sessions"],
+        "raters": table["block_raters"],
+        "ICC(2,1)" if compact else "ICC(2,1) (95 % CI), reading": estimates("icc21", reading=True),
+    }
+    if not compact:
+        shown["ICC(2,k) (95 % CI)"] = estimates("icc2k")
+    shown["alpha" if compact else "Krippendorff's alpha (95 % CI)"] = estimates("alpha")
+    return pd.DataFrame(shown)

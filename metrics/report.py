@@ -20,6 +20,7 @@ from sklearn.metrics import roc_curve
 from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
+from metrics.reliability import agreement_shown
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
 from metrics.units import display_unit, in_display_units, interval_text
 from metrics.validity import aggregate_by_participant
@@ -422,42 +423,7 @@ def reliability_tables(analysis: StudyAnalysis) -> tuple[pd.DataFrame, str, list
             f"{interval_text(alpha.value, alpha.ci_low, alpha.ci_high, alpha.reading)} over {alpha.items} "
             f"metrics and {alpha.subjects} participants."
         )
-    raters = []
-    for name, table in reliability.raters.items():
-        raters.append(
-            (
-                name,
-                pd.DataFrame(
-                    {
-                        "item": table["item"],
-                        "sessions (all raters)": table["sessions"],
-                        "raters": table["block_raters"],
-                        "ICC(2,1) (95 % CI), reading": [
-                            interval_text(v, lo, hi, r)
-                            for v, lo, hi, r in zip(
-                                table["icc21"],
-                                table["icc21_low"],
-                                table["icc21_high"],
-                                table["reading"],
-                                strict=True,
-                            )
-                        ],
-                        "ICC(2,k) (95 % CI)": [
-                            interval_text(v, lo, hi)
-                            for v, lo, hi in zip(
-                                table["icc2k"], table["icc2k_low"], table["icc2k_high"], strict=True
-                            )
-                        ],
-                        "Krippendorff's alpha (95 % CI)": [
-                            interval_text(v, lo, hi)
-                            for v, lo, hi in zip(
-                                table["alpha"], table["alpha_low"], table["alpha_high"], strict=True
-                            )
-                        ],
-                    }
-                ),
-            )
-        )
+    raters = [(name, agreement_shown(table)) for name, table in reliability.raters.items()]
     return retest, consistency, raters
 
 

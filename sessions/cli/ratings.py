@@ -8,8 +8,7 @@ import click
 import pandas as pd
 
 from metrics.instruments import INSTRUMENTS, instrument
-from metrics.reliability import rater_agreement
-from metrics.units import interval_text
+from metrics.reliability import agreement_shown, rater_agreement
 from sessions.catalog import CatalogError
 from sessions.cli.base import open_catalog, print_frame, print_json, user_errors
 from sessions.ratings import add_rating, import_ratings, study_ratings
@@ -119,23 +118,7 @@ def ratings_reliability(study: str, instrument_name: str, as_json: bool) -> None
     if as_json:
         print_json(table.to_dict(orient="records"))
         return
-    shown = pd.DataFrame(
-        {
-            "item": table["item"],
-            "sessions": table["sessions"],
-            "raters": table["block_raters"],
-            "ICC(2,1)": [
-                interval_text(v, lo, hi, r)
-                for v, lo, hi, r in zip(
-                    table["icc21"], table["icc21_low"], table["icc21_high"], table["reading"], strict=True
-                )
-            ],
-            "alpha": [
-                interval_text(v, lo, hi)
-                for v, lo, hi in zip(table["alpha"], table["alpha_low"], table["alpha_high"], strict=True)
-            ],
-        }
-    )
+    shown = agreement_shown(table, compact=True)
     print_frame(
         shown,
         f"{instrument(instrument_name).name} inter-rater reliability in {study}",

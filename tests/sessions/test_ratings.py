@@ -8,18 +8,10 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
+from metrics.datasets.jigsaws import GRS_ITEMS
 from metrics.reliability import intraclass_correlation
 from sessions.cli import main
 from tests.metrics.test_jigsaws import TRIALS, write_trial
-
-GRS_ITEMS = (
-    "respect_for_tissue",
-    "suture_needle_handling",
-    "time_and_motion",
-    "flow_of_operation",
-    "overall_performance",
-    "quality_of_final_product",
-)
 
 
 def invoke(*args):
