@@ -98,3 +98,49 @@ def home(tmp_path, catalog_url, monkeypatch):
     monkeypatch.setenv("VASCSIM_HOME", str(folder))
     monkeypatch.setenv("VASCSIM_DATABASE_URL", catalog_url)
     return folder
+
+
+# One reduced demo (SQLite, local files) for every test that reads a demo study: it runs once per
+# test session and each test works on its own copy, so a test that changes the catalog changes only
+# its copy. Two experts (two sessions each), three trainees (three practice sessions and a
+# retention), the interrupted stitch only: 16 sessions, enough for test-retest (five participants).
+REDUCED_DEMO_SIZE = dict(
+    experts=2, expert_sessions=2, trainees=3, practice_sessions=3, retention=True, closures=False
+)
+
+
+@pytest.fixture(scope="session")
+def demo_template(tmp_path_factory):
+    from sessions.catalog import Catalog
+    from sessions.demo import DemoSize, run_demo
+
+    home = tmp_path_factory.mktemp("demo-template")
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    result = run_demo(catalog, home, DemoSize(**REDUCED_DEMO_SIZE))
+    catalog.close()
+    return home, result
+
+
+@pytest.fixture(scope="session")
+def copy_demo(demo_template):
+    """``copy_demo(folder)`` copies the reduced demo's home (catalog, recordings, reports, cache) into
+    ``folder`` and points the catalog's session directories at the copy; returns the catalog URL."""
+    import shutil
+
+    from sqlalchemy import create_engine, text
+
+    template, _ = demo_template
+
+    def copy(folder):
+        shutil.copytree(template, folder, dirs_exist_ok=True)
+        url = f"sqlite:///{folder / 'catalog.sqlite'}"
+        engine = create_engine(url)
+        with engine.begin() as connection:
+            connection.execute(
+                text("UPDATE sessions SET directory = replace(directory, :old, :new)"),
+                {"old": str(template), "new": str(folder)},
+            )
+        engine.dispose()
+        return url
+
+    return copy

@@ -11,7 +11,7 @@ from dashboard.settings import DashboardSettings
 from metrics.replay.export import ReplaySettings, export_replay
 from sessions.accounts import create_user, link_participant
 from sessions.catalog import Catalog
-from sessions.demo import DEMO_STUDY, DemoSize, run_demo
+from sessions.demo import DEMO_STUDY
 from sessions.models import MetricResult, Participant, Session, Study
 from sessions.replaying import replay_inputs
 from tests.dashboard.conftest import running_server
@@ -21,16 +21,9 @@ PASSWORD = "browser-password"
 
 
 @pytest.fixture(scope="module")
-def demo_site(tmp_path_factory):
+def demo_site(tmp_path_factory, copy_demo):
     home = tmp_path_factory.mktemp("home")
-    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
-    run_demo(
-        catalog,
-        home,
-        DemoSize(
-            experts=2, expert_sessions=2, trainees=2, practice_sessions=2, retention=False, closures=False
-        ),
-    )
+    catalog = Catalog(copy_demo(home))
     with catalog.session() as orm:
         study = orm.scalar(select(Study).where(Study.name == DEMO_STUDY))
         people = {p.code: p for p in orm.scalars(select(Participant).where(Participant.study_id == study.id))}
@@ -79,7 +72,7 @@ def test_supervisor_reviews_a_session(demo_site):
         page.on("requestfailed", lambda request: failures.append(request.url))
         _sign_in(page, base, "supervisor")
         page.click(f"a[href='/studies/{ids['study']}']")
-        assert page.locator("#participants tbody tr").count() == 4
+        assert page.locator("#participants tbody tr").count() == 5
         page.click(f"#participants a[href='/participants/{ids['T01']}']")
         page.wait_for_selector("#curves svg.main-svg")
         assert _plot_has_data(page, "#curves > div")

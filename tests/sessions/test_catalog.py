@@ -14,6 +14,7 @@ from sessions.catalog import Catalog, CatalogError
 from sessions.demo import PRIMARY_METRICS, DemoSize, run_demo
 from sessions.models import Base, Participant, Session
 from sessions.tasks import session_tissue
+from tests.conftest import REDUCED_DEMO_SIZE
 
 
 def test_migrations_match_the_models(catalog_url, open_catalog):
@@ -70,9 +71,21 @@ def test_bad_urls_are_one_line_errors(tmp_path):
 
 
 @pytest.mark.slow
-def test_reduced_demo_report_matches_the_stored_streams(catalog_url, tmp_path, open_catalog):
+@pytest.mark.parametrize("catalog_url", ["postgresql"], indirect=True)
+def test_reduced_demo_on_postgresql_report_matches_the_stored_streams(catalog_url, tmp_path, open_catalog):
     catalog = open_catalog(catalog_url)
-    result = run_demo(catalog, tmp_path, DemoSize(2, 2, 3, 3, True, closures=False))
+    result = run_demo(catalog, tmp_path, DemoSize(**REDUCED_DEMO_SIZE))
+    _report_matches_the_stored_streams(catalog, result, tmp_path)
+
+
+def test_reduced_demo_on_sqlite_report_matches_the_stored_streams(demo_template, open_catalog):
+    """The shared reduced demo (tests/conftest.py) ran on SQLite."""
+    home, result = demo_template
+    catalog = open_catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    _report_matches_the_stored_streams(catalog, result, home)
+
+
+def _report_matches_the_stored_streams(catalog, result, tmp_path):
     assert result.sessions == 2 * 2 + 3 * 4
     with catalog.session() as orm:
         rows = orm.execute(select(Session.uid, Session.directory, Session.status)).all()

@@ -24,24 +24,19 @@ from sessions.analysis import (
 )
 from sessions.catalog import Catalog, CatalogError
 from sessions.cli import main
-from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY, DemoSize, run_demo
+from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY
 from sessions.models import Participant, Session, Study
+from tests.conftest import REDUCED_DEMO_SIZE
 from tests.dashboard.conftest import sign_in
 
 PASSWORD = "correct horse battery"
+PARTICIPANTS = REDUCED_DEMO_SIZE["experts"] + REDUCED_DEMO_SIZE["trainees"]
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory):
+def demo(tmp_path_factory, copy_demo):
     home = tmp_path_factory.mktemp("home")
-    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
-    run_demo(
-        catalog,
-        home,
-        DemoSize(
-            experts=3, expert_sessions=2, trainees=3, practice_sessions=3, retention=True, closures=False
-        ),
-    )
+    catalog = Catalog(copy_demo(home))
     with catalog.session() as orm:
         create_user(orm, "supervisor", PASSWORD, "supervisor")
     yield catalog, home
@@ -81,8 +76,8 @@ def test_the_demo_rates_every_session_with_two_synthetic_raters_and_reports_ever
     assert agreement.loc["total", "block_raters"] == 2 and agreement.loc["total", "icc21"] > 0.5
     assert analysis.concurrent is not None and analysis.concurrent.rating_col == "grs_total"
     assert set(analysis.standards.misclassification["rule"]) >= {"contrasting", "mean+sd:2"}
-    assert len(analysis.standards.leave_one_expert_out) == 3  # one row per expert
-    assert analysis.reliability.test_retest["participants"].max() == 6
+    assert len(analysis.standards.leave_one_expert_out) == REDUCED_DEMO_SIZE["experts"]  # a row per expert
+    assert analysis.reliability.test_retest["participants"].max() == PARTICIPANTS
 
 
 def test_cli_report_api_and_pages_agree_on_benchmarks_and_every_pass(demo):
@@ -191,13 +186,8 @@ def test_cli_declares_and_shows(demo):
     assert "declared analysis version 1" in shown and "percentile:75" in shown
 
 
-def test_what_counts_as_retention_is_declared_and_used(tmp_path):
-    catalog = Catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}")
-    run_demo(
-        catalog,
-        tmp_path,
-        DemoSize(experts=2, expert_sessions=2, trainees=2, practice_sessions=3, closures=False),
-    )
+def test_what_counts_as_retention_is_declared_and_used(tmp_path, copy_demo):
+    catalog = Catalog(copy_demo(tmp_path))
     before, _ = analyse_catalog_study(catalog, DEMO_STUDY)
     _cli(
         tmp_path,
@@ -233,7 +223,7 @@ def _method(analysis):
     return _method_lines(analysis)
 
 
-def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
+def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path, copy_demo):
     """A registry version bump: old results are shown as stale, left out with a note, and rescored."""
     from sqlalchemy import update
 
@@ -241,14 +231,7 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path):
     from sessions.models import MetricResult, Session
 
     home = tmp_path
-    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
-    run_demo(
-        catalog,
-        home,
-        DemoSize(
-            experts=2, expert_sessions=2, trainees=2, practice_sessions=3, retention=False, closures=False
-        ),
-    )
+    catalog = Catalog(copy_demo(home))
     with catalog.session() as orm:
         old = orm.scalar(select(Session).order_by(Session.id).limit(1))
         uid = old.uid
@@ -300,7 +283,7 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
     assert data["overridden"] == {"rating_col": {"declared": None, "used": "grs_total"}}
     concurrent = {row["metric"]: row for row in data["concurrent"]}
     assert set(concurrent) == set(DEMO_ANALYSIS.metrics)
-    assert all(row["n"] == 6 for row in concurrent.values())  # participants, not sessions
+    assert all(row["n"] == PARTICIPANTS for row in concurrent.values())  # participants, not sessions
     assert all(
         row["rho_ci_low"] is None or row["rho_ci_low"] != row["rho_ci_low"] for row in concurrent.values()
     )
