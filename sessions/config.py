@@ -56,3 +56,18 @@ def prepare_rendering() -> None:
     falls back with a warning. A choice made by the user's environment is kept."""
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
+LRS_VARIABLES = {
+    "endpoint": "VASCSIM_LRS_ENDPOINT",
+    "key": "VASCSIM_LRS_KEY",
+    "secret": "VASCSIM_LRS_SECRET",
+    "home_page": "VASCSIM_LRS_HOME_PAGE",
+}
+"""Where `vascsim lrs push` finds its LRS when no option names it (a secret in the environment
+stays out of the process list)."""
+
+
+def lrs_setting(name: str) -> str | None:
+    """The LRS setting ``name`` (endpoint, key, secret, home_page) from the environment, or None."""
+    return os.environ.get(LRS_VARIABLES[name]) or None

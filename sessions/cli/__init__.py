@@ -14,6 +14,7 @@ from sessions.cli import (
     devices,
     exchange,
     imports,
+    lrs,
     participants,
     ratings,
     recorded,
@@ -52,5 +53,6 @@ for command in (
     imports.import_jigsaws,
     users.users,
     benchmark.benchmark,
+    lrs.lrs,
 ):
     main.add_command(command)
