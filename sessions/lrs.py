@@ -57,7 +57,7 @@ class LrsEndpoint:
         if not self.url.startswith(("http://", "https://")):
             raise LrsError(f"the LRS endpoint must be an http(s) address; got {self.url!r}")
         if not self.key:
-            raise LrsError("no LRS key: give --key (or VASCSIM_LRS_KEY)")
+            raise LrsError("no LRS key (the basic-auth user the LRS gave vascsim)")
 
     @property
     def statements_url(self) -> str:
@@ -251,3 +251,56 @@ def read_statements(endpoint: LrsEndpoint, params: dict[str, str] | None = None)
             url = str(origin.join(more)) if more else None
             query = {}
     return out
+
+
+# -- a study's LRS, configured once ------------------------------------------------------------
+@dataclass(frozen=True)
+class StudyLrs:
+    """Where a study's statements go: endpoint, key, the actors' home page, and whether every
+    scoring of one of its sessions pushes (``auto``). The secret is never stored: it is read from
+    VASCSIM_LRS_SECRET when a push happens."""
+
+    endpoint: str
+    key: str
+    home_page: str
+    activity_base: str = "https://vascsim.org/xapi"
+    auto: bool = False
+
+
+def _configured_path(home: Path) -> Path:
+    return home / "lrs" / "studies.json"
+
+
+def configured(home: Path) -> dict[str, StudyLrs]:
+    path = _configured_path(home)
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+        return {study: StudyLrs(**fields) for study, fields in data.items()}
+    except (OSError, ValueError, TypeError) as error:
+        raise LrsError(f"the LRS configuration {path} cannot be read ({error}); configure again") from error
+
+
+def configure(home: Path, study: str, settings: StudyLrs) -> None:
+    """Store the study's LRS (checked first: a bad endpoint or home page is refused, nothing stored)."""
+    from sessions.xapi import XapiSettings
+
+    LrsEndpoint(settings.endpoint, settings.key, "")
+    XapiSettings(settings.home_page, settings.activity_base)
+    every = {name: vars(value) for name, value in configured(home).items()}
+    every[study] = vars(settings)
+    path = _configured_path(home)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _write_whole(path, json.dumps(every, indent=1, sort_keys=True))
+
+
+def push_study(catalog: Any, home: Path, study: str, secret: str, resend: bool = False) -> PushResult:
+    """Push the study's statements to its configured LRS."""
+    from sessions.xapi import XapiSettings, study_statements
+
+    settings = configured(home).get(study)
+    if settings is None:
+        raise LrsError(f"study {study!r} has no LRS configured")
+    statements = study_statements(catalog, study, XapiSettings(settings.home_page, settings.activity_base))
+    return push(statements, LrsEndpoint(settings.endpoint, settings.key, secret), home, resend=resend)

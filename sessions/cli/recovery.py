@@ -10,6 +10,7 @@ from sessions.cli.base import (
     open_catalog,
     user_errors,
 )
+from sessions.cli.lrs import push_after_scoring
 
 
 @click.command()
@@ -34,6 +35,7 @@ def recover(session: str, score: bool, as_json: bool) -> None:
     uid, header = recover_session(catalog, session)
     if uid is not None and score and header["samples"]["rows"]:
         score_session(catalog, uid, home)
+        push_after_scoring(catalog, home, [uid])
     if as_json:
         click.echo(json.dumps(dict(header, catalog_session=uid), indent=2, sort_keys=True))
         return

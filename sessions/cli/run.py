@@ -12,6 +12,7 @@ from sessions.cli.base import (
     stderr_console,
     user_errors,
 )
+from sessions.cli.lrs import push_after_scoring
 
 
 @click.command()
@@ -63,11 +64,12 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     values = _session_metrics(catalog, uid)
     if as_json:
         print_json({"session": uid, "trial": trial, "metrics": values})
-        return
-    click.echo(f"session {uid} ({participant}, trial {trial}) complete and scored")
-    for name, value in values.items():
-        unit = REGISTRY[name].unit if name in REGISTRY else ""
-        click.echo(f"  {name:28s} {shown(value, unit):>14s}")
+    else:
+        click.echo(f"session {uid} ({participant}, trial {trial}) complete and scored")
+        for name, value in values.items():
+            unit = REGISTRY[name].unit if name in REGISTRY else ""
+            click.echo(f"  {name:28s} {shown(value, unit):>14s}")
+    push_after_scoring(catalog, home, [uid])
 
 
 def _session_metrics(catalog, uid: str) -> dict:

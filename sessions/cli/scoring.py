@@ -14,6 +14,7 @@ from sessions.cli.base import (
     stderr_console,
     user_errors,
 )
+from sessions.cli.lrs import push_after_scoring
 from sessions.status import SCORABLE
 
 
@@ -59,6 +60,7 @@ def score(uids, study, as_json) -> None:
         print_json(results)
     else:
         click.echo(f"scored {len(results)} session(s)")
+    push_after_scoring(catalog, home, results)
 
 
 @click.command()

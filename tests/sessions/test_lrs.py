@@ -257,3 +257,52 @@ def test_cli_push_dry_run_and_errors(demo_catalog, ralph, monkeypatch):
     ralph.stop()
     extra = runner.invoke(main, [*args, "--resend"])
     assert extra.exit_code == 1 and "did not answer" in extra.output and extra.output.count("\n") == 1
+
+
+def test_a_study_set_to_push_does_so_whenever_a_session_is_scored(tmp_path, copy_demo, ralph, monkeypatch):
+    home = tmp_path / "home"
+    url = copy_demo(home)
+    monkeypatch.setenv("VASCSIM_HOME", str(home))
+    monkeypatch.setenv("VASCSIM_DATABASE_URL", url)
+    monkeypatch.setenv("VASCSIM_LRS_SECRET", SECRET)
+    runner = CliRunner()
+    refused = runner.invoke(
+        main,
+        [
+            "lrs",
+            "configure",
+            "--study",
+            DEMO_STUDY,
+            "--endpoint",
+            "ftp://x",
+            "--key",
+            KEY,
+            "--home-page",
+            HOME_PAGE,
+        ],
+    )
+    assert refused.exit_code == 1 and "http(s)" in refused.output
+    args = ["lrs", "configure", "--study", DEMO_STUDY, "--endpoint", ralph.url, "--key", KEY]
+    configured = runner.invoke(main, [*args, "--home-page", HOME_PAGE, "--auto"])
+    assert configured.exit_code == 0 and "pushed whenever a session is scored" in configured.output
+    assert SECRET not in (home / "lrs" / "studies.json").read_text()  # the secret is never stored
+    catalog = Catalog(url)
+    with catalog.session() as orm:
+        uid = orm.scalar(select(Session.uid).order_by(Session.id).limit(1))
+    scored = runner.invoke(main, ["score", uid, "--json"])
+    assert scored.exit_code == 0 and json.loads(scored.stdout)[uid]  # stdout stays JSON
+    assert f"LRS: sent {len(_statements(catalog))} statement(s) of study {DEMO_STUDY}" in scored.stderr
+    again = runner.invoke(main, ["score", uid])  # the same values: nothing new to send
+    assert "LRS: sent 0 statement(s)" in again.stderr
+    ralph.stop()  # a trainee practises while the LRS is away: the session is kept, its statements spooled
+    offline = runner.invoke(
+        main, ["run", "--study", DEMO_STUDY, "--participant", "T01", "--task", "interrupted-stitch"]
+    )
+    assert offline.exit_code == 0 and "complete and scored" in offline.stdout
+    assert "LRS: the LRS at" in offline.stderr and "stay spooled" in offline.stderr
+    ralph.start()
+    back = runner.invoke(main, ["lrs", "push", "--study", DEMO_STUDY])  # the study's configured LRS
+    assert back.exit_code == 0 and back.stdout.startswith("sent ")
+    endpoint = LrsEndpoint(ralph.url, KEY, SECRET)
+    assert {s["id"] for s in read_statements(endpoint)} >= {s.id for s in _statements(catalog)}
+    catalog.close()
