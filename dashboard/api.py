@@ -184,6 +184,36 @@ def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
     )
 
 
+@router.get(
+    "/studies/{study_id}/progress.{kind}",
+    response_class=Response,
+    summary="Each participant's progress and status (CSV or Excel workbook)",
+    responses=CONFLICT,
+)
+def progress_file(request: Request, study_id: Id, kind: str, viewer: Staff) -> Response:
+    import tempfile
+
+    from sessions.progress import progress_table, write_progress
+
+    if kind not in ("csv", "xlsx"):
+        raise not_found(f"progress.{kind}")
+    state = _state(request)
+    with state.catalog.session() as orm:
+        name = access.owned_study(orm, viewer, study_id, whole=True).name
+    table = progress_table(state.catalog, name, state.analyses.get(study_id).analysis)
+    with tempfile.TemporaryDirectory() as folder:
+        path = write_progress(table, Path(folder) / f"progress.{kind}", name)
+        content = path.read_bytes()
+    media = (
+        "text/csv" if kind == "csv" else "application/vnd.openxmlformats-officedocument.spreadsheetml.sheet"
+    )
+    return Response(
+        content,
+        media_type=media,
+        headers={"Content-Disposition": f'attachment; filename="progress-{_plain(name)}.{kind}"'},
+    )
+
+
 def _plain(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)[:80]
 

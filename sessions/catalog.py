@@ -219,9 +219,7 @@ class Catalog:
         orm.flush()
         return participant
 
-    def add_session(
-        self, fields: dict, fill: Callable[[OrmSession, Session], None] | None = None
-    ) -> Session:
+    def add_session(self, fields: dict, fill: Callable[[OrmSession, Session], None] | None = None) -> Session:
         """Insert a session row in its own transaction; returns it.
 
         ``fields["trial"]`` None: the next trial number of its participant on its task, allocated

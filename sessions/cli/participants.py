@@ -63,3 +63,28 @@ def participants_list(study: str, as_json: bool) -> None:
         print_json(rows)
         return
     print_frame(pd.DataFrame(rows), f"Participants of {study}")
+
+
+@participants.command("export")
+@click.option("--study", required=True, help="The study whose participants' progress is exported.")
+@click.option(
+    "-o",
+    "--output",
+    "output",
+    type=click.Path(dir_okay=False),
+    required=True,
+    help="progress.xlsx or progress.csv.",
+)
+@user_errors
+def participants_export(study: str, output: str) -> None:
+    """Each participant's progress and status as an Excel workbook or CSV: sessions, dates, passes,
+    status in words, and each benchmarked metric's latest value beside its benchmark (units and
+    direction in the headers)."""
+    from pathlib import Path
+
+    from sessions.progress import progress_table, write_progress
+
+    catalog, _ = open_catalog()
+    table = progress_table(catalog, study)
+    path = write_progress(table, Path(output), study)
+    click.echo(f"wrote {path} ({len(table)} participants)")
