@@ -248,20 +248,38 @@ def compute_metrics(
     return metrics_of(scored_streams(directory, device, uid, code, label, home))
 
 
-def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[str, float]:
-    """Compute every registered metric of a stored session (:func:`compute_metrics`) and store it
-    with the registry version, replacing what that version had (computed or imported)."""
+@dataclass(frozen=True)
+class ScoringInput:
+    """What scoring a session reads: its folder, device, id, participant code and group label (all
+    plain values, so a Dask worker on another machine can be handed them)."""
+
+    directory: str
+    device: str
+    uid: str
+    code: str
+    label: str
+
+
+def scoring_input(catalog: Catalog, uid: str) -> ScoringInput:
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         if row.status not in SCORABLE:
             raise CatalogError(
                 f"session {uid} is {row.status}; only complete or recovered sessions are scored"
             )
-        directory, device = row.directory, row.device
-        code, label = row.participant.code, row.participant.group_label
-    streams = scored_streams(Path(directory), device, uid, code, label, home)
-    values = metrics_of(streams)
-    stitches = stitch_table(streams)
+        return ScoringInput(row.directory, row.device, uid, row.participant.code, row.participant.group_label)
+
+
+def session_scores(
+    what: ScoringInput, home: Path | None = None
+) -> tuple[dict[str, float], pd.DataFrame | None]:
+    """Every registered metric of the session and its per-stitch placement (reads, stores nothing)."""
+    streams = scored_streams(Path(what.directory), what.device, what.uid, what.code, what.label, home)
+    return metrics_of(streams), stitch_table(streams)
+
+
+def store_scores(catalog: Catalog, uid: str, values: dict[str, float], stitches: pd.DataFrame | None) -> None:
+    """Store a session's scores with the registry version, replacing what that version had."""
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         for table in (MetricResult, StitchResult):
@@ -270,6 +288,13 @@ def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[
             )
         orm.add_all(metric_results(row.id, values))
         orm.add_all(stitch_results(row.id, stitches))
+
+
+def score_session(catalog: Catalog, uid: str, home: Path | None = None) -> dict[str, float]:
+    """Compute every registered metric of a stored session (:func:`compute_metrics`) and store it
+    with the registry version, replacing what that version had (computed or imported)."""
+    values, stitches = session_scores(scoring_input(catalog, uid), home)
+    store_scores(catalog, uid, values, stitches)
     return values
 
 

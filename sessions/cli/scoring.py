@@ -17,45 +17,75 @@ from sessions.cli.base import (
 from sessions.cli.lrs import push_after_scoring
 from sessions.status import SCORABLE
 
+SCHEDULER = click.option(
+    "--scheduler",
+    default=None,
+    help="Compute on a running Dask cluster (tcp://HOST:8786); sessions must be on a path its workers see.",
+)
+WORKERS = click.option(
+    "--workers",
+    type=click.IntRange(1, 256),
+    default=None,
+    help="Compute on a local Dask cluster of N worker processes.",
+)
+
+
+def _study_sessions(catalog, study: str, only_unscored: bool = False) -> list[str]:
+    """The study's scorable sessions (simulator and bench; imported JIGSAWS trials keep their own
+    metrics); ``only_unscored``: those without results under this registry version."""
+    from sqlalchemy import select
+
+    from metrics.registry import REGISTRY_VERSION
+    from sessions.models import MetricResult, Participant, Session, Study
+
+    with catalog.session() as orm:
+        catalog.study(orm, study)
+        query = (
+            select(Session.uid)
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(Study, Participant.study_id == Study.id)
+            .where(Study.name == study, Session.status.in_(SCORABLE), Session.device != "jigsaws")
+            .order_by(Session.id)
+        )
+        if only_unscored:
+            current = select(MetricResult.session_id).where(MetricResult.registry_version == REGISTRY_VERSION)
+            query = query.where(Session.id.not_in(current))
+        return list(orm.scalars(query))
+
+
+def _score_with_progress(catalog, home, targets, scheduler, workers) -> dict:
+    from sessions.scoring import score_sessions
+
+    where = f" on {scheduler}" if scheduler else (f" on {workers} local Dask workers" if workers else "")
+    with progress_bar() as progress:
+        task = progress.add_task(f"scoring{where}", total=len(targets), last="")
+        return score_sessions(
+            catalog,
+            targets,
+            home,
+            scheduler=scheduler,
+            workers=workers,
+            progress=lambda uid: progress.update(task, advance=1, last=uid),
+        )
+
 
 @click.command()
 @click.argument("uids", nargs=-1)
 @click.option("--study", default=None, help="Score every complete session of this study.")
+@SCHEDULER
+@WORKERS
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
 @user_errors
-def score(uids, study, as_json) -> None:
-    """(Re)compute every metric of the given sessions, or of a whole study."""
-    from sqlalchemy import select
-
+def score(uids, study, scheduler, workers, as_json) -> None:
+    """(Re)compute every metric of the given sessions, or of a whole study (in this process, or on
+    Dask with --workers N or --scheduler tcp://HOST:8786: the same results)."""
     from sessions.catalog import CatalogError
-    from sessions.models import Participant, Session, Study
-    from sessions.runner import score_session
 
     catalog, home = open_catalog()
-    targets = list(uids)
-    if study:
-        with catalog.session() as orm:
-            catalog.study(orm, study)
-            targets += list(
-                orm.scalars(
-                    select(Session.uid)
-                    .join(Participant, Session.participant_id == Participant.id)
-                    .join(Study, Participant.study_id == Study.id)
-                    .where(
-                        Study.name == study,
-                        Session.status.in_(SCORABLE),
-                        Session.device != "jigsaws",
-                    )
-                )
-            )
+    targets = list(uids) + (_study_sessions(catalog, study) if study else [])
     if not targets:
         raise CatalogError("nothing to score: give session ids or --study")
-    results = {}
-    with progress_bar() as progress:
-        task = progress.add_task("scoring", total=len(targets), last="")
-        for uid in targets:
-            results[uid] = score_session(catalog, uid, home)
-            progress.update(task, advance=1, last=uid)
+    results = _score_with_progress(catalog, home, targets, scheduler, workers)
     if as_json:
         print_json(results)
     else:
@@ -81,20 +111,27 @@ def score(uids, study, as_json) -> None:
     "--rating", default=None, help="Override: a continuous rating for concurrent validity, e.g. grs_total."
 )
 @click.option("--task", default=None, help="Override: the task whose sessions are analysed.")
+@SCHEDULER
+@WORKERS
 @click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
 @user_errors
-def report(study, out, groups, level, metric_names, rule, rating, task, as_json) -> None:
+def report(study, out, groups, level, metric_names, rule, rating, task, scheduler, workers, as_json) -> None:
     """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures).
 
     The analysis is the one the study declared (`vascsim studies analysis STUDY` shows it), the
     same the dashboard and the demo use. Options override it for this report only; the report
-    says which.
+    says which. With --workers or --scheduler, sessions not yet scored under this metrics
+    registry are scored on Dask first (otherwise the report leaves them out and says so).
     """
 
     from metrics.report import write_report
     from sessions.analysis import analyse_catalog_study
 
     catalog, home = open_catalog()
+    if scheduler or workers:
+        stale = _study_sessions(catalog, study, only_unscored=True)
+        if stale:
+            _score_with_progress(catalog, home, stale, scheduler, workers)
     overrides = analysis_options(groups, level, metric_names, rule)
     if rating is not None:
         overrides["rating_col"] = rating
