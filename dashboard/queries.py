@@ -261,9 +261,9 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
 
 def target_bite(task: str) -> float | None:
     """The task's target bite from the wound edge (m), if the task library declares one."""
-    from sessions.tasks import TASKS
+    from sessions.tasks import known_task, task_spec
 
-    placement = TASKS[task].placement if task in TASKS else None
+    placement = task_spec(task).placement if known_task(task) else None
     return None if placement is None else float(placement["target_bite_m"])
 
 

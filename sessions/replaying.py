@@ -11,7 +11,7 @@ from sessions.catalog import Catalog, CatalogError, NotFound
 from sessions.config import cache_dir
 from sessions.models import Participant, Session
 from sessions.status import SCORABLE
-from sessions.tasks import TASKS, tissue_for
+from sessions.tasks import known_task, tissue_for
 
 REPLAYABLE = SCORABLE
 
@@ -23,7 +23,7 @@ def _replayable(row: Session) -> None:
         )
     if row.status not in REPLAYABLE:
         raise CatalogError(f"session {row.uid} is {row.status}; only complete or recovered sessions replay")
-    if row.task.name not in TASKS:
+    if not known_task(row.task.name):
         raise CatalogError(f"session {row.uid} ran task {row.task.name!r}, which this vascsim cannot rebuild")
 
 

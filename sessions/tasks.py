@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sim.errors import VascsimError
 
@@ -218,10 +222,130 @@ def _restricted_access(tilt_deg: float = 45.0) -> TaskSpec:
 TASKS["restricted-access"] = _restricted_access()
 
 
+# -- tasks added from a mesh (`vascsim tasks add`): VASCSIM_HOME/tasks/NAME/{task.json,mesh.vtu} ------
+USER_TASK_FILE = "task.json"
+USER_MESH_FILE = "mesh.vtu"
+
+
+def user_tasks_dir() -> Path:
+    from sessions.config import data_home
+
+    return data_home() / "tasks"
+
+
+def user_tasks() -> dict[str, TaskSpec]:
+    """Tasks added from a mesh, read from the data directory (each checked as it is read)."""
+    found = {}
+    folder = user_tasks_dir()
+    if not folder.is_dir():
+        return found
+    for path in sorted(folder.glob(f"*/{USER_TASK_FILE}")):
+        try:
+            data = json.loads(path.read_text())
+            spec = TaskSpec(
+                **{
+                    **data,
+                    "entry": tuple(data["entry"]),
+                    "normal": tuple(data["normal"]),
+                    "bite_direction": tuple(data["bite_direction"]),
+                }
+            )
+        except (OSError, ValueError, TypeError, KeyError) as error:
+            raise VascsimError(
+                f"task file {path} cannot be read ({error}); remove its folder or fix it"
+            ) from error
+        found[spec.name] = spec
+    return found
+
+
+def all_tasks() -> dict[str, TaskSpec]:
+    """The built-in tasks and those added from meshes."""
+    return {**TASKS, **user_tasks()}
+
+
+def known_task(name: str) -> bool:
+    return name in TASKS or (user_tasks_dir() / name / USER_TASK_FILE).is_file()
+
+
 def task_spec(name: str) -> TaskSpec:
-    if name not in TASKS:
-        raise VascsimError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
-    return TASKS[name]
+    if name in TASKS:
+        return TASKS[name]
+    added = user_tasks()
+    if name not in added:
+        raise VascsimError(f"unknown task {name!r}; known tasks: {', '.join([*TASKS, *added])}")
+    return added[name]
+
+
+def add_mesh_task(
+    name: str,
+    mesh,
+    entry: Sequence[float],
+    tissue: str = "porcine-artery",
+    fixed: Sequence[str] = ("end0", "end1"),
+    stitch_radius: float = 0.003,
+    bite_direction: Sequence[float] | None = None,
+    description: str = "",
+    time_budget_s: float = 60.0,
+    region_tissue: dict[str, str] | None = None,
+) -> TaskSpec:
+    """Store ``mesh`` (a :class:`sim.mesh.TetMesh`) as task ``name``: one bite at ``entry`` (m), the
+    nearest point of its outer surface, in along the inward normal there; contact candidates are
+    the outer surface's nodes within ``stitch_radius``; ``fixed`` names the node sets held."""
+    import re
+
+    from sim.mesh import save_mesh
+    from sim.tissue_presets import tissue_preset
+
+    if not re.fullmatch(r"[a-z0-9][a-z0-9-]{1,40}", name):
+        raise VascsimError(f"task name {name!r}: 2-41 lower-case letters, digits and dashes")
+    if name in TASKS or (user_tasks_dir() / name).exists():
+        raise VascsimError(f"task {name!r} already exists")
+    tissue_preset(tissue)  # an unknown preset is refused before anything is written
+    missing = [k for k in fixed if k not in mesh.node_sets]
+    if missing:
+        raise VascsimError(
+            f"the mesh has no node set {', '.join(missing)}; its sets: {', '.join(mesh.node_sets)}"
+        )
+    outer = mesh.node_sets.get("outer", mesh.surface_nodes)
+    point, normal = _surface_point(mesh, np.asarray(entry, dtype=np.float64), outer)
+    if bite_direction is None:
+        axis = np.array([0.0, 0.0, 1.0]) if abs(normal[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        bite = np.cross(normal, axis)
+    else:
+        bite = np.asarray(bite_direction, dtype=np.float64)
+        bite = bite - (bite @ normal) * normal
+    bite = bite / np.linalg.norm(bite)
+    folder = user_tasks_dir() / name
+    folder.mkdir(parents=True)
+    save_mesh(mesh, folder / USER_MESH_FILE)
+    spec = TaskSpec(
+        name,
+        "mesh_file",
+        description or f"One bite into a meshed vessel wall ({mesh.n_nodes} nodes), tissue {tissue}.",
+        tuple(float(v) for v in point),
+        tuple(float(-v) for v in normal),  # the task's normal points out of the wall, as the built-ins'
+        tuple(float(v) for v in bite),
+        {
+            "mesh_file": USER_MESH_FILE,
+            "fixed": list(fixed),
+            "stitch_radius_m": float(stitch_radius),
+            "model": "biphase",
+            "tissue": tissue,
+            **({"region_tissue": dict(region_tissue)} if region_tissue else {}),
+        },
+        time_budget_s=time_budget_s,
+    )
+    (folder / USER_TASK_FILE).write_text(json.dumps(dataclasses.asdict(spec), indent=1))
+    return spec
+
+
+def _surface_point(mesh, entry: NDArray[np.float64], candidates) -> tuple[NDArray, NDArray]:
+    """The candidate surface node nearest ``entry`` and the inward unit normal there (the mean of its
+    exterior faces' outward normals, negated)."""
+    node = int(candidates[np.argmin(np.linalg.norm(mesh.points[candidates] - entry, axis=1))])
+    touching = np.any(mesh.surface_triangles == node, axis=1)
+    outward = mesh.surface_normals[touching].mean(axis=0)
+    return mesh.points[node], -outward / np.linalg.norm(outward)
 
 
 def task_mesh(spec: TaskSpec):
@@ -231,6 +355,10 @@ def task_mesh(spec: TaskSpec):
     from sim.mesh import Calcification, Wound, grid_box_mesh, refined_coordinates, vessel_mesh
 
     p = spec.parameters
+    if spec.scenario == "mesh_file":
+        from sim.mesh import load_mesh
+
+        return load_mesh(user_tasks_dir() / spec.name / p["mesh_file"])
     if spec.scenario == "vessel_patch":
         wound = p["wound"]
         plaque = p.get("calcification")
@@ -260,6 +388,13 @@ def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
     """Surface nodes in the task's stitch region (a patch: an x, y box at every depth; a vessel
     patch: an angle and z range of the adventitia): the contact candidates."""
     points = mesh.points[mesh.surface_nodes]
+    if spec.scenario == "mesh_file":
+        outer = mesh.node_sets.get("outer", mesh.surface_nodes)
+        near = (
+            np.linalg.norm(mesh.points[outer] - np.asarray(spec.entry), axis=1)
+            <= spec.parameters["stitch_radius_m"]
+        )
+        return np.asarray(outer)[near]
     if spec.scenario == "vessel_patch":
         region = spec.parameters["stitch_region"]
         angle = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
@@ -319,7 +454,7 @@ def session_tissue(streams, cache_dir: Path | None = None):
     """The tissue model a recorded session ran on (from its header's ``task``), or None for
     sessions of other origins (imported data, unknown tasks)."""
     task = streams.attributes.get("task")
-    return tissue_for(task, cache_dir) if task in TASKS else None
+    return tissue_for(task, cache_dir) if task is not None and known_task(task) else None
 
 
 def task_simulation(task: str, device, cache_dir: Path | None = None, **options):

@@ -19,7 +19,7 @@ def tasks() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the tasks as JSON.")
 def tasks_list(as_json: bool) -> None:
     """List the tasks: name, tissue preset, and what the trainee is asked to do."""
-    from sessions.tasks import TASKS
+    from sessions.tasks import all_tasks
 
     rows = [
         {
@@ -29,7 +29,7 @@ def tasks_list(as_json: bool) -> None:
             "time_budget_s": t.time_budget_s,
             "description": t.description,
         }
-        for t in TASKS.values()
+        for t in all_tasks().values()
     ]
     if as_json:
         print_json(rows)
@@ -66,6 +66,8 @@ def tasks_show(name: str, as_json: bool) -> None:
             f"artery r {1e3 * p['inner_radius_m']:g} mm, wall {1e3 * p['wall_m']:g} mm, "
             f"{1e3 * p['length_m']:g} mm long, {p['arc_deg']:g} deg patch, held on {held}"
         )
+    elif "mesh_file" in p:
+        geometry = f"a meshed vessel wall ({p['mesh_file']} in the task's folder), held on {held}"
     if geometry:
         click.echo(click.wrap_text(geometry, 78, initial_indent="geometry     ", subsequent_indent=" " * 13))
     for region, preset in spec.parameters.get("region_tissue", {}).items():
@@ -91,3 +93,132 @@ def tasks_show(name: str, as_json: bool) -> None:
     for kind in ("entry", "exit"):
         for mark in placement[f"{kind}_targets"]:
             click.echo(f"{kind} mark   ".ljust(13) + "(" + ", ".join(f"{1e3 * v:.1f}" for v in mark) + ") mm")
+
+
+def _triple(value: str, option: str) -> tuple[float, float, float]:
+    try:
+        x, y, z = (float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not X,Y,Z", param_hint=option) from None
+    return x, y, z
+
+
+@tasks.command("add")
+@click.argument("name")
+@click.option(
+    "--mesh",
+    "mesh_path",
+    type=click.Path(dir_okay=False),
+    required=True,
+    help="A lumen surface (STL, OBJ, VTP, PLY: meshed here) or a tetrahedral mesh (VTU, MSH).",
+)
+@click.option(
+    "--thickness",
+    type=click.FloatRange(0.1, 10),
+    default=None,
+    help="Wall thickness (mm) to offset the lumen by.",
+)
+@click.option(
+    "--outer",
+    "outer_path",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="The outer surface instead of a thickness.",
+)
+@click.option(
+    "--max-edge",
+    type=click.FloatRange(0.05, 5),
+    default=0.4,
+    show_default=True,
+    help="Largest element edge (mm).",
+)
+@click.option(
+    "--units",
+    type=click.Choice(["mm", "m", "cm", "um"]),
+    default="mm",
+    show_default=True,
+    help="The surface file's units.",
+)
+@click.option(
+    "--entry", required=True, help="Where the bite goes in, X,Y,Z (mm): the nearest outer-surface point."
+)
+@click.option(
+    "--bite-direction",
+    default=None,
+    help="X,Y,Z: the direction the bite heads across the wall (default: about the z axis).",
+)
+@click.option(
+    "--tissue",
+    default="porcine-artery",
+    show_default=True,
+    help="Tissue preset (vascsim indentation --help lists them).",
+)
+@click.option(
+    "--calcified", default=None, help="X,Y,Z,R (mm): a calcified sphere (its own preset, 'calcified')."
+)
+@click.option("--mesher", type=click.Choice(["auto", "tetgen", "tetwild"]), default="auto", show_default=True)
+@click.option("--description", default="", help="What the trainee is asked to do.")
+@user_errors
+def tasks_add(
+    name,
+    mesh_path,
+    thickness,
+    outer_path,
+    max_edge,
+    units,
+    entry,
+    bite_direction,
+    tissue,
+    calcified,
+    mesher,
+    description,
+) -> None:
+    """Add a task on your own vessel geometry: a segmentation's lumen surface (with --thickness or
+    --outer) is meshed into a layered wall (TetGen; fTetWild when TetGen refuses the surface) and its
+    quality reported; a tetrahedral mesh is taken as it is. The cut ends (end0, end1, ...) are held."""
+    from pathlib import Path
+
+    from sessions.tasks import add_mesh_task
+    from sim.mesh import load_mesh
+    from sim.mesh.surfaces import CalcifiedSphere, mesh_quality, mesh_vessel_surface
+
+    path = Path(mesh_path)
+    sphere = None
+    if calcified is not None:
+        try:
+            x, y, z, r = (float(v) for v in calcified.split(","))
+        except ValueError:
+            raise click.BadParameter(f"{calcified!r} is not X,Y,Z,R", param_hint="--calcified") from None
+        sphere = CalcifiedSphere((x * 1e-3, y * 1e-3, z * 1e-3), r * 1e-3)
+    if path.suffix.lower() in (".vtu", ".msh", ".mesh", ".xdmf"):
+        mesh = load_mesh(path, reorient=True)
+        quality = mesh_quality(mesh.points, mesh.tets)
+    else:
+        mesh, quality = mesh_vessel_surface(
+            path,
+            thickness=None if thickness is None else thickness * 1e-3,
+            outer_path=outer_path,
+            max_edge=max_edge * 1e-3,
+            units=units,
+            calcified=sphere,
+            mesher=mesher,
+        )
+    fixed = sorted(k for k in mesh.node_sets if k.startswith("end"))
+    regions = {"calcified": "calcified"} if "calcified" in mesh.region_names.values() else {}
+    spec = add_mesh_task(
+        name,
+        mesh,
+        [v * 1e-3 for v in _triple(entry, "--entry")],
+        tissue=tissue,
+        fixed=fixed,
+        bite_direction=None if bite_direction is None else _triple(bite_direction, "--bite-direction"),
+        description=description,
+        region_tissue=regions,
+    )
+    for line in quality.lines():
+        click.echo(line)
+    where = ", ".join(f"{1e3 * v:.2f}" for v in spec.entry)
+    click.echo(
+        f"task {name} added: one bite at ({where}) mm, held on {', '.join(fixed) or 'nothing'}; "
+        f"`vascsim run --task {name}` runs it"
+    )
