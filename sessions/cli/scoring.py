@@ -22,6 +22,12 @@ SCHEDULER = click.option(
     default=None,
     help="Compute on a running Dask cluster (tcp://HOST:8786); sessions must be on a path its workers see.",
 )
+DATA_ROOT = click.option(
+    "--data-root",
+    default=None,
+    help="Where the workers read sessions from instead of VASCSIM_HOME: a path they mount or an fsspec "
+    "URL (s3://..., file://...) holding the same sessions/ folder.",
+)
 WORKERS = click.option(
     "--workers",
     type=click.IntRange(1, 256),
@@ -53,7 +59,7 @@ def _study_sessions(catalog, study: str, only_unscored: bool = False) -> list[st
         return list(orm.scalars(query))
 
 
-def _score_with_progress(catalog, home, targets, scheduler, workers) -> dict:
+def _score_with_progress(catalog, home, targets, scheduler, workers, data_root=None) -> dict:
     from sessions.scoring import score_sessions
 
     where = f" on {scheduler}" if scheduler else (f" on {workers} local Dask workers" if workers else "")
@@ -66,6 +72,7 @@ def _score_with_progress(catalog, home, targets, scheduler, workers) -> dict:
             scheduler=scheduler,
             workers=workers,
             progress=lambda uid: progress.update(task, advance=1, last=uid),
+            data_root=data_root,
         )
 
 
@@ -74,9 +81,10 @@ def _score_with_progress(catalog, home, targets, scheduler, workers) -> dict:
 @click.option("--study", default=None, help="Score every complete session of this study.")
 @SCHEDULER
 @WORKERS
+@DATA_ROOT
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
 @user_errors
-def score(uids, study, scheduler, workers, as_json) -> None:
+def score(uids, study, scheduler, workers, data_root, as_json) -> None:
     """(Re)compute every metric of the given sessions, or of a whole study (in this process, or on
     Dask with --workers N or --scheduler tcp://HOST:8786: the same results)."""
     from sessions.catalog import CatalogError
@@ -85,7 +93,7 @@ def score(uids, study, scheduler, workers, as_json) -> None:
     targets = list(uids) + (_study_sessions(catalog, study) if study else [])
     if not targets:
         raise CatalogError("nothing to score: give session ids or --study")
-    results = _score_with_progress(catalog, home, targets, scheduler, workers)
+    results = _score_with_progress(catalog, home, targets, scheduler, workers, data_root)
     if as_json:
         print_json(results)
     else:
@@ -113,9 +121,12 @@ def score(uids, study, scheduler, workers, as_json) -> None:
 @click.option("--task", default=None, help="Override: the task whose sessions are analysed.")
 @SCHEDULER
 @WORKERS
+@DATA_ROOT
 @click.option("--json", "as_json", is_flag=True, help="Print the validity table as JSON.")
 @user_errors
-def report(study, out, groups, level, metric_names, rule, rating, task, scheduler, workers, as_json) -> None:
+def report(
+    study, out, groups, level, metric_names, rule, rating, task, scheduler, workers, data_root, as_json
+) -> None:
     """Write a study report (HTML, Markdown, CSV tables, PNG/SVG figures).
 
     The analysis is the one the study declared (`vascsim studies analysis STUDY` shows it), the
@@ -128,10 +139,10 @@ def report(study, out, groups, level, metric_names, rule, rating, task, schedule
     from sessions.analysis import analyse_catalog_study
 
     catalog, home = open_catalog()
-    if scheduler or workers:
+    if scheduler or workers or data_root:
         stale = _study_sessions(catalog, study, only_unscored=True)
         if stale:
-            _score_with_progress(catalog, home, stale, scheduler, workers)
+            _score_with_progress(catalog, home, stale, scheduler, workers, data_root)
     overrides = analysis_options(groups, level, metric_names, rule)
     if rating is not None:
         overrides["rating_col"] = rating

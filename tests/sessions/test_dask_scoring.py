@@ -101,3 +101,36 @@ def test_a_running_scheduler_and_report_scoring_what_is_stale(demo):
         unreachable.exit_code == 1
         and "cannot reach the Dask scheduler tcp://127.0.0.1:9" in unreachable.output
     )
+
+
+def test_sessions_read_from_a_data_root_url(demo, tmp_path):
+    """Workers find the sessions under --data-root: a mounted copy (file://) on two local workers, and
+    an fsspec store (memory://) whose folders are copied to the worker first."""
+    import shutil
+
+    import fsspec
+
+    catalog, home = demo
+    reference = _stored(catalog)
+    mounted = tmp_path / "mount"
+    shutil.copytree(home / "sessions", mounted / "sessions")
+    with catalog.session() as orm:
+        uids = list(orm.scalars(select(Session.uid).order_by(Session.id).limit(4)))
+        orm.execute(update(MetricResult).values(value=-1.0))
+    shutil.rmtree(home / "sessions" / uids[0])  # only the mounted copy has it now
+    runner = CliRunner()
+    mount = runner.invoke(main, ["score", *uids, "--workers", "2", "--data-root", f"file://{mounted}"])
+    assert mount.exit_code == 0, mount.output
+    memory = fsspec.filesystem("memory")
+    for uid in uids[2:]:
+        for path in (mounted / "sessions" / uid).iterdir():
+            memory.pipe(f"/store/sessions/{uid}/{path.name}", path.read_bytes())
+    stored = runner.invoke(main, ["score", *uids[2:], "--data-root", "memory://store"])  # in process
+    assert stored.exit_code == 0, stored.output
+    metrics, _ = _stored(catalog)
+    _same(
+        {k: v for k, v in metrics.items() if k[0] in uids},
+        {k: v for k, v in reference[0].items() if k[0] in uids},
+    )
+    missing = runner.invoke(main, ["score", uids[0]])  # without the data root: its folder is gone here
+    assert missing.exit_code == 1 and uids[0] in missing.output and "Traceback" not in missing.output
