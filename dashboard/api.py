@@ -170,13 +170,13 @@ def validity(request: Request, study_id: Id, viewer: Staff) -> dict:
     responses=CONFLICT,
 )
 def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
-    from metrics.report import summary_table
+    from metrics.report import validity_download
 
     state = _state(request)
     with state.catalog.session() as orm:
         name = access.owned_study(orm, viewer, study_id, whole=True).name
     buffer = io.StringIO()
-    summary_table(state.analyses.get(study_id).analysis).to_csv(buffer, index=False)
+    validity_download(state.analyses.get(study_id).analysis).to_csv(buffer, index=False)
     return Response(
         buffer.getvalue(),
         media_type="text/csv",

@@ -17,12 +17,14 @@ from dashboard.auth import Viewer
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import (
     composite_summary,
+    display_scale,
     participant_medians,
     reliability_tables,
     standards_tables,
     summary_table,
 )
 from metrics.study import practice_mask
+from metrics.units import display_unit
 from sessions.catalog import Catalog
 from sessions.models import Annotation, Participant, Session, Study, Task, User
 from sessions.review import against_band, expert_band, session_stitches
@@ -278,9 +280,13 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
     metrics = table["metric"].tolist()
     medians = participant_medians(analysis, metrics)
     skilled = (medians[settings.group_col] == settings.skilled_group).to_numpy()
+    scales = {metric: display_scale(metric) for metric in metrics}  # the units a surgeon reads
     boxes = {
         metric: {
-            group: [float(v) for v in medians.loc[medians[settings.group_col] == group, metric].dropna()]
+            group: [
+                scales[metric][0] * float(v)
+                for v in medians.loc[medians[settings.group_col] == group, metric].dropna()
+            ]
             for group in settings.groups
         }
         for metric in metrics
@@ -312,12 +318,17 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         if analysis.concurrent is None
         else {
             "rating": analysis.concurrent.rating_col,
-            "table": records(analysis.concurrent.table),
+            "table": records(
+                analysis.concurrent.table.assign(
+                    unit=[display_unit(u) or "1" for u in analysis.concurrent.table["unit"]]
+                )
+            ),
             "notes": analysis.concurrent.notes,
         },
         "skilled_group": settings.skilled_group,
         "synthetic": analysis.synthetic,
         "boxes": boxes,
+        "box_axes": {metric: label for metric, (_, label) in scales.items()},
         "roc": [c for c in (roc_points(medians, m, skilled) for m in metrics) if c is not None],
         "registry_version": REGISTRY_VERSION,
     }

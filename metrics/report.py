@@ -42,6 +42,15 @@ def participant_medians(analysis: StudyAnalysis, metrics: list[str]) -> pd.DataF
     return aggregate_by_participant(compared, settings.group_col, settings.cluster_col, metrics)
 
 
+def display_scale(metric: str) -> tuple[float, str]:
+    """The factor from SI to the unit a surgeon reads, and that unit's axis label with the direction."""
+    unit = metric_unit(metric)
+    better = REGISTRY[metric].better if metric in REGISTRY else ""
+    shown = display_unit(unit)
+    label = f"{shown}, {better} is better" if shown else f"{better} is better"
+    return float(in_display_units(1.0, unit) or 1.0), label
+
+
 def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
     settings = analysis.settings
     metrics = analysis.validity.table["metric"].tolist()
@@ -52,8 +61,9 @@ def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
     per_participant = participant_medians(analysis, metrics)
     significant = set(analysis.validity.discriminating())
     for axis, metric in zip(axes.ravel(), metrics, strict=False):
+        factor, label = display_scale(metric)
         groups = [
-            per_participant.loc[per_participant[settings.group_col] == g, metric].dropna()
+            factor * per_participant.loc[per_participant[settings.group_col] == g, metric].dropna()
             for g in settings.groups
         ]
         axis.boxplot(groups, tick_labels=list(settings.groups), widths=0.5)
@@ -62,7 +72,7 @@ def _box_plots(analysis: StudyAnalysis, folder: Path) -> str:
                 np.full(len(values), k) + np.linspace(-0.08, 0.08, len(values)), values, s=8, alpha=0.6
             )
         axis.set_title(metric + (" *" if metric in significant else ""), fontsize=9)
-        axis.set_ylabel(metric_unit(metric), fontsize=8)
+        axis.set_ylabel(label, fontsize=8)
         axis.tick_params(labelsize=7)
     for axis in axes.ravel()[len(metrics) :]:
         axis.set_visible(False)
@@ -126,16 +136,17 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
     fitted = {(r.participant_id, r.metric): r for r in curves.itertuples()} if not curves.empty else {}
     participants = trainees[settings.cluster_col].unique()[:MAX_TRAINEES_DRAWN]
     for axis, bench in zip(axes.ravel(), benchmarks, strict=False):
+        factor, label = display_scale(bench.metric)
         for participant in participants:
             mine = trainees[trainees[settings.cluster_col] == participant]
             done = mine[practice.loc[mine.index]]
-            line = axis.plot(done["trial"], done[bench.metric], "o", markersize=3, alpha=0.7)
+            line = axis.plot(done["trial"], factor * done[bench.metric], "o", markersize=3, alpha=0.7)
             colour = line[0].get_color()
             fit = fitted.get((participant, bench.metric))
-            end = (done["trial"].iloc[-1], done[bench.metric].iloc[-1]) if len(done) else None
+            end = (done["trial"].iloc[-1], factor * done[bench.metric].iloc[-1]) if len(done) else None
             if fit is not None:
                 n = np.linspace(1, done["trial"].max(), 60)
-                fitted_values = LEARNING_MODELS[fit.model](n, fit.plateau, fit.amplitude, fit.rate)
+                fitted_values = factor * LEARNING_MODELS[fit.model](n, fit.plateau, fit.amplitude, fit.rate)
                 axis.plot(n, fitted_values, "-", color=colour, alpha=0.7, linewidth=1)
                 end = (n[-1], fitted_values[-1])
             if end is not None and np.isfinite(end[1]):  # each trainee's curve carries its code
@@ -149,10 +160,10 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
                     va="center",
                 )
             delayed = mine[~practice.loc[mine.index]]
-            axis.plot(delayed["trial"], delayed[bench.metric], "s", color=colour, markersize=5)
-        axis.axhline(bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")
+            axis.plot(delayed["trial"], factor * delayed[bench.metric], "s", color=colour, markersize=5)
+        axis.axhline(factor * bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")
         axis.set_xlabel("trial (squares: retention)", fontsize=8)
-        axis.set_ylabel(f"{bench.metric} [{metric_unit(bench.metric)}]", fontsize=8)
+        axis.set_ylabel(f"{bench.metric} ({label})", fontsize=8)
         axis.set_title(f"{bench.metric} ({bench.better} is better)", fontsize=9)
         axis.legend(fontsize=7)
     for axis in axes.ravel()[len(benchmarks) :]:
@@ -214,6 +225,31 @@ def summary_table(analysis: StudyAnalysis) -> pd.DataFrame:
         columns += ["p_cluster"]
     columns += ["p_holm", "discriminates", "direction", "as_expected"]
     return table[columns]
+
+
+def validity_download(analysis: StudyAnalysis) -> pd.DataFrame:
+    """The validity table as a person downloads it: the medians in the units a surgeon reads, the
+    unit beside them, and headers that say so (the report's tables/ keep SI, with registry.csv)."""
+    table = summary_table(analysis).copy()
+    units = table["unit"].tolist()
+    for group in analysis.settings.groups:
+        column = f"median_{group}"
+        table[column] = [
+            in_display_units(v, u) if v == v else v for v, u in zip(table[column], units, strict=True)
+        ]
+    table["unit"] = [display_unit(u) or "1" for u in units]
+    return table.rename(
+        columns={
+            **{f"median_{g}": f"median {g} (participant medians, in unit)" for g in analysis.settings.groups},
+            "unit": "unit (of the medians)",
+            "better": "better (direction of skill)",
+            "auc": "AUC (oriented: 1 = the skilled group better)",
+            "auc_ci_low": "AUC 95% CI low",
+            "auc_ci_high": "AUC 95% CI high",
+            "p_value": "p (Mann-Whitney, exact)",
+            "p_holm": "p (Holm-adjusted)",
+        }
+    )
 
 
 NO_INTERVAL = "n/a"

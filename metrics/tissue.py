@@ -44,7 +44,6 @@ CONTACT_STATE = 1
 PIERCED_STATE = 2
 
 
-
 def indentation_runs(streams: SessionStreams) -> list[tuple[int, int]]:
     """[start, stop) sample ranges of uninterrupted indentation of one contact point."""
     state = streams.needle_state

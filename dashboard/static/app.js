@@ -157,7 +157,8 @@ function drawValidity() {
       y: values[group], name: group, type: "box", boxpoints: "all", jitter: 0.4, pointpos: 0,
       marker: { color: COLOURS[g] },
     })), {
-      title: { text: metric, font: { size: 12 } }, height: 260, margin: { t: 35, b: 30, l: 50, r: 10 },
+      title: { text: metric, font: { size: 12 } }, height: 260, margin: { t: 35, b: 30, l: 60, r: 10 },
+      yaxis: { title: { text: (pageData.box_axes || {})[metric] || "", font: { size: 11 } } },
       showlegend: false,
     }, PLOT_CONFIG);
   });

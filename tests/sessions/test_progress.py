@@ -104,6 +104,16 @@ def test_the_dashboard_serves_the_same_table_to_staff_only(demo):
         served = pd.read_excel(io.BytesIO(answer.content))
         assert list(served["status"]) == list(progress_table(catalog, DEMO_STUDY)["status"])
         assert client.get(f"/api/studies/{study_id}/progress.ods").status_code == 404
+        # the validity table as downloaded: medians in display units, the headers saying so
+        csv = pd.read_csv(io.StringIO(client.get(f"/api/studies/{study_id}/validity.csv").text))
+        assert "median expert (participant medians, in unit)" in csv.columns
+        analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+        si = analysis.validity.table.set_index("metric")
+        row = csv.set_index("metric").loc["entry_to_target"]
+        assert row["unit (of the medians)"] == "mm"
+        assert row["median expert (participant medians, in unit)"] == pytest.approx(
+            1e3 * si.at["entry_to_target", "median_expert"]
+        )
     with TestClient(app) as client:
         sign_in(client, "trainee", PASSWORD)
         assert client.get(f"/api/studies/{study_id}/progress.csv").status_code == 403
