@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 from jinja2 import Environment
 from markupsafe import Markup
+from matplotlib.ticker import MaxNLocator
 from sklearn.metrics import roc_curve
 
 from metrics.figures import new_figure
@@ -163,6 +164,7 @@ def _learning_curves(analysis: StudyAnalysis, folder: Path) -> list[str]:
             axis.plot(delayed["trial"], factor * delayed[bench.metric], "s", color=colour, markersize=5)
         axis.axhline(factor * bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")
         axis.set_xlabel("trial (squares: retention)", fontsize=8)
+        axis.xaxis.set_major_locator(MaxNLocator(integer=True))  # trials are whole sessions
         axis.set_ylabel(f"{bench.metric} ({label})", fontsize=8)
         axis.set_title(f"{bench.metric} ({bench.better} is better)", fontsize=9)
         axis.legend(fontsize=7)
