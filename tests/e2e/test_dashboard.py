@@ -231,3 +231,41 @@ def test_a_blinded_rater_rates_a_session_without_learning_whose_it_is(demo_site)
         ).all()
     catalog.close()
     assert stored == [("supervisor", "total", 12.0)]  # replaced: six items of 2
+
+
+@pytest.mark.slow
+def test_session_lists_carry_dates_and_sort_by_any_column(demo_site):
+    base, ids, _, _ = demo_site
+    with chromium() as browser:
+        page = browser.new_page()
+        _sign_in(page, base, "supervisor")
+        page.goto(f"{base}/studies/{ids['study']}")
+        heading = page.locator("#participants thead th", has_text="Sessions")
+
+        def column(name: str) -> list[str]:
+            index = page.locator("#participants thead th").all_inner_texts().index(name)
+            return [
+                row.locator("td").nth(index).inner_text()
+                for row in page.locator("#participants tbody tr").all()
+            ]
+
+        heading.click()
+        assert heading.get_attribute("aria-sort") == "ascending"
+        counts = [int(v) for v in column("Sessions")]
+        assert counts == sorted(counts) and counts[0] < counts[-1]  # experts' 2 before trainees' 4
+        heading.click()
+        assert heading.get_attribute("aria-sort") == "descending"
+        assert [int(v) for v in column("Sessions")] == sorted(counts, reverse=True)
+        assert all(len(v) == 16 and v[4] == "-" for v in column("Last active (UTC)"))  # 2026-12-04 14:32
+        page.goto(f"{base}/participants/{ids['T01']}")
+        trial = page.locator("#sessions thead th", has_text="Trial")
+        trial.click()
+        trial.click()  # descending: the latest first
+        trials = [
+            int(row.locator("td").nth(2).inner_text()) for row in page.locator("#sessions tbody tr").all()
+        ]
+        assert trials == sorted(trials, reverse=True) and len(trials) == 4
+        started = page.locator("#sessions tbody tr").first.locator("td").first.inner_text()
+        assert len(started) == 16 and started[:2] == "20"
+        words = page.locator("#sessions tbody").inner_text()
+        assert " fail" not in words and ("worse than the benchmark" in words or "pass" in words)
