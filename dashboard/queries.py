@@ -14,6 +14,7 @@ from sqlalchemy import func, select
 from dashboard.access import owned_participant, owned_session, owned_study, session_filter
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
+from metrics.feedback import feedback_line, what_to_work_on
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import (
     composite_summary,
@@ -256,6 +257,10 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
         study_id, f"expert-band-{task_id}", lambda: expert_band(catalog, study_id, task_id)
     )
     detail["metrics"] = against_band(values, band)
+    detail["work_on"] = [
+        {"metric": item["metric"], "kind": item["kind"], "line": feedback_line(item)}
+        for item in what_to_work_on(detail["metrics"])
+    ]
     detail["stitches"] = session_stitches(catalog, uid)
     detail["target_bite_m"] = target_bite(detail["task"])
     return detail

@@ -108,12 +108,17 @@ def sessions_show(uid: str, as_json: bool) -> None:
             "error": row.error,
             "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
         }
+    from metrics.feedback import feedback_line, what_to_work_on
     from sessions.review import session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)
     data["metrics"] = {r["metric"]: r["value"] for r in rows}
     data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
     data["stitches"] = session_stitches(catalog, uid)
+    work_on = what_to_work_on(rows)
+    data["work_on"] = [
+        {"metric": i["metric"], "kind": i["kind"], "advice": feedback_line(i)} for i in work_on
+    ]
     if as_json:
         print_json(data)
         return
@@ -130,6 +135,13 @@ def sessions_show(uid: str, as_json: bool) -> None:
                 click.echo(f"  {r['metric']:28s} {shown(r['value'], r['unit']):>14s}  {versus}")
         elif key == "versus_experts":
             continue
+        elif key == "work_on":
+            click.echo(
+                "work on      (safety first, then quality, then efficiency; furthest from the experts first)"
+            )
+            for item in value or [{"kind": "", "advice": "nothing worse than the experts' middle half"}]:
+                text = f"{item['kind']}: {item['advice']}" if item["kind"] else item["advice"]
+                click.echo(click.wrap_text(text, 78, initial_indent="  ", subsequent_indent="    "))
         elif key == "stitches":
             _show_stitches(value)
         else:

@@ -1,0 +1,85 @@
+"""What to work on: every metric has advice; worse-than-expert metrics ranked safety, quality,
+efficiency and by distance outside the experts' band; the same lines in the CLI and the dashboard."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+from fastapi.testclient import TestClient
+from sqlalchemy import select
+
+from dashboard.app import create_app
+from dashboard.settings import DashboardSettings
+from metrics.feedback import ADVICE, band_widths_outside, feedback_line, kind_of, what_to_work_on
+from metrics.registry import REGISTRY
+from sessions.accounts import create_user
+from sessions.catalog import Catalog
+from sessions.cli import main
+from sessions.models import Participant, Session
+from sessions.review import against_band
+from tests.dashboard.conftest import sign_in
+
+
+def test_every_registered_metric_has_advice_and_no_other():
+    assert set(ADVICE) == set(REGISTRY.names())
+    assert all(text.endswith(".") and len(text) < 90 for text in ADVICE.values())
+
+
+def test_band_widths_outside_hand_worked():
+    assert band_widths_outside(0.5, 0.1, 0.2, "lower") == pytest.approx(3.0)  # 0.3 beyond q3, band 0.1
+    assert band_widths_outside(0.15, 0.1, 0.2, "lower") == 0.0
+    assert band_widths_outside(-3.0, -2.5, -2.0, "higher") == pytest.approx(1.0)
+    assert band_widths_outside(2.0, 0.0, 0.0, "lower") == 2.0  # two back-wall catches where experts had none
+
+
+def test_ranking_puts_safety_first_then_quality_then_efficiency():
+    band = {
+        "back_wall_catches": {"expert_q1": 0.0, "expert_median": 0.0, "expert_q3": 0.0},
+        "entry_to_target": {"expert_q1": 1e-4, "expert_median": 1.5e-4, "expert_q3": 2e-4},
+        "exit_to_target": {"expert_q1": 1e-4, "expert_median": 1.5e-4, "expert_q3": 2e-4},
+        "path_length": {"expert_q1": 0.02, "expert_median": 0.025, "expert_q3": 0.03},
+        "task_time": {"expert_q1": 5.0, "expert_median": 6.0, "expert_q3": 7.0},
+    }
+    values = {
+        "back_wall_catches": 1.0,  # a never event, however small
+        "entry_to_target": 3e-4,  # 1 band width worse
+        "exit_to_target": 6e-4,  # 4 band widths worse
+        "path_length": 0.09,  # 6 band widths worse, but efficiency
+        "task_time": 6.5,  # within
+    }
+    items = what_to_work_on(against_band(values, band), limit=3)
+    assert [i["metric"] for i in items] == ["back_wall_catches", "exit_to_target", "entry_to_target"]
+    assert [kind_of(i["metric"]) for i in items] == ["safety", "quality", "quality"]
+    everything = what_to_work_on(against_band(values, band), limit=10)
+    assert [i["metric"] for i in everything][-1] == "path_length" and len(everything) == 4
+    line = feedback_line(items[1])
+    assert line == (
+        "Bring the needle out at the exit mark: rotate along its curve. "
+        "(exit_to_target 0.6 mm; experts 0.1-0.2 mm, lower is better)"
+    )
+    only_safety = what_to_work_on(against_band(values, band), limit=0)
+    assert [i["metric"] for i in only_safety] == ["back_wall_catches"]  # safety is never cut
+
+
+def test_the_cli_and_the_session_page_say_the_same(tmp_path, copy_demo, monkeypatch):
+    home = tmp_path / "home"
+    url = copy_demo(home)
+    monkeypatch.setenv("VASCSIM_HOME", str(home))
+    monkeypatch.setenv("VASCSIM_DATABASE_URL", url)
+    catalog = Catalog(url)
+    with catalog.session() as orm:
+        uid = orm.scalar(
+            select(Session.uid).join(Participant).where(Participant.code == "T01").order_by(Session.trial)
+        )
+        create_user(orm, "supervisor", "correct horse battery", "supervisor")
+    shown = json.loads(CliRunner().invoke(main, ["sessions", "show", uid, "--json"]).stdout)
+    assert shown["work_on"], "a first-day trainee has something to work on"
+    app = create_app(DashboardSettings(home=home, database_url=url), catalog)
+    with TestClient(app) as client:
+        sign_in(client, "supervisor", "correct horse battery")
+        page = client.get(f"/sessions/{uid}").text
+    for item in shown["work_on"]:
+        assert item["advice"].replace("'", "&#39;") in page
+    catalog.close()
