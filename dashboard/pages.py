@@ -154,7 +154,12 @@ def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
     detail = queries.session_detail(state.catalog, state.analyses, viewer, uid)
     has_video = replay_video(state.settings.home, uid) is not None
     has_samples = any(f["name"] == SAMPLES_FILE for f in detail["files"])
-    data = {"uid": uid, "has_video": has_video, "has_samples": has_samples}
+    data = {
+        "uid": uid,
+        "has_video": has_video,
+        "has_samples": has_samples,
+        "signal_bands": detail.get("signal_bands", {}),
+    }
     ratings = session_ratings(state.catalog, uid) if viewer.role in STAFF else []
     return render(
         request,

@@ -257,6 +257,7 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
         study_id, f"expert-band-{task_id}", lambda: expert_band(catalog, study_id, task_id)
     )
     detail["metrics"] = against_band(values, band)
+    detail["signal_bands"] = signal_bands(detail["metrics"])
     detail["work_on"] = [
         {"metric": item["metric"], "kind": item["kind"], "line": feedback_line(item)}
         for item in what_to_work_on(detail["metrics"])
@@ -369,3 +370,22 @@ def session_list(catalog: Catalog, viewer: Viewer, study_id: int | None, limit: 
             for u, s, t, p, a, c in rows
         ]
     return {"total": int(total), "items": items}
+
+
+SIGNAL_BANDS = {"force": ("peak_force", "experts' peak force, middle half")}
+"""Signal plot -> (the metric whose expert band is drawn on it, the band's label)."""
+
+
+def signal_bands(rows: list[dict]) -> dict:
+    """The experts' interquartile band of each plotted signal's metric, in the plot's unit."""
+    from metrics.replay.reference import SIGNALS
+
+    by_metric = {row["metric"]: row for row in rows}
+    bands = {}
+    for signal, (metric, label) in SIGNAL_BANDS.items():
+        row = by_metric.get(metric)
+        if row is None or row["expert_q1"] is None or row["expert_q3"] is None:
+            continue
+        factor = SIGNALS[signal][1]
+        bands[signal] = {"low": factor * row["expert_q1"], "high": factor * row["expert_q3"], "label": label}
+    return bands

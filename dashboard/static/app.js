@@ -63,6 +63,31 @@ function eventFilter(list, events) {
   list.parentNode.insertBefore(select, list);
 }
 
+// events drawn on the session's plots, and their colours (the list below the plots names them all)
+const MARKED = {
+  pierce: "#1a8a4a", exit: "#2a6fb0", pull_through: "#777777",
+  overstress: "#c0392b", edge_overstress: "#c0392b", force_clamped: "#c0392b",
+};
+
+const WARNINGS = new Set(["overstress", "edge_overstress", "force_clamped"]);
+
+function markerShapes(events) {
+  // the needle's passage as full-height dotted lines; warnings as short red ticks along the top, so
+  // a run of them does not hide the curve
+  return events.filter((e) => MARKED[e.kind]).map((e) => ({
+    type: "line", xref: "x", yref: "paper", x0: e.time, x1: e.time,
+    y0: WARNINGS.has(e.kind) ? 0.9 : 0, y1: 1,
+    line: { color: MARKED[e.kind], width: WARNINGS.has(e.kind) ? 1.5 : 1, dash: WARNINGS.has(e.kind) ? "solid" : "dot" },
+  }));
+}
+
+function bandShape(band) {
+  return {
+    type: "rect", xref: "paper", x0: 0, x1: 1, yref: "y", y0: band.low, y1: band.high,
+    fillcolor: "rgba(42, 111, 176, 0.13)", line: { width: 0 }, layer: "below",
+  };
+}
+
 async function drawSession() {
   const host = document.getElementById("signals");
   const video = document.getElementById("replay");
@@ -76,15 +101,22 @@ async function drawSession() {
   const data = await response.json();
   host.innerHTML = "";
   const plots = [];
+  const markers = markerShapes(data.events || []);
+  const bands = pageData.signal_bands || {};
   Object.entries(data.signals).forEach(([name, signal], k) => {
     const div = plotDiv(host, "plot-" + name);
     div.classList.add("signal-plot");
+    div.fixedShapes = markers.concat(bands[name] ? [bandShape(bands[name])] : []);
     Plotly.newPlot(div, [{
       x: signal.time, y: signal.values, mode: "lines", name: name, line: { color: COLOURS[k % COLOURS.length] },
     }], {
       yaxis: { title: { text: signal.label } }, xaxis: { title: { text: "time (s)" }, range: [0, data.duration_s] },
-      shapes: [cursorShape(0)], height: 220, margin: { t: 10, b: 40, l: 70, r: 10 }, showlegend: false,
-      hovermode: "x",
+      shapes: [cursorShape(0)].concat(div.fixedShapes), height: 220, margin: { t: 10, b: 40, l: 70, r: 10 },
+      showlegend: false, hovermode: "x",
+      annotations: bands[name] ? [{
+        xref: "paper", x: 0.01, xanchor: "left", yref: "y", y: bands[name].high, yanchor: "bottom",
+        text: bands[name].label, showarrow: false, font: { size: 10, color: "#2a6fb0" },
+      }] : [],
     }, PLOT_CONFIG);
     // a click anywhere on the plot area seeks to that time (a drag still zooms). Plotly covers the page
     // while a button is down, so the press is read on the plot and the release on the window.
@@ -127,7 +159,7 @@ async function drawSession() {
 
   function moveCursor(t) {
     host.dataset.cursor = t.toFixed(3);
-    plots.forEach((div) => Plotly.relayout(div, { shapes: [cursorShape(t)] }));
+    plots.forEach((div) => Plotly.relayout(div, { shapes: [cursorShape(t)].concat(div.fixedShapes) }));
   }
   function seek(t) {
     if (video) video.currentTime = t; else moveCursor(t);

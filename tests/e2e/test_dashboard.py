@@ -269,3 +269,25 @@ def test_session_lists_carry_dates_and_sort_by_any_column(demo_site):
         assert len(started) == 16 and started[:2] == "20"
         words = page.locator("#sessions tbody").inner_text()
         assert " fail" not in words and ("worse than the benchmark" in words or "pass" in words)
+
+
+@pytest.mark.slow
+def test_the_force_plot_shows_the_expert_band_and_the_needles_passage(demo_site):
+    base, _, own, _ = demo_site
+    with chromium() as browser:
+        page = browser.new_page()
+        _sign_in(page, base, "supervisor")
+        page.goto(f"{base}/sessions/{own}")
+        page.wait_for_selector("#signals[data-ready='1']", timeout=60_000)
+        shapes = page.evaluate("() => document.querySelector('#plot-force').layout.shapes")
+        bands = [s for s in shapes if s["type"] == "rect"]
+        assert len(bands) == 1 and 0 < bands[0]["y0"] < bands[0]["y1"]  # mN, the experts' middle half
+        lines = [s for s in shapes if s["type"] == "line" and s["line"].get("dash") == "dot"]
+        pierce = page.locator("#events li[data-kind='pierce'] button").first.get_attribute("data-time")
+        assert any(abs(s["x0"] - float(pierce)) < 1e-6 for s in lines)
+        # the cursor moves, the markers stay
+        page.locator("#events li[data-kind='pierce'] button").first.click()
+        page.wait_for_function("() => document.querySelector('#plot-force').layout.shapes.length > 2")
+        after = page.evaluate("() => document.querySelector('#plot-force').layout.shapes.length")
+        assert after == len(shapes)
+        assert "experts' peak force" in page.inner_text("#plot-key")
