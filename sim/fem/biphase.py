@@ -282,11 +282,11 @@ class BiphaseTissue:
         stress = 0.0
         total = np.zeros_like(soft.displacement)
         for model, part in parts:
-            grad = displacement_gradients(model._gradients, mesh.tets, part.displacement)
+            grad = displacement_gradients(model.element_gradients, mesh.tets, part.displacement)
             lam, mu = model._lame
             stress = stress + stress_tensor(small_strain(grad), lam, mu)
             total += part.displacement
-        grad_total = displacement_gradients(self.soft._gradients, mesh.tets, total)
+        grad_total = displacement_gradients(self.soft.element_gradients, mesh.tets, total)
         deformed = signed_volumes(mesh.points + total, mesh.tets).sum()
         return {
             "von_mises": von_mises_of_stress(stress),

@@ -74,7 +74,9 @@ class IndentationStress:
                 solution = model.solve(
                     {int(n): w * unit for n, w in zip(self.nodes, weights, strict=True)}, full_field=True
                 )
-                grad = displacement_gradients(model._gradients[self.elements], tets, solution.displacement)
+                grad = displacement_gradients(
+                    model.element_gradients[self.elements], tets, solution.displacement
+                )
                 per_axis.append(stress_tensor(small_strain(grad), lam[self.elements], mu[self.elements]))
             self.operators.append(np.stack(per_axis))  # (3, E, 3, 3)
 
@@ -165,7 +167,7 @@ class TissueFieldReplay:
         if parts is None:
             parts = []
             for model, operator in zip(self._part_models, self._stress_operators, strict=True):
-                columns = model._nodes_columns(nodes, self._rows)
+                columns = model.node_columns(nodes, self._rows)
                 unit_stress = (operator @ columns).T.reshape(columns.shape[1], len(self._surface), 3, 3)
                 parts.append((model.contact(nodes), columns, unit_stress))
             if len(self._cache) >= self._cache_size:
@@ -245,7 +247,7 @@ def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):
     grad u = sum over the element's nodes of u_a (x) grad N_a."""
     import scipy.sparse as sp
 
-    gradients = model._gradients[elements]  # (E, 4, 3): grad N_a per element node
+    gradients = model.element_gradients[elements]  # (E, 4, 3): grad N_a per element node
     tets = model.mesh.tets[elements]
     lam, mu = (values[elements] for values in model._lame)
     base = np.arange(len(elements)) * 9
@@ -314,7 +316,7 @@ class LocalStress:
         dofs = (3 * local[:, None] + np.arange(3)).ravel()
         columns = model.load_response(ids, force_map, dofs).reshape(len(local), 3, -1)
         tets = tets.reshape(-1, 4)
-        grad = np.einsum("maiq,maj->mijq", columns[tets], model._gradients[elements])
+        grad = np.einsum("maiq,maj->mijq", columns[tets], model.element_gradients[elements])
         strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
         lam, mu = (values[elements] for values in model.lame)
         trace = np.einsum("miiq->mq", strain)

@@ -133,7 +133,8 @@ class TissueModel:
 
     # -- assembly --------------------------------------------------------------
     @cached_property
-    def _gradients(self) -> NDArray[np.float64]:
+    def element_gradients(self) -> NDArray[np.float64]:
+        """(E, 4, 3): the gradient of each element's four linear shape functions (constant per element)."""
         return shape_gradients(self.mesh.points, self.mesh.tets)
 
     @cached_property
@@ -143,7 +144,7 @@ class TissueModel:
     @cached_property
     def _stiffness(self) -> sp.csr_matrix:
         lam, mu = self._lame
-        elements = element_stiffness(self._gradients, self.mesh.element_volumes, lam, mu)
+        elements = element_stiffness(self.element_gradients, self.mesh.element_volumes, lam, mu)
         return self._pattern.assemble(elements)
 
     def stiffness_matrix(self) -> sp.csr_matrix:
@@ -239,7 +240,9 @@ class TissueModel:
     def surface_von_mises(self, displacement: NDArray[np.float64]) -> NDArray[np.float64]:
         """(F,) von Mises stress (Pa) of the element under each exterior triangle, from a full field."""
         elements = self.mesh.surface_elements
-        grad = displacement_gradients(self._gradients[elements], self.mesh.tets[elements], displacement)
+        grad = displacement_gradients(
+            self.element_gradients[elements], self.mesh.tets[elements], displacement
+        )
         return self.surface_von_mises_of_gradients(grad)
 
     def surface_von_mises_of_gradients(self, gradients: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -256,7 +259,7 @@ class TissueModel:
         reactions are this map times them (one product instead of a gather and an einsum)."""
         elements = self.mesh.surface_elements
         basis = columns.reshape(self.mesh.n_nodes, 3, columns.shape[1])[self.mesh.tets[elements]]
-        gradients = np.einsum("maic,maj->mijc", basis, self._gradients[elements])
+        gradients = np.einsum("maic,maj->mijc", basis, self.element_gradients[elements])
         return np.ascontiguousarray(gradients.reshape(-1, columns.shape[1]))
 
     # -- precomputation ----------------------------------------------------------
@@ -415,6 +418,12 @@ class TissueModel:
         _ids(dofs, 3 * self.mesh.n_nodes, "rows")
         return self._factor(rhs)[dofs]
 
+    def node_columns(self, nodes: ArrayLike, rows: ArrayLike | None = None) -> NDArray[np.float64]:
+        """K0^-1's columns at the nodes' dofs, whole (3N, 3k) or only ``rows`` (dof ids), cached ones
+        reused and the rest solved (unchecked ids: for callers holding ids the mesh gave them)."""
+        ids = np.asarray(nodes, dtype=np.int64).ravel()
+        return self._nodes_columns(ids, None if rows is None else np.asarray(rows, dtype=np.int64).ravel())
+
     def columns_at(self, nodes: ArrayLike, rows: ArrayLike) -> NDArray[np.float64]:
         """(len(rows), 3k) rows (dof ids) of K0^-1's columns at the nodes' dofs, in the order given:
         the displacement of those dofs per unit force on each node (m/N). Cached columns are
@@ -547,7 +556,7 @@ class TissueModel:
 
     def element_fields(self, displacement: NDArray[np.float64]) -> dict[str, object]:
         """Element strain, von Mises stress (Pa), largest principal stretch, relative volume change."""
-        grad_u = displacement_gradients(self._gradients, self.mesh.tets, displacement)
+        grad_u = displacement_gradients(self.element_gradients, self.mesh.tets, displacement)
         lam, mu = self._lame
         deformed = signed_volumes(self.mesh.points + displacement, self.mesh.tets).sum()
         strain = small_strain(grad_u)

@@ -531,6 +531,6 @@ def _collect(
     simulation.haptic_log = log
     end = float(log.time[-1]) if log.count else 0.0
     simulation.events.append(RuntimeEvent("stopped", end, "runtime", simulation.stop_reason or "completed"))
-    result = simulation._result(end, wall)
+    result = simulation.run_result(end, wall)
     result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in LAYERS}
     return result

@@ -431,7 +431,8 @@ class Simulation:
             prefetcher, self._prefetcher = self._prefetcher, None
             prefetcher.close()
 
-    def _result(self, end: float, wall: float) -> RunResult:
+    def run_result(self, end: float, wall: float) -> RunResult:
+        """How the run ended and what it produced, at simulated time ``end`` after ``wall`` seconds."""
         return RunResult(
             self.stop_reason or "completed",
             end,
@@ -478,7 +479,7 @@ class Simulation:
         finally:
             self.close()
         self._wind_down(now)
-        return self._result(min(now, duration), wallclock.perf_counter() - start_wall)
+        return self.run_result(min(now, duration), wallclock.perf_counter() - start_wall)
 
     def run_realtime(self, duration: float, pin_cpus: bool = True) -> RunResult:
         """Wall-clock time: the haptic layer in its own process, the others in threads."""
