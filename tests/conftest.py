@@ -144,3 +144,14 @@ def copy_demo(demo_template):
         return url
 
     return copy
+
+
+@pytest.fixture(scope="module")
+def demo_catalog(tmp_path_factory, copy_demo):
+    """A copy of the reduced demo shared by one test module: (catalog, home)."""
+    from sessions.catalog import Catalog
+
+    home = tmp_path_factory.mktemp("home")
+    catalog = Catalog(copy_demo(home))
+    yield catalog, home
+    catalog.close()

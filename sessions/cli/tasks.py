@@ -95,12 +95,15 @@ def tasks_show(name: str, as_json: bool) -> None:
             click.echo(f"{kind} mark   ".ljust(13) + "(" + ", ".join(f"{1e3 * v:.1f}" for v in mark) + ") mm")
 
 
-def _triple(value: str, option: str) -> tuple[float, float, float]:
+def _numbers(value: str, option: str, names: str = "X,Y,Z") -> list[float]:
+    """``value`` as comma-separated numbers, as many as ``names`` has (a usage error otherwise)."""
     try:
-        x, y, z = (float(v) for v in value.split(","))
+        numbers = [float(v) for v in value.split(",")]
     except ValueError:
-        raise click.BadParameter(f"{value!r} is not X,Y,Z", param_hint=option) from None
-    return x, y, z
+        numbers = []
+    if len(numbers) != len(names.split(",")):
+        raise click.BadParameter(f"{value!r} is not {names}", param_hint=option)
+    return numbers
 
 
 @tasks.command("add")
@@ -185,10 +188,7 @@ def tasks_add(
     path = Path(mesh_path)
     sphere = None
     if calcified is not None:
-        try:
-            x, y, z, r = (float(v) for v in calcified.split(","))
-        except ValueError:
-            raise click.BadParameter(f"{calcified!r} is not X,Y,Z,R", param_hint="--calcified") from None
+        x, y, z, r = _numbers(calcified, "--calcified", "X,Y,Z,R")
         sphere = CalcifiedSphere((x * 1e-3, y * 1e-3, z * 1e-3), r * 1e-3)
     if path.suffix.lower() in (".vtu", ".msh", ".mesh", ".xdmf"):
         mesh = load_mesh(path, reorient=True)
@@ -208,10 +208,10 @@ def tasks_add(
     spec = add_mesh_task(
         name,
         mesh,
-        [v * 1e-3 for v in _triple(entry, "--entry")],
+        [v * 1e-3 for v in _numbers(entry, "--entry")],
         tissue=tissue,
         fixed=fixed,
-        bite_direction=None if bite_direction is None else _triple(bite_direction, "--bite-direction"),
+        bite_direction=None if bite_direction is None else _numbers(bite_direction, "--bite-direction"),
         description=description,
         region_tissue=regions,
     )

@@ -93,14 +93,6 @@ def ralph(tmp_path):
     server.stop()
 
 
-@pytest.fixture(scope="module")
-def demo_catalog(tmp_path_factory, copy_demo):
-    home = tmp_path_factory.mktemp("home")
-    catalog = Catalog(copy_demo(home))
-    yield catalog, home
-    catalog.close()
-
-
 def _statements(catalog) -> list[Statement]:
     return study_statements(catalog, DEMO_STUDY, XapiSettings(HOME_PAGE))
 

@@ -15,7 +15,6 @@ from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
 from sessions.accounts import create_user, link_participant
 from sessions.analysis import analyse_catalog_study
-from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY
 from sessions.models import Participant, Study
@@ -25,16 +24,8 @@ from tests.dashboard.conftest import sign_in
 PASSWORD = "correct horse battery"
 
 
-@pytest.fixture(scope="module")
-def demo(tmp_path_factory, copy_demo):
-    home = tmp_path_factory.mktemp("home")
-    catalog = Catalog(copy_demo(home))
-    yield catalog, home
-    catalog.close()
-
-
-def test_the_progress_table_reads_as_the_analysis_says(demo):
-    catalog, _ = demo
+def test_the_progress_table_reads_as_the_analysis_says(demo_catalog):
+    catalog, _ = demo_catalog
     table = progress_table(catalog, DEMO_STUDY).set_index("participant")
     analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
     assert list(table.index) == ["E01", "E02", "T01", "T02", "T03"]
@@ -58,8 +49,8 @@ def test_the_progress_table_reads_as_the_analysis_says(demo):
     )
 
 
-def test_cli_exports_xlsx_and_csv_with_the_same_rows(demo, tmp_path, monkeypatch):
-    catalog, home = demo
+def test_cli_exports_xlsx_and_csv_with_the_same_rows(demo_catalog, tmp_path, monkeypatch):
+    catalog, home = demo_catalog
     monkeypatch.setenv("VASCSIM_HOME", str(home))
     monkeypatch.setenv("VASCSIM_DATABASE_URL", catalog.url)
     runner = CliRunner()
@@ -83,8 +74,8 @@ def test_cli_exports_xlsx_and_csv_with_the_same_rows(demo, tmp_path, monkeypatch
     )
 
 
-def test_the_dashboard_serves_the_same_table_to_staff_only(demo):
-    catalog, home = demo
+def test_the_dashboard_serves_the_same_table_to_staff_only(demo_catalog):
+    catalog, home = demo_catalog
     with catalog.session() as orm:
         study = orm.scalar(select(Study).where(Study.name == DEMO_STUDY))
         create_user(orm, "supervisor", PASSWORD, "supervisor")
