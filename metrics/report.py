@@ -207,6 +207,56 @@ def _html_table(frame: pd.DataFrame) -> Markup:
     return Markup(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
 
 
+def trainee_summary(analysis: StudyAnalysis) -> pd.DataFrame:
+    """Each trainee in words a supervisor reads: sessions, passes, proficiency, CUSUM, retention; and
+    each benchmarked metric's retention change (retention minus practice) in display units, the header
+    naming unit and direction. The full table stays in tables/trainees.csv."""
+    trainees = analysis.trainees
+    if trainees.empty:
+        return trainees
+    rows = []
+    for row in trainees.to_dict(orient="records"):
+        trials = row.get("trials_to_proficiency")
+        competent = row.get("cusum_competent_at")
+        kept = row.get("retention_passed")
+        worse = row.get("retention_worse_metrics")
+        record = {
+            "trainee": row["participant_id"],
+            "practice sessions": int(row["practice_sessions"]),
+            "at the benchmark": int(row["passes"]),
+            "proficient": f"yes, at trial {int(trials)}"
+            if bool(row["proficient"]) and not pd.isna(trials)
+            else "not yet",
+            "CUSUM": f"competent at trial {int(competent)}" if not pd.isna(competent) else "not yet",
+            "retention session": "-"
+            if kept is None or pd.isna(kept)
+            else _retention_words(bool(kept), worse),
+        }
+        for name in trainees.columns:
+            if name.startswith("retention_change_"):
+                metric = name[len("retention_change_") :]
+                unit = display_unit(metric_unit(metric))
+                better = REGISTRY[metric].better if metric in REGISTRY else ""
+                header = f"{metric} change ({unit + ', ' if unit else ''}{better} is better)"
+                record[header] = (
+                    in_display_units(row[name], metric_unit(metric)) if not pd.isna(row[name]) else None
+                )
+        rows.append(record)
+    return pd.DataFrame(rows)
+
+
+def _retention_words(at_benchmark: bool, worse: float | None) -> str:
+    """ "below the benchmark; worse than practice on 1 metric(s)": the session against the benchmark,
+    then against the trainee's own practice (the study's retention rule)."""
+    text = "at the benchmark" if at_benchmark else "below the benchmark"
+    if worse is None or pd.isna(worse):
+        return text
+    count = int(worse)
+    return text + (
+        "; no metric worse than practice" if count == 0 else f"; worse than practice on {count} metric(s)"
+    )
+
+
 def summary_table(analysis: StudyAnalysis) -> pd.DataFrame:
     """The validity table's headline columns, in the order a reader scans them."""
     groups = analysis.settings.groups
@@ -339,6 +389,7 @@ TEMPLATE = """<!doctype html>
 <style>
 body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
 table { border-collapse: collapse; font-size: 0.85em; margin: 1em 0; }
+table { display: block; overflow-x: auto; max-width: 100%; } /* a wide table scrolls, the page does not */
 th, td { border: 1px solid #ccc; padding: 0.25em 0.5em; text-align: right; }
 th { background: #f3f3f3; } td:first-child, th:first-child, td.text, th.text { text-align: left; }
 .warning { background: #fff3cd; border: 1px solid #e0c060; padding: 0.6em 1em; }
@@ -589,7 +640,6 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     notes = [*analysis.validity.notes[1:], *analysis.notes]
     summary = summary_table(analysis)
     registry = REGISTRY.describe()[["name", "unit", "better", "definition", "reference"]]
-    trainees = analysis.trainees
     curves = analysis.learning_curves
 
     generated = generated_line()
@@ -630,7 +680,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "concurrent_notes": concurrent.notes if concurrent is not None else [],
         "roc": roc,
         "benchmark_table": _html_table(analysis.benchmarks),
-        "trainee_table": _html_table(trainees),
+        "trainee_table": _html_table(trainee_summary(analysis)),
         "learning": learning,
         "curve_table": _html_table(_curves_for_reading(curves)),
         "registry_version": REGISTRY_VERSION,
@@ -676,7 +726,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         lines += ["### Test-retest (benchmarked metrics)", "", _markdown_table(retest), "", consistency, ""]
         for name, table in raters:
             lines += [f"### Inter-rater agreement: {name}", "", _markdown_table(table), ""]
-    lines += ["## Trainees", "", _markdown_table(trainees), ""]
+    lines += ["## Trainees", "", _markdown_table(trainee_summary(analysis)), ""]
     lines += [f"![learning curve]({p})" for p in learning] + [""]
     lines += ["## Learning-curve fits", "", _markdown_table(_curves_for_reading(curves)), ""]
     lines += [

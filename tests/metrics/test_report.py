@@ -47,3 +47,21 @@ def test_primary_metrics_discriminate_and_trainees_get_a_status(analysis):
     assert set(analysis.benchmarks["metric"]) == set(PRIMARY)
     assert "retention_passed" in analysis.trainees.columns
     assert analysis.validity.composite.auc == pytest.approx(1.0)
+
+
+def test_the_trainee_table_reads_in_words_and_display_units(analysis):
+    """Issue 25: the report's trainee table was 2,281 px wide of raw columns; it now says each trainee's
+    status in words and the retention changes in display units with unit and direction."""
+    from metrics.report import trainee_summary
+
+    table = trainee_summary(analysis).set_index("trainee")
+    raw = analysis.trainees.set_index("participant_id")
+    assert list(table.index) == list(raw.index)
+    for code, row in raw.iterrows():
+        shown = table.loc[code]
+        proficient = f"yes, at trial {int(row['trials_to_proficiency'])}" if row["proficient"] else "not yet"
+        assert shown["proficient"] == proficient and shown["at the benchmark"] == row["passes"]
+        session = shown["retention session"]
+        assert session.startswith("at the benchmark" if row["retention_passed"] else "below the benchmark")
+    header = "path_length change (mm, lower is better)"
+    assert table[header].to_numpy() == pytest.approx(1e3 * raw["retention_change_path_length"].to_numpy())
