@@ -303,6 +303,31 @@ def session_ratings(request: Request, uid: str, viewer: Staff) -> list[dict]:
 
 
 @router.post(
+    "/sessions/{uid}/replay",
+    status_code=202,
+    summary="Render the session's replay against the experts (staff; one render at a time)",
+    responses=CONFLICT,
+)
+def start_replay(request: Request, uid: str, viewer: Staff) -> dict:
+    state = _state(request)
+    with state.catalog.session() as orm:
+        access.owned_session(orm, viewer, uid)
+    return state.replays.start(uid).as_dict()
+
+
+@router.get("/sessions/{uid}/replay", summary="Whether the session's replay is ready, rendering, or failed")
+def replay_status(request: Request, uid: str, viewer: Anyone) -> dict:
+    state = _state(request)
+    with state.catalog.session() as orm:
+        access.owned_session(orm, viewer, uid)
+    job = state.replays.status(uid)
+    if job is not None and job.state != "done":
+        return job.as_dict()
+    ready = replay_video(state.settings.home, uid) is not None
+    return {"state": "ready" if ready else "none", "frames_done": 0, "frames": 0, "error": ""}
+
+
+@router.post(
     "/sessions/{uid}/ratings",
     status_code=201,
     summary="Rate a session with GRS or OSATS (staff; the rater is the caller)",

@@ -15,6 +15,7 @@ from dashboard import api, pages, rating_pages
 from dashboard.analysis import AnalysisCache
 from dashboard.auth import LoginRateLimiter
 from dashboard.errors import install_error_handlers
+from dashboard.replay_jobs import ReplayJobs
 from dashboard.settings import DashboardSettings
 from dashboard.signals import SignalCache
 from recorder.ingest import IngestStore
@@ -69,6 +70,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
     app.state.ingest = ingest_store
     app.state.analyses = AnalysisCache(app.state.catalog)
     app.state.signals = SignalCache(settings.home)
+    app.state.replays = ReplayJobs(app.state.catalog, settings.home)
     app.state.login_limiter = LoginRateLimiter(settings.login_attempts, settings.login_window_s)
     app.state.templates = Jinja2Templates(directory=str(HERE / "templates"))
     app.state.blind_key = secrets.token_bytes(32)  # blinded rating's session names (dashboard.rating_pages)

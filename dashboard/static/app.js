@@ -243,10 +243,46 @@ function drawLive() {
   });
 }
 
+// -- a replay rendered on request, with its progress ------------------------------------
+function renderReplay() {
+  const button = document.getElementById("render-button");
+  if (!button) return;
+  const bar = document.getElementById("render-progress");
+  const said = document.getElementById("render-state");
+  const address = "/api/sessions/" + encodeURIComponent(pageData.uid) + "/replay";
+  async function poll() {
+    const answer = await (await fetch(address)).json();
+    if (answer.state === "rendering") {
+      bar.hidden = false;
+      bar.max = answer.frames || 1;
+      bar.value = answer.frames_done;
+      said.textContent = answer.frames ? "rendering frame " + answer.frames_done + " of " + answer.frames : "preparing...";
+      setTimeout(poll, 1000);
+    } else if (answer.state === "ready") {
+      said.textContent = "done: loading the video";
+      window.location.reload();
+    } else if (answer.state === "failed") {
+      said.textContent = "the render failed: " + answer.error;
+      button.disabled = false;
+    }
+  }
+  button.addEventListener("click", async () => {
+    button.disabled = true;
+    const answer = await fetch(address, { method: "POST", headers: { "X-CSRF-Token": button.dataset.csrf } });
+    if (!answer.ok) {
+      said.textContent = ((await answer.json()).error || {}).message || "the render could not start";
+      button.disabled = false;
+      return;
+    }
+    poll();
+  });
+  fetch(address).then((r) => r.json()).then((answer) => { if (answer.state === "rendering") { button.disabled = true; poll(); } });
+}
+
 document.addEventListener("DOMContentLoaded", () => {
   const page = document.body.dataset.page;
   if (page === "participant") drawCurves();
-  if (page === "session") drawSession();
+  if (page === "session") { drawSession(); renderReplay(); }
   if (page === "validity") drawValidity();
   if (page === "live") drawLive();
 });

@@ -1,0 +1,82 @@
+"""Replay videos rendered on request from the session page, one at a time, with progress.
+
+A supervisor who opens a session without a replay can have it rendered here instead of running
+`vascsim replay SESSION --vs-group experts`: the same inputs (the session, its task's tissue, the
+study's expert sessions on the task) and the same file (``VASCSIM_HOME/replays/SESSION-vs.mp4``), so
+the page and the CLI show the same video. Rendering runs in a worker thread (VTK renders offscreen,
+PyAV encodes; both release the interpreter for most of the work); one job at a time, so a server
+never renders two videos at once.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sessions.catalog import Catalog, WrongState
+
+REPLAY_SIZE = (640, 360)
+
+
+@dataclass
+class ReplayJob:
+    uid: str
+    state: str = "rendering"  # rendering, done, failed
+    done: int = 0
+    total: int = 0
+    error: str = ""
+    thread: threading.Thread | None = field(default=None, repr=False)
+
+    def as_dict(self) -> dict:
+        return {"state": self.state, "frames_done": self.done, "frames": self.total, "error": self.error}
+
+
+class ReplayJobs:
+    """The server's replay renders: at most one running; finished ones remembered until restart."""
+
+    def __init__(self, catalog: Catalog, home: Path) -> None:
+        self.catalog, self.home = catalog, home
+        self._jobs: dict[str, ReplayJob] = {}
+        self._lock = threading.Lock()
+
+    def start(self, uid: str) -> ReplayJob:
+        """Start rendering ``uid``'s replay against the experts (refused while another renders)."""
+        from sessions.replaying import replay_inputs
+
+        with self._lock:
+            busy = [j for j in self._jobs.values() if j.state == "rendering"]
+            if busy:
+                if busy[0].uid == uid:
+                    return busy[0]
+                raise WrongState(
+                    f"the replay of session {busy[0].uid} is rendering; try again when it is done"
+                )
+            inputs = replay_inputs(self.catalog, self.home, uid, versus_group="experts")  # checked first
+            job = ReplayJob(uid)
+            job.thread = threading.Thread(target=self._render, args=(job, inputs), daemon=True)
+            self._jobs[uid] = job
+            job.thread.start()
+            return job
+
+    def status(self, uid: str) -> ReplayJob | None:
+        return self._jobs.get(uid)
+
+    def _render(self, job: ReplayJob, inputs) -> None:
+        from metrics.replay.export import ReplaySettings, export_replay
+
+        recorded, tissue, experts = inputs
+
+        def advance(done: int, total: int) -> None:
+            job.done, job.total = done, total
+
+        target = self.home / "replays" / f"{job.uid}-vs.mp4"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        part = target.with_name(f".{target.stem}.part.mp4")
+        try:
+            export_replay(recorded, tissue, part, experts, ReplaySettings(size=REPLAY_SIZE), progress=advance)
+            part.replace(target)  # the page never sees a half-written video
+            job.state = "done"
+        except Exception as error:  # reported on the page; the server carries on
+            job.state, job.error = "failed", f"{type(error).__name__}: {error}"
+            part.unlink(missing_ok=True)
