@@ -55,6 +55,23 @@ class RenderFrame:
     ghost_needle: NDArray[np.float64] | None = None
 
 
+def stress_colours():
+    """The wall's colour scale: tissue pink at rest, through orange and red to dark red at the top of
+    the stress range, so an unloaded wall looks like tissue (a dark-to-bright scale such as inferno
+    paints it black) and the headlight's shading shows its shape."""
+    from matplotlib.colors import LinearSegmentedColormap
+
+    return LinearSegmentedColormap.from_list(
+        "tissue-stress",
+        [
+            (0.0, (0.93, 0.74, 0.70)),
+            (0.35, (0.96, 0.55, 0.33)),
+            (0.7, (0.82, 0.16, 0.12)),
+            (1.0, (0.40, 0.02, 0.08)),
+        ],
+    )
+
+
 class TissueRenderer:
     """Renders :class:`RenderFrame` objects of one mesh to RGB arrays (H, W, 3) uint8."""
 
@@ -91,7 +108,7 @@ class TissueRenderer:
         self._surface_actor = self.plotter.add_mesh(
             self.surface,
             scalars="von Mises (kPa)",
-            cmap="inferno",
+            cmap=stress_colours(),
             clim=(stress_range[0] / 1e3, stress_range[1] / 1e3),  # shown in kPa
             show_edges=False,
             smooth_shading=False,
