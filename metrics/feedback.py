@@ -74,13 +74,13 @@ def kind_of(metric: str) -> str:
 
 
 def band_widths_outside(value: float, q1: float, q3: float, better: str) -> float:
-    """How far ``value`` lies on the worse side of the band [q1, q3], in band widths (0 inside; a
-    zero-width band, e.g. every expert at 0 back-wall catches, counts its excess as widths of 1)."""
-    width = q3 - q1 if q3 > q1 else 0.0
+    """How far ``value`` lies on the worse side of the band [q1, q3], in band widths (0 inside). A
+    zero-width band (every expert alike) measures the excess against the experts' value itself, or
+    against 1 when that is 0 (e.g. every expert at 0 back-wall catches: 2 catches are 2 widths)."""
     excess = value - q3 if better == "lower" else q1 - value
     if excess <= 0:
         return 0.0
-    return excess / width if width > 0 else excess if excess >= 1 else excess / max(abs(q3), 1e-12)
+    return excess / (q3 - q1 if q3 > q1 else abs(q3) or 1.0)
 
 
 def what_to_work_on(rows: Sequence[dict], limit: int = 3) -> list[dict]:

@@ -102,8 +102,8 @@ class Outbox:
             raise LrsError(f"the LRS ledger {self.ledger_path} is not a key -> id map; move it aside")
         return data
 
-    def remember(self, statements: list[dict[str, Any]], keys: list[str]) -> None:
-        ledger = self.ledger()
+    def remember(self, ledger: dict[str, str], statements: list[dict[str, Any]], keys: list[str]) -> None:
+        """Add a stored batch to ``ledger`` (the push's copy, read once) and write it whole."""
         for key, statement in zip(keys, statements, strict=True):
             ledger[key] = statement["id"]
         _write_whole(self.ledger_path, json.dumps(ledger, indent=0, sort_keys=True))
@@ -174,7 +174,7 @@ def push(
     try:
         for path, keys, batch in outbox.batches():
             _send(client, endpoint, path, batch, outbox)
-            outbox.remember(batch, keys)
+            outbox.remember(ledger, batch, keys)
             path.unlink()
             result.sent += len(batch)
             result.voided += sum(1 for key in keys if key.startswith("void|"))

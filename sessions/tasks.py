@@ -233,29 +233,30 @@ def user_tasks_dir() -> Path:
     return data_home() / "tasks"
 
 
+def _read_user_task(path: Path) -> TaskSpec:
+    try:
+        data = json.loads(path.read_text())
+        return TaskSpec(
+            **{
+                **data,
+                "entry": tuple(data["entry"]),
+                "normal": tuple(data["normal"]),
+                "bite_direction": tuple(data["bite_direction"]),
+            }
+        )
+    except (OSError, ValueError, TypeError, KeyError) as error:
+        raise VascsimError(
+            f"task file {path} cannot be read ({error}); remove its folder or fix it"
+        ) from error
+
+
 def user_tasks() -> dict[str, TaskSpec]:
     """Tasks added from a mesh, read from the data directory (each checked as it is read)."""
-    found = {}
     folder = user_tasks_dir()
     if not folder.is_dir():
-        return found
-    for path in sorted(folder.glob(f"*/{USER_TASK_FILE}")):
-        try:
-            data = json.loads(path.read_text())
-            spec = TaskSpec(
-                **{
-                    **data,
-                    "entry": tuple(data["entry"]),
-                    "normal": tuple(data["normal"]),
-                    "bite_direction": tuple(data["bite_direction"]),
-                }
-            )
-        except (OSError, ValueError, TypeError, KeyError) as error:
-            raise VascsimError(
-                f"task file {path} cannot be read ({error}); remove its folder or fix it"
-            ) from error
-        found[spec.name] = spec
-    return found
+        return {}
+    specs = (_read_user_task(path) for path in sorted(folder.glob(f"*/{USER_TASK_FILE}")))
+    return {spec.name: spec for spec in specs}
 
 
 def all_tasks() -> dict[str, TaskSpec]:
@@ -270,10 +271,10 @@ def known_task(name: str) -> bool:
 def task_spec(name: str) -> TaskSpec:
     if name in TASKS:
         return TASKS[name]
-    added = user_tasks()
-    if name not in added:
-        raise VascsimError(f"unknown task {name!r}; known tasks: {', '.join([*TASKS, *added])}")
-    return added[name]
+    path = user_tasks_dir() / name / USER_TASK_FILE
+    if not path.is_file():  # only a miss lists them all
+        raise VascsimError(f"unknown task {name!r}; known tasks: {', '.join(all_tasks())}")
+    return _read_user_task(path)
 
 
 def add_mesh_task(

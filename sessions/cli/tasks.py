@@ -178,7 +178,8 @@ def tasks_add(
 ) -> None:
     """Add a task on your own vessel geometry: a segmentation's lumen surface (with --thickness or
     --outer) is meshed into a layered wall (TetGen; fTetWild when TetGen refuses the surface) and its
-    quality reported; a tetrahedral mesh is taken as it is. The cut ends (end0, end1, ...) are held."""
+    quality reported; a tetrahedral mesh is taken as it is. The cut ends (end0, end1, ...) are held.
+    Then `vascsim run --task NAME` runs it."""
     from pathlib import Path
 
     from sessions.tasks import add_mesh_task
@@ -216,9 +217,8 @@ def tasks_add(
         region_tissue=regions,
     )
     for line in quality.lines():
-        click.echo(line)
+        click.echo(click.wrap_text(line, 78, subsequent_indent="  "))
     where = ", ".join(f"{1e3 * v:.2f}" for v in spec.entry)
     click.echo(
-        f"task {name} added: one bite at ({where}) mm, held on {', '.join(fixed) or 'nothing'}; "
-        f"`vascsim run --task {name}` runs it"
+        f"task {name} added: one bite at ({where}) mm, held on {', '.join(fixed) or 'nothing'}"
     )
