@@ -14,7 +14,7 @@ from sqlalchemy import func, select
 from dashboard.access import owned_participant, owned_session, owned_study, session_filter
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
-from metrics.feedback import feedback_line, what_to_work_on
+from metrics.feedback import metric_groups, participant_feedback, session_feedback
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import (
     composite_summary,
@@ -190,6 +190,7 @@ def participant_progress(
         "curves": [],
         "benchmarks": [],
         "trainee": None,
+        "feedback": None,
     }
     if not any(s["status"] in SCORABLE for s in progress["sessions"]):
         return progress
@@ -216,6 +217,8 @@ def participant_progress(
     if not analysis.trainees.empty and info["code"] in set(analysis.trainees["participant_id"]):
         found = analysis.trainees[analysis.trainees["participant_id"] == info["code"]]
         progress["trainee"] = records(found)[0]
+        progress["feedback"] = participant_feedback(analysis, info["code"])
+        progress["feedback"]["task"] = analysis.settings.task
     return progress
 
 
@@ -258,10 +261,7 @@ def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, ui
     )
     detail["metrics"] = against_band(values, band)
     detail["signal_bands"] = signal_bands(detail["metrics"])
-    detail["work_on"] = [
-        {"metric": item["metric"], "kind": item["kind"], "line": feedback_line(item)}
-        for item in what_to_work_on(detail["metrics"])
-    ]
+    detail.update(session_feedback(detail["metrics"]), metric_groups=metric_groups(detail["metrics"]))
     detail["stitches"] = session_stitches(catalog, uid)
     detail["target_bite_m"] = target_bite(detail["task"])
     return detail

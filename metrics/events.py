@@ -43,13 +43,17 @@ COLLAPSED: dict[str, str] = {
 """Kinds that come in runs: one line with a count and this explanation instead of one line each."""
 
 
+SAFETY_EVENTS = ("overstress", "edge_overstress", "force_clamped", "nonfinite_force", "device_lost")
+"""Kinds that say the patient (or the trainee's hand) was at risk: listed first, apart from the rest."""
+
+
 def event_name(kind: str) -> str:
     return EVENT_NAMES.get(kind, kind.replace("_", " "))
 
 
 def readable_events(events: pd.DataFrame) -> list[dict]:
     """One entry per event in time order (time s, kind, name, the needle's angle to the surface's
-    normal in deg or None and that as ``detail`` text), the
+    normal in deg or None and that as ``detail`` text, ``safety`` for :data:`SAFETY_EVENTS`), the
     :data:`COLLAPSED` kinds as one entry each at their first time with ``count`` and ``explanation``."""
     out: list[dict] = []
     collapsed: dict[str, dict] = {}  # kind -> its one entry in ``out``
@@ -66,6 +70,7 @@ def readable_events(events: pd.DataFrame) -> list[dict]:
             "name": event_name(kind),
             "entry_angle_deg": angle,  # the needle's angle to the surface's normal where it met it
             "detail": "" if angle is None else f"{angle:g} deg off perpendicular",
+            "safety": kind in SAFETY_EVENTS,
         }
         if kind in COLLAPSED:
             entry.update(count=1, explanation=COLLAPSED[kind])

@@ -1,11 +1,15 @@
-"""What a trainee should work on next: the metrics a session did worse on than the experts, ranked.
+"""What a trainee should work on next, and what they already do well, against the experts' band.
 
-Safety first (the never events: back-wall catches, wound-edge tears, force beyond the device's
-rating), then the quality of the stitch (placement, the tissue's load), then efficiency (motion,
-insertion, forces, the assisting hand); within each, by how far outside the experts' interquartile
-band the value lies, in band widths. Each item carries a sentence a supervisor would say
-(:data:`ADVICE`, one per registered metric, checked by a test), so the CLI, the dashboard and the
-report say the same thing.
+The never events first (back-wall catches, wound-edge tears, force beyond the device's rating: never
+cut from the list), then the rest of safety (:data:`SAFETY_GROUP`: partial-thickness bites, extra
+punctures, excessive force, the tissue's load), the quality of the stitch (placement), then
+efficiency (motion, insertion, the remaining forces, the assisting hand); within each, by how far
+outside the experts' interquartile band the value lies, in band widths. Each item carries a
+sentence a supervisor would say (:data:`ADVICE`, one per registered metric, checked by a test),
+so the CLI, the dashboard and the report say the same thing. Strengths are the metrics better
+than the experts' middle half (then the safety and quality metrics level with it), in the same
+order. :func:`session_feedback` gives both for one session, :func:`participant_feedback` for a
+trainee's recent practice.
 """
 
 from __future__ import annotations
@@ -13,14 +17,32 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import pandas as pd
+
+from metrics.band import against_band, expert_quartiles
 from metrics.registry import REGISTRY
 from metrics.standards import SAFETY_METRICS
+from metrics.study import StudyAnalysis, practice_mask
 
 KINDS = ("safety", "quality", "efficiency")
 """The order feedback is ranked in: what harms the patient, then what makes the anastomosis, then speed
 and economy."""
 
-QUALITY_GROUPS = ("placement", "tissue")
+SAFETY_GROUP = (
+    *SAFETY_METRICS,
+    "full_thickness_fraction",
+    "extra_punctures",
+    "peak_force",
+    "wound_edge_stress",
+    "high_stress_area",
+    "stress_concentration",
+    "peak_stretch",
+    "time_above_strain_limit",
+)
+"""What harms the patient: the never events, partial-thickness bites and extra punctures (leaks),
+excessive force, and the load on the tissue (stress, stretch, the wound edge)."""
+
+QUALITY_GROUPS = ("placement",)
 
 ADVICE: dict[str, str] = {
     "task_time": "Work through the steps without pauses; speed follows a settled routine.",
@@ -67,56 +89,137 @@ ADVICE: dict[str, str] = {
 
 
 def kind_of(metric: str) -> str:
-    """safety, quality or efficiency."""
-    if metric in SAFETY_METRICS:
+    """safety (:data:`SAFETY_GROUP`), quality (where the stitch went) or efficiency."""
+    if metric in SAFETY_GROUP:
         return "safety"
     return "quality" if metric in REGISTRY and REGISTRY[metric].group in QUALITY_GROUPS else "efficiency"
 
 
-def band_widths_outside(value: float, q1: float, q3: float, better: str) -> float:
-    """How far ``value`` lies on the worse side of the band [q1, q3], in band widths (0 inside). A
-    zero-width band (every expert alike) measures the excess against the experts' value itself, or
-    against 1 when that is 0 (e.g. every expert at 0 back-wall catches: 2 catches are 2 widths)."""
-    excess = value - q3 if better == "lower" else q1 - value
+def band_widths_outside(value: float, q1: float, q3: float, better: str, side: str = "worse") -> float:
+    """How far ``value`` lies on the ``side`` ("worse" or "better") of the band [q1, q3], in band
+    widths (0 inside or on the other side). A zero-width band (every expert alike) measures the excess
+    against the experts' value itself, or against 1 when that is 0 (e.g. every expert at 0 back-wall
+    catches: 2 catches are 2 widths)."""
+    worse_excess = value - q3 if better == "lower" else q1 - value
+    excess = worse_excess if side == "worse" else (q1 - value if better == "lower" else value - q3)
     if excess <= 0:
         return 0.0
     return excess / (q3 - q1 if q3 > q1 else abs(q3) or 1.0)
 
 
 def what_to_work_on(rows: Sequence[dict], limit: int = 3) -> list[dict]:
-    """The metrics a session did worse on than the experts (rows as :func:`sessions.review.against_band`
-    gives them), safety first, then quality, then efficiency, each kind by distance outside the band;
-    at most ``limit`` items, every safety item kept. Each: metric, kind, widths, advice."""
+    """The metrics a session did worse on than the experts (rows as :func:`metrics.band.against_band`
+    gives them): the never events, then safety, quality and efficiency, each kind by distance outside
+    the band; at most ``limit`` items, every never event kept. Each: metric, kind, widths, advice."""
+    items = _ranked(rows, ("worse",), "worse")
+    never = [item for item in items if item["metric"] in SAFETY_METRICS]
+    others = [item for item in items if item["metric"] not in SAFETY_METRICS]
+    return never + others[: max(limit - len(never), 0)]
+
+
+def strengths(rows: Sequence[dict], limit: int = 2) -> list[dict]:
+    """What the session did well: the metrics better than the experts' middle half (safety, quality,
+    efficiency; each kind by distance beyond the band), then the safety and quality metrics level
+    with the experts; at most ``limit``. Each: metric, kind, widths, position, row."""
+    better = _ranked(rows, ("better",), "better")
+    level = [item for item in _ranked(rows, ("within",), "better") if item["kind"] != "efficiency"]
+    return (better + level)[:limit]
+
+
+def _ranked(rows: Sequence[dict], positions: tuple[str, ...], side: str) -> list[dict]:
     items = []
     for row in rows:
-        if row.get("versus_experts") != "worse" or row["metric"] not in REGISTRY:
+        if row.get("versus_experts") not in positions or row["metric"] not in REGISTRY:
             continue
         q1, q3, value = row["expert_q1"], row["expert_q3"], row["value"]
         if None in (q1, q3, value) or not all(map(math.isfinite, (q1, q3, value))):
             continue
-        widths = band_widths_outside(value, q1, q3, row["better"])
         items.append(
             {
                 "metric": row["metric"],
                 "kind": kind_of(row["metric"]),
-                "widths": widths,
+                "widths": band_widths_outside(value, q1, q3, row["better"], side),
+                "position": row["versus_experts"],
                 "advice": ADVICE.get(row["metric"], REGISTRY[row["metric"]].definition),
                 "row": row,
             }
         )
-    items.sort(key=lambda item: (KINDS.index(item["kind"]), -item["widths"]))
-    safety = [item for item in items if item["kind"] == "safety"]
-    return safety + [item for item in items if item["kind"] != "safety"][: max(limit - len(safety), 0)]
+    items.sort(key=lambda i: (i["metric"] not in SAFETY_METRICS, KINDS.index(i["kind"]), -i["widths"]))
+    return items
 
 
 def feedback_line(item: dict) -> str:
     """ "Aim the needle tip at the entry mark before piercing. (entry_to_target 0.65 mm; experts
     0.07-0.10 mm, lower is better)": what to do, then the numbers behind it in display units."""
-    row, shown = item["row"], item["row"]["display"]
+    return f"{item['advice']} ({_numbers(item['row'])})"
+
+
+def strength_line(item: dict) -> str:
+    """ "Better than the experts' middle half: entry_to_target 0.05 mm (experts 0.07-0.10 mm, lower is
+    better)", or "Level with the experts: ..." for a value inside their band."""
+    better = item["position"] == "better"
+    lead = "Better than the experts' middle half" if better else "Level with the experts"
+    numbers = _numbers(item["row"]).split("; ", 1)
+    return f"{lead}: {numbers[0]} ({numbers[1]})"
+
+
+def _numbers(row: dict) -> str:
+    shown = row["display"]
     unit = f" {row['display_unit']}" if row["display_unit"] else ""
     low, high = shown["expert_q1"], shown["expert_q3"]
     experts = f"{low:.3g}" if f"{low:.3g}" == f"{high:.3g}" else f"{low:.3g}-{high:.3g}"
-    return (
-        f"{item['advice']} ({row['metric']} {shown['value']:.3g}{unit}; experts {experts}{unit}, "
-        f"{row['better']} is better)"
-    )
+    return f"{row['metric']} {shown['value']:.3g}{unit}; experts {experts}{unit}, {row['better']} is better"
+
+
+def session_feedback(rows: Sequence[dict], limit: int = 3) -> dict[str, list[dict]]:
+    """What to work on and strengths for rows as :func:`metrics.band.against_band` gives them, each
+    item ready to show: metric, kind, line. The session page, ``vascsim sessions show``, the
+    participant page and the report all show these."""
+    return {
+        "work_on": [
+            {"metric": i["metric"], "kind": i["kind"], "line": feedback_line(i)}
+            for i in what_to_work_on(rows, limit)
+        ],
+        "strengths": [
+            {"metric": i["metric"], "kind": i["kind"], "line": strength_line(i)} for i in strengths(rows)
+        ],
+    }
+
+
+METRIC_GROUPS = (("safety", "Safety"), ("quality-efficiency", "Quality and efficiency"))
+"""How a session's metrics are shown: the never events and tissue harm first, then the rest (the
+grouping surgical simulators' users know)."""
+
+
+def metric_groups(rows: Sequence[dict]) -> list[dict]:
+    """``rows`` split into the groups of :data:`METRIC_GROUPS` (kind, title, metrics), registry order
+    kept inside each; an empty group is left out."""
+    safety = [row for row in rows if kind_of(row["metric"]) == "safety"]
+    rest = [row for row in rows if kind_of(row["metric"]) != "safety"]
+    return [
+        {"kind": kind, "title": title, "metrics": members}
+        for (kind, title), members in zip(METRIC_GROUPS, (safety, rest), strict=True)
+        if members
+    ]
+
+
+RECENT_SESSIONS = 3
+"""How many of a trainee's latest practice sessions their feedback summarises (the median of each)."""
+
+
+def participant_feedback(analysis: StudyAnalysis, code: str, recent: int = RECENT_SESSIONS) -> dict:
+    """A trainee's feedback from their latest ``recent`` practice sessions of the analysed task: the
+    median of each metric against the experts' band (the quartiles of every expert session in the
+    analysis). Keys: work_on, strengths (as :func:`session_feedback`), trials (the trials summarised;
+    empty when the trainee has no practice session or no expert has one)."""
+    settings, table = analysis.settings, analysis.sessions
+    names = [name for name in table.columns if name in REGISTRY]
+    experts = table[table[settings.group_col] == settings.skilled_group]
+    band = expert_quartiles(experts[names].melt(var_name="metric", value_name="value"))
+    mine = table[(table[settings.cluster_col] == code) & practice_mask(table)].sort_values("trial")
+    mine = mine.tail(recent)
+    if mine.empty or not band:
+        return {"work_on": [], "strengths": [], "trials": []}
+    medians = mine[names].median(skipna=True)
+    values = {name: (None if pd.isna(medians[name]) else float(medians[name])) for name in names}
+    return {**session_feedback(against_band(values, band)), "trials": [int(t) for t in mine["trial"]]}

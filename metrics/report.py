@@ -18,6 +18,7 @@ from markupsafe import Markup
 from matplotlib.ticker import MaxNLocator
 from sklearn.metrics import roc_curve
 
+from metrics.feedback import RECENT_SESSIONS, participant_feedback
 from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
@@ -245,6 +246,20 @@ def trainee_summary(analysis: StudyAnalysis) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+FEEDBACK_BASIS = (
+    f"Each trainee's last {RECENT_SESSIONS} practice sessions (the median of each metric) against the "
+    "experts' middle half on this task: the never events first, then safety, the quality of the stitch "
+    "and efficiency, each by how far outside the experts' band; the same lines as the participant page."
+)
+
+
+def trainee_feedback(analysis: StudyAnalysis) -> list[tuple[str, dict]]:
+    """Per trainee (as in the trainee table), :func:`metrics.feedback.participant_feedback`."""
+    if analysis.trainees.empty:
+        return []
+    return [(code, participant_feedback(analysis, code)) for code in analysis.trainees["participant_id"]]
+
+
 def _retention_words(at_benchmark: bool, worse: float | None) -> str:
     """ "below the benchmark; worse than practice on 1 metric(s)": the session against the benchmark,
     then against the trainee's own practice (the study's retention rule)."""
@@ -434,12 +449,22 @@ and the largest shift in trials-to-proficiency among those proficient both ways.
 {{ table }}{% endfor %}{% endif %}
 <h2>Trainees</h2>
 {{ trainee_table }}
+{% if feedback %}<h3>What each trainee should work on next</h3>
+<p>{{ feedback_basis }}</p>
+{% for code, items in feedback %}<h4>{{ code }}</h4>
+{% if items.work_on %}<ol class="work-on">{% for item in items.work_on %}
+<li><strong>{{ item.kind }}</strong>: {{ item.line }}</li>{% endfor %}</ol>
+{% else %}<p>Nothing worse than the experts' middle half.</p>{% endif %}
+{% if items.strengths %}<p>Strengths:</p><ul>{% for item in items.strengths %}
+<li>{{ item.line }}</li>{% endfor %}</ul>{% endif %}
+{% endfor %}{% endif %}
 {% for path in learning %}<p><img src="{{ path }}" alt="learning curve"></p>{% endfor %}
 <h2>Learning-curve fits</h2>
 {{ curve_table }}
 <h2>Metric definitions (registry version {{ registry_version }})</h2>
 {{ registry_table }}
-<p>Tables as CSV: {% for name in csv %}<a href="tables/{{ name }}">{{ name }}</a> {% endfor %}</p>
+<p>Tables as CSV (SI units, named in each header or in a unit column):
+{% for name in csv %}<a href="tables/{{ name }}">{{ name }}</a> {% endfor %}</p>
 </body></html>
 """
 
@@ -567,15 +592,54 @@ def _method_lines(analysis: StudyAnalysis) -> list[str]:
 
 
 def _curves_for_reading(curves: pd.DataFrame) -> pd.DataFrame:
-    """The fits as a reader should take them: a plateau the data cannot pin down is not printed."""
+    """The fits as a reader should take them: plateau, amplitude and benchmark in the metric's display
+    unit (named in its own column); a plateau the data cannot pin down is not printed."""
     if curves.empty:
         return curves
     shown = curves.drop(columns=["plateau_determined"]).copy()
+    units = [metric_unit(m) for m in curves["metric"]]
+    shown.insert(shown.columns.get_loc("metric") + 1, "unit", [display_unit(u) for u in units])
+    for column in ("plateau", "amplitude", "benchmark"):
+        shown[column] = [in_display_units(v, u) for v, u in zip(curves[column], units, strict=True)]
     shown["plateau"] = [
-        f"{p:.3g}" if ok else "not determined by these trials"
-        for p, ok in zip(curves["plateau"], curves["plateau_determined"], strict=True)
+        f"{p:.3g}" if ok and p is not None else "not determined by these trials"
+        for p, ok in zip(shown["plateau"], curves["plateau_determined"], strict=True)
     ]
     return shown
+
+
+def benchmarks_for_reading(benchmarks: pd.DataFrame) -> pd.DataFrame:
+    """The benchmarks as a supervisor reads them: each metric's pass condition in its display unit
+    ("<= 3.04 deg"), the rule and the experts behind it (the SI mark stays in tables/benchmarks.csv)."""
+    if benchmarks.empty:
+        return benchmarks
+    shown = benchmarks[["metric", "pass_if", "better", "rule", "experts"]]
+    return shown.rename(columns={"pass_if": "a session passes when", "better": "better is"})
+
+
+SI_TABLES_IN_METRIC_UNITS = {
+    "benchmarks.csv": ("benchmark",),
+    "learning_curves.csv": ("plateau", "amplitude", "benchmark"),
+}
+"""Long tables whose named columns hold values in each row's metric unit: they get a ``unit`` column."""
+
+
+def csv_with_units(name: str, frame: pd.DataFrame) -> pd.DataFrame:
+    """A table as the report writes it to tables/: SI values, and every header says its unit. A wide
+    column named after a metric (or ``retention_change_<metric>``) becomes "path_length [m]" (a count
+    or ratio, unit "1", keeps its name); a long
+    table of :data:`SI_TABLES_IN_METRIC_UNITS` gets a ``unit`` column beside ``metric``."""
+    if name in SI_TABLES_IN_METRIC_UNITS and "metric" in frame.columns and "unit" not in frame.columns:
+        frame = frame.copy()
+        frame.insert(frame.columns.get_loc("metric") + 1, "unit", [metric_unit(m) for m in frame["metric"]])
+        return frame
+
+    def header(column: str) -> str:
+        metric = column.removeprefix("retention_change_")
+        unit = metric_unit(metric) if metric in REGISTRY else ""
+        return f"{column} [{unit}]" if unit not in ("", "1") else column  # a count or ratio: no unit
+
+    return frame.rename(columns=header)
 
 
 def generated_line() -> str:
@@ -625,7 +689,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         csv["composite_scores.csv"] = analysis.validity.composite.scores
         csv["composite_weights.csv"] = analysis.validity.composite.weights.rename_axis("metric").reset_index()
     for name, frame in csv.items():
-        frame.to_csv(tables / name, index=False)
+        csv_with_units(name, frame).to_csv(tables / name, index=False)
 
     box_plots = _box_plots(analysis, figures)
     roc = _roc(analysis, figures)
@@ -643,6 +707,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     curves = analysis.learning_curves
 
     generated = generated_line()
+    feedback = trainee_feedback(analysis)
     standards = standards_tables(analysis)
     retest, consistency, raters = reliability_tables(analysis)
     context = {
@@ -679,8 +744,10 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "concurrent_table": _html_table(concurrent.table) if concurrent is not None else "",
         "concurrent_notes": concurrent.notes if concurrent is not None else [],
         "roc": roc,
-        "benchmark_table": _html_table(analysis.benchmarks),
+        "benchmark_table": _html_table(benchmarks_for_reading(analysis.benchmarks)),
         "trainee_table": _html_table(trainee_summary(analysis)),
+        "feedback": feedback,
+        "feedback_basis": FEEDBACK_BASIS,
         "learning": learning,
         "curve_table": _html_table(_curves_for_reading(curves)),
         "registry_version": REGISTRY_VERSION,
@@ -714,7 +781,8 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     if concurrent is not None:
         lines += ["## Concurrent validity", "", *[f"- {n}" for n in concurrent.notes], ""]
         lines += [_markdown_table(concurrent.table), ""]
-    lines += ["## Proficiency benchmarks", "", _markdown_table(analysis.benchmarks), ""]
+    benchmarks = _markdown_table(benchmarks_for_reading(analysis.benchmarks))
+    lines += ["## Proficiency benchmarks", "", benchmarks, ""]
     if standards:
         lines += ["## Standard setting: how often each pass mark misjudges", ""]
         lines += [*[f"- {n}" for n in analysis.standards.notes], "", _markdown_table(standards["marks"]), ""]
@@ -727,6 +795,13 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         for name, table in raters:
             lines += [f"### Inter-rater agreement: {name}", "", _markdown_table(table), ""]
     lines += ["## Trainees", "", _markdown_table(trainee_summary(analysis)), ""]
+    if feedback:
+        lines += ["### What each trainee should work on next", "", FEEDBACK_BASIS, ""]
+        for code, items in feedback:
+            lines += [f"#### {code}", ""]
+            lines += [f"{n}. **{i['kind']}**: {i['line']}" for n, i in enumerate(items["work_on"], start=1)]
+            lines += [] if items["work_on"] else ["Nothing worse than the experts' middle half."]
+            lines += ["", *[f"- Strength: {i['line']}" for i in items["strengths"]], ""]
     lines += [f"![learning curve]({p})" for p in learning] + [""]
     lines += ["## Learning-curve fits", "", _markdown_table(_curves_for_reading(curves)), ""]
     lines += [

@@ -92,6 +92,7 @@ async function drawSession() {
   const host = document.getElementById("signals");
   const video = document.getElementById("replay");
   const list = document.getElementById("events");
+  const safetyList = document.getElementById("safety-events");
   if (!host) return;
   const response = await fetch("/api/sessions/" + encodeURIComponent(pageData.uid) + "/signals");
   if (!response.ok) {
@@ -153,9 +154,15 @@ async function drawSession() {
       note.textContent = " (" + event.explanation + ")";
       item.appendChild(note);
     }
-    list.appendChild(item);
+    (event.safety && safetyList ? safetyList : list).appendChild(item);
   });
-  eventFilter(list, data.events || []);
+  if (safetyList && !safetyList.children.length) {
+    const none = document.createElement("li");
+    none.className = "none";
+    none.textContent = "None in this session: no overstress, no force limited, no device fault.";
+    safetyList.appendChild(none);
+  }
+  eventFilter(list, (data.events || []).filter((e) => !e.safety));
 
   function moveCursor(t) {
     host.dataset.cursor = t.toFixed(3);

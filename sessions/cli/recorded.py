@@ -108,17 +108,14 @@ def sessions_show(uid: str, as_json: bool) -> None:
             "error": row.error,
             "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
         }
-    from metrics.feedback import feedback_line, what_to_work_on
+    from metrics.feedback import session_feedback
     from sessions.review import session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)
     data["metrics"] = {r["metric"]: r["value"] for r in rows}
     data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
     data["stitches"] = session_stitches(catalog, uid)
-    work_on = what_to_work_on(rows)
-    data["work_on"] = [
-        {"metric": i["metric"], "kind": i["kind"], "advice": feedback_line(i)} for i in work_on
-    ]
+    data.update(session_feedback(rows))
     if as_json:
         print_json(data)
         return
@@ -139,9 +136,13 @@ def sessions_show(uid: str, as_json: bool) -> None:
             click.echo(
                 "work on      (safety first, then quality, then efficiency; furthest from the experts first)"
             )
-            for item in value or [{"kind": "", "advice": "nothing worse than the experts' middle half"}]:
-                text = f"{item['kind']}: {item['advice']}" if item["kind"] else item["advice"]
+            for item in value or [{"kind": "", "line": "nothing worse than the experts' middle half"}]:
+                text = f"{item['kind']}: {item['line']}" if item["kind"] else item["line"]
                 click.echo(click.wrap_text(text, 78, initial_indent="  ", subsequent_indent="    "))
+        elif key == "strengths":
+            click.echo("strengths    (better than the experts' middle half, or level with them)")
+            for item in value or [{"line": "none yet"}]:
+                click.echo(click.wrap_text(item["line"], 78, initial_indent="  ", subsequent_indent="    "))
         elif key == "stitches":
             _show_stitches(value)
         else:

@@ -28,6 +28,7 @@ def demo_site(tmp_path_factory, copy_demo):
         study = orm.scalar(select(Study).where(Study.name == DEMO_STUDY))
         people = {p.code: p for p in orm.scalars(select(Participant).where(Participant.study_id == study.id))}
         create_user(orm, "supervisor", PASSWORD, "supervisor")
+        create_user(orm, "admin", PASSWORD, "admin")
         trainee = create_user(orm, "trainee", PASSWORD, "trainee")
         link_participant(orm, trainee, people["T01"])
         own = orm.scalar(
@@ -291,3 +292,79 @@ def test_the_force_plot_shows_the_expert_band_and_the_needles_passage(demo_site)
         after = page.evaluate("() => document.querySelector('#plot-force').layout.shapes.length")
         assert after == len(shapes)
         assert "experts' peak force" in page.inner_text("#plot-key")
+
+
+@pytest.mark.slow
+def test_an_admin_links_a_trainee_by_code_and_an_unknown_code_is_refused(demo_site):
+    base, _, _, _ = demo_site
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1366, "height": 900})
+        _sign_in(page, base, "admin")
+        page.goto(f"{base}/admin")
+        assert page.locator("select[name=role]").input_value() == ""  # no role chosen for you
+        users = page.locator("#users tbody tr").count()
+
+        def create(username: str, participants: str) -> str:
+            page.fill("input[name=username]", username)
+            page.fill("input[name=password]", PASSWORD)
+            page.select_option("select[name=role]", "trainee")
+            page.fill("form.card input[name=participants]", participants)
+            page.click("form.card button[type=submit] >> text=Create")
+            page.wait_for_load_state("networkidle")
+            return page.inner_text("#admin-message")
+
+        said = create("trainee-t99", f"{DEMO_STUDY}:T99")
+        assert "T99" in said and "created" not in said
+        assert page.locator("#users tbody tr").count() == users  # nothing made
+        said = create("trainee-t02", f"{DEMO_STUDY}:T02")
+        assert "created" in said
+        row = page.locator("#users tbody tr", has_text="trainee-t02")
+        assert row.locator("input[name=participants]").input_value() == f"{DEMO_STUDY}:T02"  # a code, no id
+        # linked later to another participant, from the users table
+        row.locator("input[name=participants]").fill(f"{DEMO_STUDY}:T03")
+        row.locator("button", has_text="Save links").click()
+        page.wait_for_load_state("networkidle")
+        assert "linked" in page.inner_text("#admin-message")
+        row = page.locator("#users tbody tr", has_text="trainee-t02")
+        assert row.locator("input[name=participants]").input_value() == f"{DEMO_STUDY}:T03"
+
+
+@pytest.mark.slow
+def test_what_to_work_on_is_listed_and_ranked_with_safety_first(demo_site):
+    base, ids, own, _ = demo_site
+    order = {"safety": 0, "quality": 1, "efficiency": 2}
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1366, "height": 900})
+        _sign_in(page, base, "supervisor")
+        for address in (f"/sessions/{own}", f"/participants/{ids['T01']}"):
+            page.goto(base + address)
+            kinds = page.locator("#work-on ol li .kind").all_inner_texts()
+            assert kinds, f"a first-week trainee has something to work on ({address})"
+            ranks = [order[k.lower()] for k in kinds]
+            assert ranks == sorted(ranks), kinds
+            lines = page.locator("#work-on ol li").all_inner_texts()
+            assert all("experts" in line and "is better" in line for line in lines)
+        page.goto(f"{base}/sessions/{own}")
+        groups = page.locator("#metrics tr.group th").all_inner_texts()
+        assert groups[-1] == "Quality and efficiency" and groups[0] in ("Safety", "Quality and efficiency")
+        page.wait_for_selector("#signals[data-ready='1']", timeout=60_000)
+        assert page.locator("#safety-events li").count() >= 1  # the events or "None in this session"
+        safety = page.evaluate("() => [...document.querySelectorAll('#events li')].map(l => l.dataset.kind)")
+        assert not {"overstress", "edge_overstress", "force_clamped"} & set(safety)
+
+
+@pytest.mark.slow
+def test_the_render_button_produces_a_playable_replay(demo_site):
+    base, _, _, other = demo_site
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1366, "height": 900})
+        _sign_in(page, base, "supervisor")
+        page.goto(f"{base}/sessions/{other}")
+        assert page.locator("#replay").count() == 0
+        page.click("#render-button")
+        page.wait_for_selector("video#replay", timeout=180_000)  # the page reloads with the video
+        page.wait_for_function("() => document.getElementById('replay').readyState >= 2", timeout=30_000)
+        page.evaluate("() => document.getElementById('replay').play()")
+        page.wait_for_function("() => document.getElementById('replay').currentTime > 0.3", timeout=30_000)
+        assert page.evaluate("() => document.getElementById('replay').error") is None
+        assert page.evaluate("() => document.getElementById('replay').videoWidth") == 640

@@ -3,7 +3,7 @@ checks collapse into one line with a count and an explanation."""
 
 import pandas as pd
 
-from metrics.events import COLLAPSED, EVENT_NAMES, readable_events
+from metrics.events import COLLAPSED, EVENT_NAMES, SAFETY_EVENTS, readable_events
 from recorder.schema import EVENT_KINDS
 
 
@@ -31,3 +31,21 @@ def test_a_run_of_plausibility_checks_is_one_line_with_its_count():
     assert readable[2]["count"] == 25 and readable[2]["time"] == 1.0
     assert "plausibility check" in readable[2]["explanation"]
     assert "count" not in readable[3]
+
+
+def test_safety_events_are_flagged_for_listing_first():
+    events = pd.DataFrame(
+        [
+            {"time": 0.8, "kind": "pierce"},
+            {"time": 1.1, "kind": "edge_overstress"},
+            {"time": 1.2, "kind": "force_clamped"},
+            {"time": 1.3, "kind": "force_clamped"},
+        ]
+    )
+    readable = readable_events(events)
+    assert [(e["kind"], e["safety"]) for e in readable] == [
+        ("pierce", False),
+        ("edge_overstress", True),
+        ("force_clamped", True),
+    ]
+    assert set(SAFETY_EVENTS) <= set(EVENT_NAMES)

@@ -12,7 +12,17 @@ from sqlalchemy import select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
-from metrics.feedback import ADVICE, band_widths_outside, feedback_line, kind_of, what_to_work_on
+from metrics.feedback import (
+    ADVICE,
+    band_widths_outside,
+    feedback_line,
+    kind_of,
+    metric_groups,
+    session_feedback,
+    strength_line,
+    strengths,
+    what_to_work_on,
+)
 from metrics.registry import REGISTRY
 from sessions.accounts import create_user
 from sessions.catalog import Catalog
@@ -81,5 +91,59 @@ def test_the_cli_and_the_session_page_say_the_same(tmp_path, copy_demo, monkeypa
         sign_in(client, "supervisor", "correct horse battery")
         page = client.get(f"/sessions/{uid}").text
     for item in shown["work_on"]:
-        assert item["advice"].replace("'", "&#39;") in page
+        assert item["line"].replace("'", "&#39;") in page
+    for item in shown["strengths"]:
+        assert item["line"].replace("'", "&#39;") in page
     catalog.close()
+
+
+def test_strengths_are_the_metrics_better_than_the_experts_then_safety_level_with_them():
+    band = {
+        "back_wall_catches": {"expert_q1": 0.0, "expert_median": 0.0, "expert_q3": 0.0},
+        "entry_to_target": {"expert_q1": 1e-4, "expert_median": 1.5e-4, "expert_q3": 2e-4},
+        "path_length": {"expert_q1": 0.02, "expert_median": 0.025, "expert_q3": 0.03},
+        "task_time": {"expert_q1": 5.0, "expert_median": 6.0, "expert_q3": 7.0},
+    }
+    values = {"back_wall_catches": 0.0, "entry_to_target": 0.5e-4, "path_length": 0.01, "task_time": 6.0}
+    rows = against_band(values, band)
+    found = strengths(rows, limit=3)
+    # better than the band: quality before efficiency; then the never event level with the experts
+    assert [i["metric"] for i in found] == ["entry_to_target", "path_length", "back_wall_catches"]
+    assert strength_line(found[0]) == (
+        "Better than the experts' middle half: entry_to_target 0.05 mm (experts 0.1-0.2 mm, lower is better)"
+    )
+    assert strength_line(found[2]).startswith("Level with the experts: back_wall_catches 0 (experts 0,")
+    assert not any(i["metric"] == "task_time" for i in strengths(rows, limit=10))  # level efficiency: no
+    shown = session_feedback(rows)
+    assert shown["work_on"] == [] and [i["metric"] for i in shown["strengths"]] == [
+        "entry_to_target",
+        "path_length",
+    ]
+
+
+def test_metrics_grouped_safety_first_then_quality_and_efficiency():
+    values = {"task_time": 6.0, "peak_force": 0.8, "back_wall_catches": 0.0, "full_thickness_fraction": 1.0}
+    groups = metric_groups(against_band(values, {}))
+    assert [g["title"] for g in groups] == ["Safety", "Quality and efficiency"]
+    assert [r["metric"] for r in groups[0]["metrics"]] == [
+        "peak_force",
+        "back_wall_catches",
+        "full_thickness_fraction",
+    ]
+    assert [r["metric"] for r in groups[1]["metrics"]] == ["task_time"]
+    assert [g["title"] for g in metric_groups(against_band({"task_time": 6.0}, {}))] == [
+        "Quality and efficiency"
+    ]
+
+
+def test_never_events_outrank_the_rest_of_safety():
+    band = {
+        "wound_edge_stress": {"expert_q1": 1e5, "expert_median": 2e5, "expert_q3": 3e5},
+        "force_clamp_hits": {"expert_q1": 0.0, "expert_median": 0.0, "expert_q3": 0.0},
+    }
+    values = {"wound_edge_stress": 3e6, "force_clamp_hits": 1.0}  # 13.5 widths against 1
+    items = what_to_work_on(against_band(values, band), limit=1)
+    assert [i["metric"] for i in items] == [
+        "force_clamp_hits"
+    ]  # the never event is kept, the limit is filled
+    assert [i["kind"] for i in what_to_work_on(against_band(values, band), limit=5)] == ["safety", "safety"]

@@ -65,3 +65,66 @@ def test_the_trainee_table_reads_in_words_and_display_units(analysis):
         assert session.startswith("at the benchmark" if row["retention_passed"] else "below the benchmark")
     header = "path_length change (mm, lower is better)"
     assert table[header].to_numpy() == pytest.approx(1e3 * raw["retention_change_path_length"].to_numpy())
+
+
+def test_participant_feedback_is_the_median_of_the_last_practice_sessions_against_the_experts(analysis):
+    from metrics.band import against_band
+    from metrics.feedback import participant_feedback, what_to_work_on
+
+    table = analysis.sessions
+    code = analysis.trainees["participant_id"].iloc[0]
+    found = participant_feedback(analysis, code)
+    mine = table[(table["participant_id"] == code) & (table["phase"].fillna("practice") != "retention")]
+    last = mine.sort_values("trial").tail(3)
+    assert found["trials"] == last["trial"].astype(int).tolist()
+    # an independent reading: numpy quartiles of every expert session, the trainee's medians
+    experts = table[table["label"] == "expert"]
+    worse = []
+    for name in PRIMARY:
+        q1, q3 = np.nanquantile(experts[name].to_numpy(float), [0.25, 0.75])
+        value = float(np.nanmedian(last[name].to_numpy(float)))
+        better = "lower" if name != "spectral_arc_length" else "higher"
+        if (value > q3) if better == "lower" else (value < q1):
+            worse.append(name)
+    listed = {item["metric"] for item in found["work_on"]}
+    assert listed & set(PRIMARY) <= set(worse) and listed, "a first-week synthetic trainee has work to do"
+    values = {n: float(np.nanmedian(last[n].to_numpy(float))) for n in PRIMARY}
+    band = {
+        n: dict(
+            zip(
+                ("expert_q1", "expert_median", "expert_q3"),
+                np.nanquantile(experts[n], [0.25, 0.5, 0.75]),
+                strict=True,
+            )
+        )
+        for n in PRIMARY
+    }
+    assert {i["metric"] for i in what_to_work_on(against_band(values, band), limit=10)} == set(worse)
+
+
+def test_the_report_lists_each_trainees_feedback_and_its_csvs_say_their_units(analysis, tmp_path):
+    from metrics.feedback import participant_feedback
+
+    page = write_report(analysis, tmp_path / "report")
+    text = page.read_text()
+    code = analysis.trainees["participant_id"].iloc[0]
+    assert "What each trainee should work on next" in text
+    for item in participant_feedback(analysis, code)["work_on"]:
+        assert item["line"].replace("'", "&#39;") in text
+    sessions = pd.read_csv(page.parent / "tables/session_metrics.csv")
+    assert {"path_length [m]", "entry_angle_error_deg [deg]", "force_at_insertion [N]"} <= set(
+        sessions.columns
+    )
+    np.testing.assert_allclose(sessions["path_length [m]"], analysis.sessions["path_length"])  # SI kept
+    benchmarks = pd.read_csv(page.parent / "tables/benchmarks.csv")
+    assert dict(zip(benchmarks["metric"], benchmarks["unit"].astype(str), strict=True)) == {
+        "path_length": "m",
+        "spectral_arc_length": "1",  # dimensionless, as registry.csv says
+        "entry_angle_error_deg": "deg",
+        "force_at_insertion": "N",
+    }
+    assert "spectral_arc_length" in sessions.columns  # a ratio keeps its bare name
+    trainees = pd.read_csv(page.parent / "tables/trainees.csv")
+    assert "retention_change_path_length [m]" in trainees.columns
+    # the page shows the pass condition in display units, not the SI mark
+    assert "a session passes when" in text and " mm</td>" in text

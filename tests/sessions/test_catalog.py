@@ -99,6 +99,7 @@ def _report_matches_the_stored_streams(catalog, result, tmp_path):
     )
     stored = (
         pd.read_csv(result.report.parent / "tables" / "session_metrics.csv")
+        .rename(columns=lambda header: header.split(" [")[0])  # "path_length [m]": SI, unit in the header
         .set_index("session_id")
         .sort_index()
     )
