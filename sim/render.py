@@ -20,8 +20,9 @@ from sim.mesh import TetMesh
 STRESS_RANGE_PA = (0.0, 5e5)
 """The colour scale's range: 0-500 kPa holds a calibrated arterial wall's stitch (puncture about 0.15 MPa
 near the needle, levering several times that); shown in kPa."""
-FORCE_ARROW_M_PER_N = 0.005
-"""Force arrows are 5 mm long per newton (a 0.8 N puncture: 4 mm, a third of the 12 mm patch)."""
+FORCE_ARROW_M_PER_N = 0.003
+"""Force arrows are 3 mm long per newton: an expert's 0.8 N puncture 2.4 mm, a fifth of the 12 mm
+patch; a levered 2 N, 6 mm, still inside the view."""
 
 
 def vtk_matrix():
@@ -96,6 +97,7 @@ class TissueRenderer:
         self.surface = pv.PolyData(mesh.points.copy(), faces)
         self.surface.cell_data["von Mises (kPa)"] = np.zeros(len(mesh.surface_triangles))
         self.size = size
+        self.stress_range = stress_range
         self.force_scale = force_scale
         self.zoom = zoom
         # one headlight (a light at the camera, as VTK's own default): under software rasterisation
@@ -114,7 +116,7 @@ class TissueRenderer:
             smooth_shading=False,
             show_scalar_bar=scalar_bar,
             scalar_bar_args={
-                "title": "von Mises (kPa)",
+                "title": "stress\n(kPa)",
                 "color": "black",
                 "fmt": "%.3g",
                 "vertical": True,
@@ -157,6 +159,8 @@ class TissueRenderer:
         self._bite_colours = np.zeros((0, 3), dtype=np.uint8)
         self._bite_actor = None
         self._bites_shown = 0
+        self._outline = None  # show_outline: edges drawn along mesh nodes, moved with the tissue
+        self._outline_nodes = np.zeros(0, dtype=np.int64)
         self._arrow_matrix = vtk_matrix()
         self._arrow_actor.SetUserMatrix(self._arrow_matrix)
         self._pixels = None
@@ -169,6 +173,18 @@ class TissueRenderer:
         self.plotter.add_mesh(marks, color="white", point_size=8, render_points_as_spheres=True)
         self._bites = np.asarray(bites, dtype=np.float64).reshape(-1, 3)
         self._bite_colours = np.asarray(colours, dtype=np.uint8).reshape(-1, 3)
+
+    def show_outline(self, edges: NDArray[np.int64], colour: str = "#6b0a1a", width: float = 4.0) -> None:
+        """Draw ``edges`` ((E, 2) mesh node ids, e.g. the wound's cut face rim) as lines that move with
+        the tissue in every later frame."""
+        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        if not len(edges):
+            return
+        nodes, local = np.unique(edges, return_inverse=True)
+        lines = np.hstack([np.full((len(edges), 1), 2), local.reshape(-1, 2)]).ravel()
+        self._outline = self._pv.PolyData(self.mesh.points[nodes].copy(), lines=lines)
+        self._outline_nodes = nodes
+        self.plotter.add_mesh(self._outline, color=colour, line_width=width, render_lines_as_tubes=True)
 
     def reveal_bites(self, count: int) -> None:
         """Show the first ``count`` bite marks (a replay shows each once it has been made)."""
@@ -196,11 +212,20 @@ class TissueRenderer:
         self.plotter.camera_position = [tuple(position), tuple(focal_point), tuple(view_up)]
         self._camera_set = True
 
+    def share_camera(self, other: TissueRenderer) -> None:
+        """Use ``other``'s camera as it is now (position, focus, view angle) for every later frame:
+        the two sides of a comparison seen alike."""
+        self.plotter.renderer.GetActiveCamera().DeepCopy(other.plotter.renderer.GetActiveCamera())
+        self._camera_set = True
+
     def render(self, frame: RenderFrame) -> NDArray[np.uint8]:
         """Draw a frame and return its pixels."""
         self.surface.points[:] = frame.points
         self.surface.cell_data["von Mises (kPa)"][:] = frame.triangle_stress / 1e3
         self.surface.Modified()
+        if self._outline is not None:
+            self._outline.points[:] = frame.points[self._outline_nodes]
+            self._outline.Modified()
         _set_polyline(self.needle, frame.needle)
         self._marker_actor.SetVisibility(frame.contact is not None)
         if frame.contact is not None:

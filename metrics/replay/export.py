@@ -20,10 +20,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.alignment import PHASES, phase_starts
-from metrics.replay.hud import HudLine, draw_hud, label_view, value_line
+from metrics.replay.hud import FrameLayout, HudLine, Key, draw_key, value_line
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
 from metrics.replay.track import ReplayTrack, session_track
+from metrics.replay.wound import outline_edges, wound_nodes
 from metrics.streams import MetricsError, SessionStreams, from_recorded
 from metrics.tissue import with_tissue_fields
 from sim.fem.fields import TissueFieldReplay
@@ -157,7 +158,7 @@ class BiteMarks:
         made = int(np.searchsorted(self.pierce_times, when, side="right"))
         if made == 0:
             return None
-        return HudLine("bite", f"{1e3 * self.entry_off[made - 1]:.1f} mm off its mark")
+        return HudLine("bite", f"{1e3 * self.entry_off[made - 1]:.1f} mm off mark")
 
 
 def _hud_lines(
@@ -181,7 +182,7 @@ def _hud_lines(
     bite = marks.hud_line(when) if marks is not None else None
     if bite is not None:
         lines.append(bite)
-    return f"t = {when:6.2f} s", lines
+    return f"t = {when:.2f} s", lines
 
 
 def export_replay(
@@ -203,7 +204,6 @@ def export_replay(
     from threadpoolctl import threadpool_limits
 
     from metrics.replay.video import VideoWriter, check_video_path
-    from sim.render import TissueRenderer
 
     settings = settings or ReplaySettings()
     check_video_path(out)
@@ -229,20 +229,13 @@ def export_replay(
         )
     bands = {} if reference is None else {name: reference.phase_band(name) for name in ("force", "tip_speed")}
     timings["re-simulation"] = time.perf_counter() - started
-    width, height = settings.size
     split = settings.mode == "side-by-side"
-    view = (width // 2 - (width // 2) % 2, height) if split else (width, height)
-    renderers = [TissueRenderer(tissue.mesh, size=view, offscreen=True, anti_aliasing=settings.anti_aliasing)]
-    if split:
-        renderers.append(
-            TissueRenderer(tissue.mesh, size=view, offscreen=True, anti_aliasing=settings.anti_aliasing)
-        )
     marks = BiteMarks.of(streams, tissue.mesh)
-    if marks is not None:  # the trainee's view shows the task's marks and where the bites went
-        renderers[0].show_placement(marks.targets, marks.points, marks.colours)
+    canvas = ReplayCanvas(
+        tissue.mesh, streams, settings, ghost=expert_scene is not None and not split, marks=marks
+    )
     ghost_path = expert_scene.track.tip if expert_scene is not None and not split else None
     total = len(scene.track)
-    scale = height / 720
     insertion = insertion_frame_index(streams, scene.track.times) if stills is not None else None
     written: list[Path] = []
     render_time = 0.0
@@ -255,31 +248,23 @@ def export_replay(
         """Frame k's scene (and the expert's beside it): the tissue state solved for that frame."""
         expert_k = None if expert_times is None else expert_scene.index_at(float(expert_times[k]))
         if split:
-            return scene.frame(k), expert_scene.frame(expert_k)
+            return scene.frame(k), (expert_scene.frame(expert_k), expert_k)
         ghost_needle = expert_scene.track.needle[expert_k] if expert_k is not None else None
         return scene.frame(k, ghost_path, ghost_needle), None
 
     try:
         # one BLAS thread: idle OpenBLAS workers spin and would take the cores the rasteriser needs
         with VideoWriter(out, settings.size, settings.fps) as writer, threadpool_limits(1):
-            for k, (frame, expert_frame) in enumerate(frames_ahead(scene_frames, total)):
+            for k, (frame, expert) in enumerate(frames_ahead(scene_frames, total)):
                 began = time.perf_counter()
-                if marks is not None:
-                    renderers[0].reveal_bites(marks.made_by(float(scene.track.times[k])))
-                pixels = renderers[0].render(frame)
-                if k == 0 and split:
-                    renderers[1].set_camera(*renderers[0].plotter.camera_position)
-                if split:
-                    right = renderers[1].render(expert_frame)
-                    label_view(pixels, f"trainee {streams.participant_id or ''}".strip(), scale)
-                    label_view(right, f"expert {reference.medoid.participant_id or ''}".strip(), scale)
-                    pixels = np.hstack([pixels, right])
-                    if pixels.shape[1] != width:
-                        pixels = np.pad(
-                            pixels, ((0, 0), (0, width - pixels.shape[1]), (0, 0)), constant_values=255
-                        )
                 title, lines = _hud_lines(scene, k, bands, marks)
-                draw_hud(pixels, title, lines, scale)
+                beside = None
+                if split:
+                    expert_title, expert_lines = _hud_lines(expert_scene, expert[1], bands)
+                    who = f"expert {reference.medoid.participant_id or ''}"
+                    beside = (expert[0], f"{who}  {expert_title}", expert_lines)
+                    title = f"trainee {streams.participant_id or ''}  {title}"
+                pixels = canvas.draw(float(scene.track.times[k]), frame, title, lines, beside)
                 if k == insertion:
                     written += _write_insertion_stills(Path(stills), scene, k, frame, pixels)
                 render_time += time.perf_counter() - began
@@ -287,8 +272,7 @@ def export_replay(
                 if progress is not None:
                     progress(k + 1, total)
     finally:
-        for renderer in renderers:
-            renderer.close()
+        canvas.close()
     timings["render"] = render_time
     if stills is not None:
         from metrics.replay.plots import write_signal_plots
@@ -297,6 +281,104 @@ def export_replay(
     seconds = time.perf_counter() - started
     timings["total"] = seconds
     return ReplayResult(Path(out), total, seconds, timings, written)
+
+
+class ReplayCanvas:
+    """Draws replay frames: the 3-D view (two side by side), a heads-up strip above each and the key
+    beside them (:class:`metrics.replay.hud.FrameLayout`), the wound's rim and the bite marks in the
+    scene. ``ghost``: the expert's needle and tip path are drawn in the trainee's view."""
+
+    def __init__(
+        self, mesh, streams: SessionStreams, settings: ReplaySettings, ghost: bool, marks=None
+    ) -> None:
+        from sim.render import TissueRenderer, stress_colours
+
+        views = 2 if settings.mode == "side-by-side" else 1
+        self.layout = FrameLayout.of(settings.size, views)
+        width, height = self.layout.view_size
+        # a view narrower than 16:9 sees less across: zoom in less, so the scene is not cropped
+        zoom = settings.zoom * min(1.0, (width / height) / (16 / 9)) ** 0.5
+        self.marks = marks
+        self.renderers = [
+            TissueRenderer(
+                mesh,
+                size=self.layout.view_size,
+                offscreen=True,
+                anti_aliasing=settings.anti_aliasing,
+                scalar_bar=False,  # the key beside the views carries the scale
+                zoom=zoom,
+            )
+            for _ in range(views)
+        ]
+        if marks is not None:  # the trainee's view shows the task's marks and where the bites went
+            self.renderers[0].show_placement(marks.targets, marks.points, marks.colours)
+        wound = wound_outline(streams, mesh)
+        for renderer in self.renderers:
+            renderer.show_outline(wound)
+        stress_kpa = tuple(v / 1e3 for v in self.renderers[0].stress_range)
+        keys = replay_keys(ghost=ghost, marks=marks is not None, wound=len(wound) > 0)
+        layout = self.layout
+        self.key = draw_key(layout.height, layout.panel, layout.scale, stress_kpa, stress_colours(), keys)
+        self._camera_shared = False
+
+    def draw(self, when: float, frame, title: str, lines: list[HudLine], beside=None) -> NDArray[np.uint8]:
+        """The frame at time ``when`` (s): ``frame`` (a :class:`sim.render.RenderFrame`) under its
+        readout; ``beside``: (frame, title, lines) for the second view of a side-by-side replay."""
+        if self.marks is not None:
+            self.renderers[0].reveal_bites(self.marks.made_by(when))
+        views = [(self.renderers[0].render(frame), title, lines)]
+        if beside is not None:
+            if not self._camera_shared:  # one camera for both sides
+                self.renderers[1].share_camera(self.renderers[0])
+                self._camera_shared = True
+            views.append((self.renderers[1].render(beside[0]), beside[1], beside[2]))
+        return self.layout.compose(views, self.key)
+
+    def close(self) -> None:
+        for renderer in self.renderers:
+            renderer.close()
+
+
+def wound_outline(streams: SessionStreams, mesh) -> NDArray[np.int64]:
+    """The rim of the wound's cut faces ((E, 2) node ids) for the session's task, empty when the task
+    has no wound (:mod:`metrics.replay.wound`)."""
+    from metrics.placement import PlacementTargets
+
+    targets = PlacementTargets.from_attributes(dict(streams.attributes))
+    point, normal = (None, None) if targets is None else (targets.wound_point, targets.wound_normal)
+    return outline_edges(mesh.surface_triangles, wound_nodes(mesh, point, normal))
+
+
+def replay_keys(ghost: bool, marks: bool, wound: bool) -> list[Key]:
+    """What the key says, for what the video shows (colours as :class:`sim.render.TissueRenderer`
+    draws them)."""
+    from metrics.placement import MARK_COLOURS
+    from sim.render import FORCE_ARROW_M_PER_N
+
+    (near, on_mark), (far, near_mark), (_, off_mark) = MARK_COLOURS
+    keys = []
+    if ghost:
+        keys += [
+            Key("line", ((50, 205, 50),), "expert's tip path"),
+            Key("line", ((60, 179, 113),), "expert's needle"),
+        ]
+    keys += [
+        Key("line", ((192, 192, 192),), "trainee's needle" if ghost else "needle"),
+        Key("arrow", ((30, 144, 255),), f"force on the needle, {1e3 * FORCE_ARROW_M_PER_N:.0f} mm per N"),
+        Key("dot", ((0, 191, 255),), "entry point"),
+    ]
+    if marks:
+        keys += [
+            Key("dot", ((255, 255, 255),), "target marks"),
+            Key(
+                "dot",
+                (on_mark, near_mark, off_mark),
+                f"bites: within {1e3 * near:.2g} mm of the mark, {1e3 * far:.2g} mm, farther",
+            ),
+        ]
+    if wound:
+        keys.append(Key("line", ((107, 10, 26),), "wound edge"))
+    return keys
 
 
 def frames_ahead(make: Callable[[int], T], total: int, depth: int = 2) -> Iterator[T]:

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from metrics import from_recorded
-from metrics.replay.export import ReplaySettings, SceneReplay, _hud_lines, export_replay
-from metrics.replay.hud import draw_hud
+from metrics.replay.export import ReplayCanvas, ReplaySettings, SceneReplay, _hud_lines, export_replay
 from metrics.replay.plots import figure_pixels, signal_figure
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import stress_map
@@ -24,7 +23,7 @@ from sessions.synthetic import pass_parameters
 from sessions.tasks import task_preset, tissue_for
 from sim.fem.fields import TissueFieldReplay
 from sim.needle import Needle
-from sim.render import TissueRenderer, compare_images, write_image
+from sim.render import compare_images, write_image
 from sim.runtime import Simulation
 
 FORCES = task_preset("wall-stitch").forces  # the calibrated needle the runner uses
@@ -98,7 +97,7 @@ def test_tissue_state_per_frame_equals_the_models_full_solve(recorded):
         np.testing.assert_allclose(stress, von_mises, rtol=1e-9, atol=1e-9)
 
 
-def _insertion_frame(recorded, size=(320, 180)):
+def _insertion_frame(recorded, size=(640, 360)):
     tissue, trainee, experts = recorded
     streams = with_tissue_fields(from_recorded(trainee), tissue)
     expert_streams = [with_tissue_fields(from_recorded(e), tissue) for e in experts]
@@ -107,12 +106,13 @@ def _insertion_frame(recorded, size=(320, 180)):
     expert = SceneReplay(experts[expert_streams.index(reference.medoid)], tissue, reference.medoid, 30)
     k = int(np.searchsorted(scene.track.times, scene.pierce_time))
     expert_k = expert.index_at(float(reference.medoid_alignment.reference_time_at(scene.track.times[k])))
-    renderer = TissueRenderer(tissue.mesh, size=size, offscreen=True, anti_aliasing=False, zoom=1.4)
-    pixels = renderer.render(scene.frame(k, expert.track.tip, expert.track.needle[expert_k]))
-    renderer.close()
+    canvas = ReplayCanvas(tissue.mesh, streams, ReplaySettings(size=size), ghost=True)
     bands = {name: reference.phase_band(name) for name in ("force", "tip_speed")}
     title, lines = _hud_lines(scene, k, bands)
-    return draw_hud(pixels, title, lines, size[1] / 720 * 2), streams, reference
+    frame = scene.frame(k, expert.track.tip, expert.track.needle[expert_k])
+    pixels = canvas.draw(float(scene.track.times[k]), frame, title, lines)
+    canvas.close()
+    return pixels, streams, reference
 
 
 def _golden(name: str, pixels: np.ndarray, tmp_path: Path) -> tuple[int, float]:
@@ -125,7 +125,7 @@ def _golden(name: str, pixels: np.ndarray, tmp_path: Path) -> tuple[int, float]:
 
 def test_insertion_frame_matches_the_reference_image(recorded, tmp_path):
     pixels, _, _ = _insertion_frame(recorded)
-    assert pixels.shape == (180, 320, 3)
+    assert pixels.shape == (360, 640, 3)
     failed, mean_error = _golden("replay_insertion.png", pixels, tmp_path)
     assert failed <= 0.005 * pixels.shape[0] * pixels.shape[1], (failed, mean_error)
     assert mean_error < 0.01
