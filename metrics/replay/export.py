@@ -161,6 +161,10 @@ class BiteMarks:
         return HudLine("bite", f"{1e3 * self.entry_off[made - 1]:.1f} mm off mark")
 
 
+def _titled(prefix: str, readout: tuple[str, list[HudLine]]) -> tuple[str, list[HudLine]]:
+    return prefix + readout[0], readout[1]
+
+
 def _hud_lines(
     scene: SceneReplay, k: int, bands: dict[str, dict], marks: BiteMarks | None = None
 ) -> tuple[str, list[HudLine]]:
@@ -231,39 +235,49 @@ def export_replay(
     timings["re-simulation"] = time.perf_counter() - started
     split = settings.mode == "side-by-side"
     marks = BiteMarks.of(streams, tissue.mesh)
+    total = len(scene.track)
+    # the expert's moment matching each frame, in one pass over the alignment
+    expert_ks: list[int | None] = [None] * total
+    if expert_scene is not None:
+        expert_times = reference.medoid_alignment.reference_time_at(scene.track.times)
+        expert_ks = [expert_scene.index_at(float(t)) for t in expert_times]
+    # every frame's readouts first: the strips are sized for the widest of them
+    trainee = f"trainee {streams.participant_id or ''}  " if split else ""
+    expert = f"expert {reference.medoid.participant_id or ''}  " if split else ""
+    readouts = [_titled(trainee, _hud_lines(scene, k, bands, marks)) for k in range(total)]
+    beside_readouts = (
+        [_titled(expert, _hud_lines(expert_scene, expert_k, bands)) for expert_k in expert_ks]
+        if split
+        else []
+    )
     canvas = ReplayCanvas(
-        tissue.mesh, streams, settings, ghost=expert_scene is not None and not split, marks=marks
+        tissue.mesh,
+        streams,
+        settings,
+        ghost=expert_scene is not None and not split,
+        marks=marks,
+        readouts=readouts + beside_readouts,
     )
     ghost_path = expert_scene.track.tip if expert_scene is not None and not split else None
-    total = len(scene.track)
     insertion = insertion_frame_index(streams, scene.track.times) if stills is not None else None
     written: list[Path] = []
     render_time = 0.0
-    # the expert's moment matching each frame, in one pass over the alignment
-    expert_times = (
-        reference.medoid_alignment.reference_time_at(scene.track.times) if expert_scene is not None else None
-    )
 
     def scene_frames(k: int):
         """Frame k's scene (and the expert's beside it): the tissue state solved for that frame."""
-        expert_k = None if expert_times is None else expert_scene.index_at(float(expert_times[k]))
+        expert_k = expert_ks[k]
         if split:
-            return scene.frame(k), (expert_scene.frame(expert_k), expert_k)
+            return scene.frame(k), expert_scene.frame(expert_k)
         ghost_needle = expert_scene.track.needle[expert_k] if expert_k is not None else None
         return scene.frame(k, ghost_path, ghost_needle), None
 
     try:
         # one BLAS thread: idle OpenBLAS workers spin and would take the cores the rasteriser needs
         with VideoWriter(out, settings.size, settings.fps) as writer, threadpool_limits(1):
-            for k, (frame, expert) in enumerate(frames_ahead(scene_frames, total)):
+            for k, (frame, other) in enumerate(frames_ahead(scene_frames, total)):
                 began = time.perf_counter()
-                title, lines = _hud_lines(scene, k, bands, marks)
-                beside = None
-                if split:
-                    expert_title, expert_lines = _hud_lines(expert_scene, expert[1], bands)
-                    who = f"expert {reference.medoid.participant_id or ''}"
-                    beside = (expert[0], f"{who}  {expert_title}", expert_lines)
-                    title = f"trainee {streams.participant_id or ''}  {title}"
+                title, lines = readouts[k]
+                beside = (other, *beside_readouts[k]) if split else None
                 pixels = canvas.draw(float(scene.track.times[k]), frame, title, lines, beside)
                 if k == insertion:
                     written += _write_insertion_stills(Path(stills), scene, k, frame, pixels)
@@ -286,15 +300,23 @@ def export_replay(
 class ReplayCanvas:
     """Draws replay frames: the 3-D view (two side by side), a heads-up strip above each and the key
     beside them (:class:`metrics.replay.hud.FrameLayout`), the wound's rim and the bite marks in the
-    scene. ``ghost``: the expert's needle and tip path are drawn in the trainee's view."""
+    scene. ``ghost``: the expert's needle and tip path are drawn in the trainee's view; ``readouts``: every
+    (title, lines) the strips will show (their height is set for the widest; without them, for
+    :data:`metrics.replay.hud.WIDEST_LINES`)."""
 
     def __init__(
-        self, mesh, streams: SessionStreams, settings: ReplaySettings, ghost: bool, marks=None
+        self,
+        mesh,
+        streams: SessionStreams,
+        settings: ReplaySettings,
+        ghost: bool,
+        marks=None,
+        readouts: list[tuple[str, list[HudLine]]] = (),
     ) -> None:
         from sim.render import TissueRenderer, stress_colours
 
         views = 2 if settings.mode == "side-by-side" else 1
-        self.layout = FrameLayout.of(settings.size, views)
+        self.layout = FrameLayout.of(settings.size, views, readouts)
         width, height = self.layout.view_size
         # a view narrower than 16:9 sees less across: zoom in less, so the scene is not cropped
         zoom = settings.zoom * min(1.0, (width / height) / (16 / 9)) ** 0.5

@@ -9,6 +9,7 @@ so it stays readable when a 1280 x 720 video plays 530 px wide in the dashboard.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,7 +50,7 @@ def value_line(
 
 
 WIDEST_LINES = (
-    HudLine("phase", "pull-through"),
+    HudLine("phase", "approach"),  # the longest of metrics.alignment.PHASES
     HudLine("force", "8888.8 mN", "experts 888.8-888.8", True),
     HudLine("tip speed", "888.8 mm/s", "experts 88.8-88.8", True),
     HudLine("entry angle", "88 deg"),
@@ -80,11 +81,16 @@ class FrameLayout:
     panel: int
 
     @classmethod
-    def of(cls, size: tuple[int, int], views: int = 1) -> FrameLayout:
+    def of(
+        cls, size: tuple[int, int], views: int = 1, readouts: Sequence[tuple[str, list[HudLine]]] = ()
+    ) -> FrameLayout:
+        """The layout whose strips hold each of ``readouts`` ((title, lines) per frame and view;
+        without them, the widest a frame can carry: :data:`WIDEST_LINES`)."""
         width, height = size
         panel = int(round(PANEL_SHARE * width))
         view_width = (width - panel) // views
-        rows = len(_rows("t = 888.88 s", list(WIDEST_LINES), view_width, height / 720))
+        shown = readouts or [("t = 888.88 s", list(WIDEST_LINES))]
+        rows = max(len(_rows(title, lines, view_width, height / 720)) for title, lines in shown)
         return cls(width, height, views, min(_strip_height(rows, height / 720), height // 2), panel)
 
     @property
