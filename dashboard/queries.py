@@ -6,8 +6,6 @@ belongs to somebody else answers exactly like an id that does not exist.
 
 from __future__ import annotations
 
-import math
-
 import pandas as pd
 from sqlalchemy import func, select
 
@@ -25,7 +23,7 @@ from metrics.report import (
     summary_table,
 )
 from metrics.study import practice_mask
-from metrics.units import display_unit
+from metrics.units import display_unit, in_display_units
 from sessions.catalog import Catalog
 from sessions.models import Annotation, Participant, Session, Study, Task, User
 from sessions.review import against_band, expert_band, session_stitches
@@ -202,15 +200,17 @@ def participant_progress(
         hit = rows.index[rows["session_id"] == item["uid"]]
         item["passed"] = bool(passed.loc[hit[0]]) if len(hit) else None
     for bench in analysis.benchmarks.itertuples():
+        unit = REGISTRY[bench.metric].unit if bench.metric in REGISTRY else ""
         progress["curves"].append(
-            {
+            {  # in the units a surgeon reads (metrics.units), each point with its own pass/fail
                 "metric": bench.metric,
-                "unit": REGISTRY[bench.metric].unit if bench.metric in REGISTRY else "",
+                "unit": display_unit(unit),
                 "better": bench.better,
-                "benchmark": None if math.isnan(bench.benchmark) else bench.benchmark,
+                "benchmark": in_display_units(bench.benchmark, unit),
                 "trial": rows["trial"].tolist(),
                 "phase": rows["phase"].fillna("practice").tolist(),
-                "value": [None if not math.isfinite(v) else v for v in rows[bench.metric].astype(float)],
+                "passed": [bool(p) for p in passed],
+                "value": [in_display_units(v, unit) for v in rows[bench.metric].astype(float)],
             }
         )
     progress["benchmarks"] = benchmark_rows(analysis)

@@ -47,6 +47,11 @@ SAFETY_EVENTS = ("overstress", "edge_overstress", "force_clamped", "nonfinite_fo
 """Kinds that say the patient (or the trainee's hand) was at risk: listed first, apart from the rest."""
 
 
+EPISODE_GAP_S = 0.5
+"""Safety events of one kind less than this apart (s) are one episode: listed once with a count and
+the time it ended (a levered needle overstresses the wall tick after tick)."""
+
+
 def event_name(kind: str) -> str:
     return EVENT_NAMES.get(kind, kind.replace("_", " "))
 
@@ -54,13 +59,20 @@ def event_name(kind: str) -> str:
 def readable_events(events: pd.DataFrame) -> list[dict]:
     """One entry per event in time order (time s, kind, name, the needle's angle to the surface's
     normal in deg or None and that as ``detail`` text, ``safety`` for :data:`SAFETY_EVENTS`), the
-    :data:`COLLAPSED` kinds as one entry each at their first time with ``count`` and ``explanation``."""
+    :data:`COLLAPSED` kinds as one entry each at their first time with ``count`` and ``explanation``,
+    and a run of one safety kind (:data:`EPISODE_GAP_S`) as one entry with ``count`` and ``until`` (s)."""
     out: list[dict] = []
     collapsed: dict[str, dict] = {}  # kind -> its one entry in ``out``
+    episodes: dict[str, dict] = {}  # safety kind -> its latest episode's entry
     for event in events.sort_values("time", kind="stable").itertuples():
         kind = str(event.kind)
         if kind in collapsed:
             collapsed[kind]["count"] += 1
+            continue
+        episode = episodes.get(kind)
+        if episode is not None and float(event.time) - episode["until"] < EPISODE_GAP_S:
+            episode["count"] += 1
+            episode["until"] = round(float(event.time), 4)
             continue
         angle = getattr(event, "entry_angle_deg", None)
         angle = None if angle is None or not math.isfinite(angle) else round(float(angle), 1)
@@ -75,5 +87,8 @@ def readable_events(events: pd.DataFrame) -> list[dict]:
         if kind in COLLAPSED:
             entry.update(count=1, explanation=COLLAPSED[kind])
             collapsed[kind] = entry
+        elif kind in SAFETY_EVENTS:
+            entry.update(count=1, until=entry["time"])
+            episodes[kind] = entry
         out.append(entry)
     return out

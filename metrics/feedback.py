@@ -23,6 +23,7 @@ from metrics.band import against_band, expert_quartiles
 from metrics.registry import REGISTRY
 from metrics.standards import SAFETY_METRICS
 from metrics.study import StudyAnalysis, practice_mask
+from metrics.units import significant
 
 KINDS = ("safety", "quality", "efficiency")
 """The order feedback is ranked in: what harms the patient, then what makes the anastomosis, then speed
@@ -167,8 +168,13 @@ def _numbers(row: dict) -> str:
     shown = row["display"]
     unit = f" {row['display_unit']}" if row["display_unit"] else ""
     low, high = shown["expert_q1"], shown["expert_q3"]
-    experts = f"{low:.3g}" if f"{low:.3g}" == f"{high:.3g}" else f"{low:.3g}-{high:.3g}"
-    return f"{row['metric']} {shown['value']:.3g}{unit}; experts {experts}{unit}, {row['better']} is better"
+    experts = (
+        significant(low)
+        if significant(low) == significant(high)
+        else f"{significant(low)}-{significant(high)}"
+    )
+    value = significant(shown["value"])
+    return f"{row['metric']} {value}{unit}; experts {experts}{unit}, {row['better']} is better"
 
 
 def session_feedback(rows: Sequence[dict], limit: int = 3) -> dict[str, list[dict]]:

@@ -24,7 +24,7 @@ from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.reliability import agreement_shown
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
-from metrics.units import display_unit, in_display_units, interval_text
+from metrics.units import display_unit, in_display_units, interval_text, significant
 from metrics.validity import aggregate_by_participant
 
 FIGURE_FORMATS = ("png", "svg")
@@ -181,7 +181,7 @@ def table_text(value) -> str:
     if isinstance(value, bool | np.bool_):
         return "yes" if value else "no"
     if isinstance(value, float | np.floating):
-        return f"{value:.3g}"
+        return significant(float(value))
     return str(value)
 
 
@@ -360,7 +360,7 @@ def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
 
 
 def _short(value: float | None) -> str:
-    return "" if value is None or value != value else f"{value:.3g}"
+    return "" if value is None or value != value else significant(value)
 
 
 def compact_caption(analysis: StudyAnalysis) -> str:

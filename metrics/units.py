@@ -37,13 +37,22 @@ def in_display_units(value: float | None, unit: str) -> float | None:
     return value * DISPLAY_UNITS.get(unit, (unit, 1.0))[1]
 
 
+def significant(value: float, digits: int = 3) -> str:
+    """``value`` to ``digits`` significant figures as a person reads it: no exponent between 0.001 and a
+    million ("3320", not "3.32e+03"; "0.0717"; "2.43"), an exponent only beyond."""
+    text = f"{value:.{digits}g}"
+    if "e" in text and 1.0 <= abs(value) < 1e6:
+        return f"{float(text):.0f}"
+    return text
+
+
 def shown(value: float | None, unit: str, digits: int = 3) -> str:
     """``value`` (SI ``unit``) as text in its display unit, ``digits`` significant figures and the
     unit ("1.46 mm", "487 kPa", "3 deg"); "-" when there is none."""
     converted = in_display_units(value, unit)
     if converted is None:
         return "-"
-    text = f"{converted:.{digits}g}"
+    text = significant(converted, digits)
     label = display_unit(unit)
     return f"{text} {label}" if label else text
 

@@ -22,7 +22,7 @@ function drawCurves() {
   }
   pageData.curves.forEach((curve, k) => {
     const div = plotDiv(host, "curve-" + k);
-    const passed = curve.trial.map((_, i) => (pageData.sessions[i] || {}).passed);
+    const passed = curve.passed;  // this task's sessions, in the curve's order
     const traces = [{
       x: curve.trial, y: curve.value, mode: "lines+markers", name: curve.metric,
       marker: { color: passed.map((p) => (p === false ? "#b42318" : "#1a7f37")), size: 8 },
@@ -74,7 +74,11 @@ const WARNINGS = new Set(["overstress", "edge_overstress", "force_clamped"]);
 function markerShapes(events) {
   // the needle's passage as full-height dotted lines; warnings as short red ticks along the top, so
   // a run of them does not hide the curve
-  return events.filter((e) => MARKED[e.kind]).map((e) => ({
+  // a run of warnings (an episode: its first time to "until") is a red bar along the top
+  return events.filter((e) => MARKED[e.kind]).map((e) => (e.until > e.time ? {
+    type: "rect", xref: "x", yref: "paper", x0: e.time, x1: e.until, y0: 0.9, y1: 1,
+    fillcolor: MARKED[e.kind], opacity: 0.6, line: { width: 0 },
+  } : {
     type: "line", xref: "x", yref: "paper", x0: e.time, x1: e.time,
     y0: WARNINGS.has(e.kind) ? 0.9 : 0, y1: 1,
     line: { color: MARKED[e.kind], width: WARNINGS.has(e.kind) ? 1.5 : 1, dash: WARNINGS.has(e.kind) ? "solid" : "dot" },
@@ -143,8 +147,9 @@ async function drawSession() {
     button.className = "event";
     button.dataset.time = event.time;
     const angle = event.detail ? " (" + event.detail + ")" : "";
-    const count = event.count ? " ×" + event.count : "";
-    button.textContent = event.time.toFixed(2) + " s: " + event.name + angle + count;
+    const count = event.count > 1 ? " ×" + event.count : "";
+    const when = event.until > event.time ? event.time.toFixed(2) + "-" + event.until.toFixed(2) : event.time.toFixed(2);
+    button.textContent = when + " s: " + event.name + angle + count;
     if (event.explanation) button.title = event.explanation;
     button.addEventListener("click", () => seek(event.time));
     item.appendChild(button);

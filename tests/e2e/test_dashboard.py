@@ -281,7 +281,7 @@ def test_the_force_plot_shows_the_expert_band_and_the_needles_passage(demo_site)
         page.goto(f"{base}/sessions/{own}")
         page.wait_for_selector("#signals[data-ready='1']", timeout=60_000)
         shapes = page.evaluate("() => document.querySelector('#plot-force').layout.shapes")
-        bands = [s for s in shapes if s["type"] == "rect"]
+        bands = [s for s in shapes if s["type"] == "rect" and s["xref"] == "paper"]  # not an episode's bar
         assert len(bands) == 1 and 0 < bands[0]["y0"] < bands[0]["y1"]  # mN, the experts' middle half
         lines = [s for s in shapes if s["type"] == "line" and s["line"].get("dash") == "dot"]
         pierce = page.locator("#events li[data-kind='pierce'] button").first.get_attribute("data-time")

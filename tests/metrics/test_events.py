@@ -49,3 +49,18 @@ def test_safety_events_are_flagged_for_listing_first():
         ("force_clamped", True),
     ]
     assert set(SAFETY_EVENTS) <= set(EVENT_NAMES)
+
+
+def test_a_run_of_overstress_is_one_episode_with_its_count_and_end():
+    """Seen: 18 lines of overstress in one trainee session, a tick apart."""
+    ticks = [1.19, 1.28, 1.35, 1.44, 1.53, 1.60, 1.71]  # each within 0.5 s of the one before
+    events = pd.DataFrame(
+        [{"time": t, "kind": "overstress"} for t in ticks]
+        + [{"time": 3.21, "kind": "overstress"}, {"time": 1.5, "kind": "edge_overstress"}]
+    )
+    readable = readable_events(events)
+    assert [(e["kind"], e["time"], e["count"], e["until"]) for e in readable] == [
+        ("overstress", 1.19, 7, 1.71),
+        ("edge_overstress", 1.5, 1, 1.5),
+        ("overstress", 3.21, 1, 3.21),  # 1.5 s after the last: a new episode
+    ]

@@ -37,3 +37,12 @@ def test_the_review_rows_carry_the_same_numbers_in_display_units():
     assert row["display"]["expert_q1"] == pytest.approx(0.1) and row["display"]["expert_q3"] == pytest.approx(
         0.2
     )
+
+
+def test_significant_figures_read_without_an_exponent():
+    from metrics.units import shown, significant
+
+    assert significant(3324.1) == "3320" and significant(0.0717) == "0.0717" and significant(2.434) == "2.43"
+    assert significant(-1234.0) == "-1230" and significant(999.5) == "1000" and significant(12.0) == "12"
+    assert significant(2.5e7) == "2.5e+07"  # beyond a million an exponent is clearer
+    assert shown(3.324e6, "Pa") == "3320 kPa"  # seen: "3.32e+03 kPa" on the session page
