@@ -16,11 +16,12 @@ from metrics.feedback import metric_groups, participant_feedback, session_feedba
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import (
     composite_summary,
+    concurrent_for_reading,
     display_scale,
     participant_medians,
     reliability_tables,
     standards_tables,
-    summary_table,
+    summary_in_display_units,
 )
 from metrics.study import practice_mask
 from metrics.units import display_unit, in_display_units
@@ -282,7 +283,7 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         info = {"id": study.id, "name": study.name}
     analysis = analyses.get(study_id).analysis
     settings = analysis.settings
-    table = summary_table(analysis)
+    table = summary_in_display_units(analysis)
     metrics = table["metric"].tolist()
     medians = participant_medians(analysis, metrics)
     skilled = (medians[settings.group_col] == settings.skilled_group).to_numpy()
@@ -324,11 +325,7 @@ def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, s
         if analysis.concurrent is None
         else {
             "rating": analysis.concurrent.rating_col,
-            "table": records(
-                analysis.concurrent.table.assign(
-                    unit=[display_unit(u) or "1" for u in analysis.concurrent.table["unit"]]
-                )
-            ),
+            "table": _shown(concurrent_for_reading(analysis.concurrent.table)),
             "notes": analysis.concurrent.notes,
         },
         "skilled_group": settings.skilled_group,

@@ -294,9 +294,9 @@ def summary_table(analysis: StudyAnalysis) -> pd.DataFrame:
     return table[columns]
 
 
-def validity_download(analysis: StudyAnalysis) -> pd.DataFrame:
-    """The validity table as a person downloads it: the medians in the units a surgeon reads, the
-    unit beside them, and headers that say so (the report's tables/ keep SI, with registry.csv)."""
+def summary_in_display_units(analysis: StudyAnalysis) -> pd.DataFrame:
+    """:func:`summary_table` with each group's median in the units a surgeon reads and ``unit`` naming
+    that unit ("1" for a count or ratio): what the report and the dashboard show."""
     table = summary_table(analysis).copy()
     units = table["unit"].tolist()
     for group in analysis.settings.groups:
@@ -305,7 +305,13 @@ def validity_download(analysis: StudyAnalysis) -> pd.DataFrame:
             in_display_units(v, u) if v == v else v for v, u in zip(table[column], units, strict=True)
         ]
     table["unit"] = [display_unit(u) or "1" for u in units]
-    return table.rename(
+    return table
+
+
+def validity_download(analysis: StudyAnalysis) -> pd.DataFrame:
+    """The validity table as a person downloads it: the medians in the units a surgeon reads, the
+    unit beside them, and headers that say so (the report's tables/ keep SI, with registry.csv)."""
+    return summary_in_display_units(analysis).rename(
         columns={
             **{f"median_{g}": f"median {g} (participant medians, in unit)" for g in analysis.settings.groups},
             "unit": "unit (of the medians)",
@@ -608,6 +614,31 @@ def _curves_for_reading(curves: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
+def concurrent_for_reading(table: pd.DataFrame) -> pd.DataFrame:
+    """Concurrent validity as a person reads it: per metric, its direction, the participants, Spearman's
+    rho with its interval in one cell ("0.65 (-0.08 to 0.98)"), p and Holm p, and whether the metric
+    agrees with the rating. Rho is unitless: the metric's unit is not shown (the CSV keeps it)."""
+    rows = []
+    for row in table.itertuples(index=False):
+        low, high = row.rho_ci_low, row.rho_ci_high
+        known = low is not None and high is not None and math.isfinite(low) and math.isfinite(high)
+        rho = interval_text(row.rho, low, high)
+        if not known and math.isfinite(row.rho):
+            rho += " (too few participants for an interval)"
+        rows.append(
+            {
+                "metric": row.metric,
+                "better is": row.better,
+                "participants": int(row.n),
+                "Spearman rho, better with a higher rating (95 % CI)": rho,
+                "p": row.p_value,
+                "Holm p": row.p_holm,
+                "agrees": bool(row.agrees),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def benchmarks_for_reading(benchmarks: pd.DataFrame) -> pd.DataFrame:
     """The benchmarks as a supervisor reads them: each metric's pass condition in its display unit
     ("<= 3.04 deg"), the rule and the experts behind it (the SI mark stays in tables/benchmarks.csv)."""
@@ -702,7 +733,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         weights = composite.weights.rename_axis("metric").reset_index()
         weights = weights[weights["weight"].abs() > 0].sort_values("weight", key=np.abs, ascending=False)
     notes = [*analysis.validity.notes[1:], *analysis.notes]
-    summary = summary_table(analysis)
+    summary = summary_in_display_units(analysis)
     registry = REGISTRY.describe()[["name", "unit", "better", "definition", "reference"]]
     curves = analysis.learning_curves
 
@@ -741,7 +772,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "box_plots": box_plots,
         "composite_text": composite_text,
         "composite_table": _html_table(weights),
-        "concurrent_table": _html_table(concurrent.table) if concurrent is not None else "",
+        "concurrent_table": _html_table(concurrent_for_reading(concurrent.table))
+        if concurrent is not None
+        else "",
         "concurrent_notes": concurrent.notes if concurrent is not None else [],
         "roc": roc,
         "benchmark_table": _html_table(benchmarks_for_reading(analysis.benchmarks)),
@@ -780,7 +813,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     ]
     if concurrent is not None:
         lines += ["## Concurrent validity", "", *[f"- {n}" for n in concurrent.notes], ""]
-        lines += [_markdown_table(concurrent.table), ""]
+        lines += [_markdown_table(concurrent_for_reading(concurrent.table)), ""]
     benchmarks = _markdown_table(benchmarks_for_reading(analysis.benchmarks))
     lines += ["## Proficiency benchmarks", "", benchmarks, ""]
     if standards:

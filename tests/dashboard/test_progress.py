@@ -20,15 +20,39 @@ from tests.dashboard.conftest import sign_in
 
 
 @pytest.fixture(scope="module")
-def progress(demo_catalog):
+def served(demo_catalog):
+    """(participant T01's progress, the study's validity report) as the API serves them."""
     catalog, home = demo_catalog
     with catalog.session() as orm:
         create_user(orm, "curves-supervisor", "correct horse battery", "supervisor")
-        trainee = orm.scalar(select(Participant.id).where(Participant.code == "T01"))
+        trainee, study = orm.execute(
+            select(Participant.id, Participant.study_id).where(Participant.code == "T01")
+        ).one()
     app = create_app(DashboardSettings(home=home, database_url=catalog.url), catalog)
     with TestClient(app) as client:
         sign_in(client, "curves-supervisor", "correct horse battery")
-        yield client.get(f"/api/participants/{trainee}/progress").json()
+        yield (
+            client.get(f"/api/participants/{trainee}/progress").json(),
+            client.get(f"/api/studies/{study}/validity").json(),
+        )
+
+
+@pytest.fixture(scope="module")
+def progress(served):
+    return served[0]
+
+
+def test_the_validity_tables_medians_are_in_display_units(served, demo_catalog):
+    """Seen: the validity page's medians in SI (entry_to_target 0.000137 m) beside mm everywhere else."""
+    catalog, _ = demo_catalog
+    analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    si = analysis.validity.table.set_index("metric")
+    shown = {row["metric"]: row for row in served[1]["table"]}
+    assert shown["entry_to_target"]["unit"] == "mm"
+    assert shown["entry_to_target"]["median_expert"] == pytest.approx(
+        1e3 * si.at["entry_to_target", "median_expert"]
+    )
+    assert shown["tip_speed_after_pierce"]["unit"] == "mm/s"
 
 
 def test_learning_curves_are_in_display_units_with_each_points_own_pass(progress, demo_catalog):

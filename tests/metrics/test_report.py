@@ -1,5 +1,7 @@
 """The study report from a synthetic study: files, numbers matching the tables, synthetic label."""
 
+import math
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -128,3 +130,20 @@ def test_the_report_lists_each_trainees_feedback_and_its_csvs_say_their_units(an
     assert "retention_change_path_length [m]" in trainees.columns
     # the page shows the pass condition in display units, not the SI mark
     assert "a session passes when" in text and " mm</td>" in text
+
+
+def test_concurrent_validity_reads_rho_with_its_interval_and_no_metric_unit():
+    from metrics.report import concurrent_for_reading
+
+    table = pd.DataFrame(
+        [
+            {"metric": "path_length", "unit": "m", "better": "lower", "n": 10, "rho": 0.646,
+             "rho_ci_low": -0.0797, "rho_ci_high": 0.981, "p_value": 0.046, "p_holm": 0.138, "agrees": False},
+            {"metric": "task_time", "unit": "s", "better": "lower", "n": 3, "rho": 0.5,
+             "rho_ci_low": math.nan, "rho_ci_high": math.nan, "p_value": 0.6, "p_holm": 0.6, "agrees": False},
+        ]
+    )  # fmt: skip
+    shown = concurrent_for_reading(table)
+    assert "unit" not in shown.columns  # rho has none; the metric's unit read as if it were rho's
+    column = "Spearman rho, better with a higher rating (95 % CI)"
+    assert shown[column].tolist() == ["0.65 (-0.08 to 0.98)", "0.50 (too few participants for an interval)"]
