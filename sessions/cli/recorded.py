@@ -108,7 +108,7 @@ def sessions_show(uid: str, as_json: bool) -> None:
             "error": row.error,
             "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
         }
-    from metrics.feedback import session_feedback
+    from metrics.feedback import metric_groups, session_feedback
     from sessions.review import session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)
@@ -122,20 +122,19 @@ def sessions_show(uid: str, as_json: bool) -> None:
     for key, value in data.items():
         if key == "files":
             for f in value:
-                click.echo(f"  file {f['name']:18s} {f['bytes']:>10d} B  sha256 {f['sha256']}")
+                click.echo(f"  file {f['name']:18s} {f['bytes']:>10d} B")
+                click.echo(f"    sha256 {f['sha256']}")  # whole, on a line of its own within 80 columns
         elif key == "metrics":
-            click.echo(
-                "metrics      (against the experts' quartiles of this task, by each metric's direction)"
-            )
-            for r in rows:
-                versus = r["versus_experts"] or ""
-                click.echo(f"  {r['metric']:28s} {shown(r['value'], r['unit']):>14s}  {versus}")
+            click.echo("metrics      (against the experts' quartiles on this task, by direction)")
+            for group in metric_groups(rows):
+                click.echo(f"  {group['title'].lower()}")
+                for r in group["metrics"]:
+                    versus = r["versus_experts"] or ""
+                    click.echo(f"    {r['metric']:26s} {shown(r['value'], r['unit']):>14s}  {versus}")
         elif key == "versus_experts":
             continue
         elif key == "work_on":
-            click.echo(
-                "work on      (safety first, then quality, then efficiency; furthest from the experts first)"
-            )
+            click.echo("work on      (safety, then quality, then efficiency; furthest out first)")
             for item in value or [{"kind": "", "line": "nothing worse than the experts' middle half"}]:
                 text = f"{item['kind']}: {item['line']}" if item["kind"] else item["line"]
                 click.echo(click.wrap_text(text, 78, initial_indent="  ", subsequent_indent="    "))

@@ -86,6 +86,15 @@ def test_the_cli_and_the_session_page_say_the_same(tmp_path, copy_demo, monkeypa
         create_user(orm, "supervisor", "correct horse battery", "supervisor")
     shown = json.loads(CliRunner().invoke(main, ["sessions", "show", uid, "--json"]).stdout)
     assert shown["work_on"], "a first-day trainee has something to work on"
+    text = CliRunner().invoke(main, ["sessions", "show", uid], env={"COLUMNS": "80"}).stdout
+    # hashes whole, each on its own line; only a path may be longer than the terminal
+    assert max(len(line) for line in text.splitlines() if not line.startswith("directory")) <= 80
+    lines = text.splitlines()
+    assert lines.index("  safety") < lines.index("  quality and efficiency") < lines.index(next(
+        line for line in lines if line.startswith("work on")
+    ))  # fmt: skip
+    for item in shown["work_on"] + shown["strengths"]:
+        assert " ".join(item["line"].split()) in " ".join(text.split())
     app = create_app(DashboardSettings(home=home, database_url=url), catalog)
     with TestClient(app) as client:
         sign_in(client, "supervisor", "correct horse battery")
