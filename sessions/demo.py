@@ -89,6 +89,17 @@ class DemoResult:
     sessions: int
     final: StudyAnalysis | None = None  # the final task's analysis (None without closures)
     final_report: Path | None = None
+    relinked: tuple[str, ...] = ()  # codes whose trainee accounts were linked again after a re-run
+    unlinked: tuple[str, ...] = ()  # codes with an account that the new demo no longer has
+    videos_removed: int = 0  # replay videos of the previous demo's sessions, deleted with them
+
+
+@dataclass(frozen=True)
+class PreviousDemo:
+    """What a re-run keeps from the demo it replaces: each participant code's linked account."""
+
+    links: dict[str, int]
+    videos_removed: int
 
 
 SYNTHETIC_RATERS = (("synthetic rater A", 0.0), ("synthetic rater B", -0.4))
@@ -129,17 +140,24 @@ def synthetic_ratings(catalog: Catalog, runs: list, seed: int) -> int:
     return store_ratings(catalog, ratings)
 
 
-def _reset_study(catalog: Catalog, name: str) -> None:
+def _reset_study(catalog: Catalog, name: str, home: Path) -> PreviousDemo:
+    """Delete the previous demo study, its recordings and its replay videos (which would otherwise
+    outlive their sessions); return the trainee accounts linked to its participants, by code."""
     with catalog.session() as orm:
         study = orm.scalar(select(Study).where(Study.name == name))
         if study is None:
-            return
+            return PreviousDemo({}, 0)
         if not all(p.synthetic for p in study.participants):
             raise CatalogError(f"study {name!r} holds real participants; the demo will not replace it")
-        directories = [s.directory for p in study.participants for s in p.sessions]
+        links = {p.code: p.user_id for p in study.participants if p.user_id is not None}
+        sessions = [(s.uid, s.directory) for p in study.participants for s in p.sessions]
         orm.delete(study)
-    for directory in directories:
+    for _, directory in sessions:
         shutil.rmtree(directory, ignore_errors=True)
+    videos = [v for uid, _ in sessions for v in (home / "replays").glob(f"{uid}*.mp4")]
+    for video in videos:
+        video.unlink(missing_ok=True)
+    return PreviousDemo(links, len(videos))
 
 
 _WORKER_CATALOGS: dict[str, Catalog] = {}
@@ -192,7 +210,7 @@ def run_demo(
     workers = workers if workers is not None else min(2, os.cpu_count() or 1)
     size = size or DemoSize()
     start = time.perf_counter()
-    _reset_study(catalog, DEMO_STUDY)
+    previous = _reset_study(catalog, DEMO_STUDY, home)
     plans = []
     with catalog.session() as orm:
         study = catalog.study(
@@ -204,7 +222,10 @@ def run_demo(
         ):
             for k in range(1, count + 1):
                 code = f"{kind[0].upper()}{k:02d}"
-                catalog.add_participant(orm, study, code, level=kind, group_label=kind, synthetic=True)
+                participant = catalog.add_participant(
+                    orm, study, code, level=kind, group_label=kind, synthetic=True
+                )
+                participant.user_id = previous.links.get(code)  # a re-run keeps trainee accounts linked
                 profile = profile_for(
                     kind, seed * 1000 + zlib.crc32(code.encode()) % 997
                 )  # not hash(): salted per process
@@ -241,4 +262,15 @@ def run_demo(
         final_report = write_report(
             final, reports / FINAL_TASK, title=f"vascsim demo study (synthetic): {FINAL_TASK}"
         )
-    return DemoResult(analysis, report, time.perf_counter() - start, len(plans), final, final_report)
+    codes = {code for code, *_ in plans}
+    return DemoResult(
+        analysis,
+        report,
+        time.perf_counter() - start,
+        len(plans),
+        final,
+        final_report,
+        relinked=tuple(sorted(set(previous.links) & codes)),
+        unlinked=tuple(sorted(set(previous.links) - codes)),
+        videos_removed=previous.videos_removed,
+    )

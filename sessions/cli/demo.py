@@ -78,6 +78,9 @@ def demo(small: bool, as_json: bool) -> None:
                 "composite_auc": None if validity.composite is None else validity.composite.auc,
                 "composite": composite_summary(validity.composite),
                 "synthetic": True,
+                "relinked": list(result.relinked),
+                "unlinked": list(result.unlinked),
+                "videos_removed": result.videos_removed,
             }
         )
         return
@@ -93,6 +96,8 @@ def demo(small: bool, as_json: bool) -> None:
     if result.final is not None:
         click.echo(final_task_line(result.final, result.final_report))
     click.echo(f"{result.sessions} sessions in {result.seconds:.0f} s; full report: {result.report}")
+    for line in rerun_lines(result):
+        click.echo(click.wrap_text(line, 80, subsequent_indent="  "))
     first_trainee = analysis.sessions.loc[analysis.sessions["label"] == "trainee", "session_id"]
     if len(first_trainee):
         click.echo(
@@ -105,3 +110,19 @@ def demo(small: bool, as_json: bool) -> None:
         "open the results in the dashboard: vascsim users add NAME --role admin; vascsim serve; "
         f"then http://127.0.0.1:8000/studies/{study_id}"
     )
+
+
+def rerun_lines(result) -> list[str]:
+    """What a re-run did to what the previous demo left: accounts linked again, accounts whose
+    participant the new demo has no more, replay videos removed with their sessions."""
+    lines = []
+    if result.relinked:
+        lines.append(f"trainee accounts linked again to the new demo's {', '.join(result.relinked)}")
+    if result.unlinked:
+        lines.append(
+            f"accounts of {', '.join(result.unlinked)} are no longer linked: this demo has no such "
+            "participant (link them on the Administration page)"
+        )
+    if result.videos_removed:
+        lines.append(f"removed {result.videos_removed} replay video(s) of the previous demo's sessions")
+    return lines
