@@ -35,6 +35,7 @@ PAPER_REF = "the vascsim source paper (haptic simulator for suturing in vascular
 # -- motion --------------------------------------------------------------------------
 @metric(
     "task_time",
+    advice="Work through the steps without pauses; speed follows a settled routine.",
     unit="s",
     definition="Time from the first to the last sample of the session.",
     better=LOWER,
@@ -47,6 +48,7 @@ def task_time(context: SessionContext) -> float:
 
 @metric(
     "path_length",
+    advice="Move the holder less: plan each bite and go straight to it.",
     unit="m",
     definition=(
         "Length the dominant tool travels within its movements (speed above 2 mm/s, rest to rest), on "
@@ -63,6 +65,7 @@ def path_length(context: SessionContext) -> float:
 
 @metric(
     "movement_count",
+    advice="Make fewer, deliberate movements instead of many corrections.",
     unit="1",
     definition=(
         "Number of submovements of the tool's speed (6 Hz zero-phase low-pass, then <= 100 Hz): "
@@ -79,6 +82,7 @@ def movement_count(context: SessionContext) -> float:
 
 @metric(
     "economy_of_motion",
+    advice="Take the direct route between the steps.",
     unit="1",
     definition=(
         "Sum over submovements of the straight-line distance from start to end (rest or the valley "
@@ -95,6 +99,7 @@ def economy_of_motion(context: SessionContext) -> float:
 
 @metric(
     "log_dimensionless_jerk",
+    advice="Move smoothly: start and stop the holder gently.",
     unit="1",
     definition=(
         "Median over submovements of -ln((T^3 / v_peak^2) * integral of |jerk|^2 dt), jerk of the tool "
@@ -115,6 +120,7 @@ def log_dimensionless_jerk(context: SessionContext) -> float:
 
 @metric(
     "spectral_arc_length",
+    advice="Move smoothly, in one flowing motion per step.",
     unit="1",
     definition=(
         "SPARC of the tool's speed profile: arc length of its normalised Fourier magnitude up to the last "
@@ -131,6 +137,7 @@ def spectral_arc_length(context: SessionContext) -> float:
 
 @metric(
     "idle_time",
+    advice="Keep the hands working; decide the next move before finishing this one.",
     unit="s",
     definition="Total time in stretches of >= 0.25 s with the tool's smoothed speed below 1 mm/s.",
     better=LOWER,
@@ -165,6 +172,7 @@ def _tip_speed_near(context: SessionContext, after: bool) -> float:
 
 @metric(
     "tip_speed_before_pierce",
+    advice="Approach the wall more slowly and in control.",
     unit="m/s",
     definition=(
         "Mean needle-tip speed within 5 mm of the insertion point (the tip at the first pierce) before each "
@@ -181,6 +189,7 @@ def tip_speed_before_pierce(context: SessionContext) -> float:
 
 @metric(
     "tip_speed_after_pierce",
+    advice="Drive the needle through the wall more slowly.",
     unit="m/s",
     definition=(
         "Mean needle-tip speed within 5 mm of the insertion point from each pierce to the end of its "
@@ -197,6 +206,7 @@ def tip_speed_after_pierce(context: SessionContext) -> float:
 
 @metric(
     "entry_angle_error_deg",
+    advice="Meet the wall at a right angle before you push.",
     unit="deg",
     definition=(
         "Angle between the needle tip's direction and the inward surface normal when it first touches the "
@@ -214,6 +224,7 @@ def entry_angle_error_deg(context: SessionContext) -> float:
 
 @metric(
     "attempts",
+    advice="Commit to one entry: set the angle, then pierce in one attempt.",
     unit="1",
     definition="Contact episodes (contact start to contact end) that ended without the needle piercing.",
     streams=("events",),
@@ -239,6 +250,7 @@ def attempts(context: SessionContext) -> float:
 
 @metric(
     "regrabs",
+    advice="Load the needle once where you need it, to avoid re-grasping.",
     unit="1",
     definition="Times the needle holder let go of the needle and took it again (one per stitch is usual).",
     streams=("events",),
@@ -252,6 +264,7 @@ def regrabs(context: SessionContext) -> float:
 
 @metric(
     "contact_to_pierce_time",
+    advice="Once the tip is on the wall, pierce decisively.",
     unit="s",
     definition="Time from the first contact of an episode to its pierce, averaged over insertions.",
     streams=("events",),
@@ -267,6 +280,7 @@ def contact_to_pierce_time(context: SessionContext) -> float:
 # -- force ---------------------------------------------------------------------------
 @metric(
     "peak_force",
+    advice="Use less force: let the needle's curve do the work.",
     unit="N",
     definition=(
         "Largest magnitude of the tissue's reaction force on the needle (before the device's clamp; "
@@ -292,6 +306,7 @@ def _contact_force(context: SessionContext):
 
 @metric(
     "mean_force",
+    advice="Keep the load on the tissue lower throughout the bite.",
     unit="N",
     definition="Mean force magnitude over samples with the needle touching or inside the tissue.",
     streams=("force",),
@@ -306,6 +321,7 @@ def mean_force(context: SessionContext) -> float:
 
 @metric(
     "rms_force",
+    advice="Keep the load on the tissue lower throughout the bite.",
     unit="N",
     definition="Root-mean-square force magnitude over samples with the needle touching or inside the tissue.",
     streams=("force",),
@@ -320,6 +336,7 @@ def rms_force(context: SessionContext) -> float:
 
 @metric(
     "force_at_insertion",
+    advice="Pierce with less force: a sharp, square entry needs less.",
     unit="N",
     definition="Force magnitude at the instant of each pierce (interpolated), averaged over insertions.",
     streams=("force", "events"),
@@ -337,6 +354,7 @@ def force_at_insertion(context: SessionContext) -> float:
 
 @metric(
     "peak_force_rate",
+    advice="Load the tissue gradually, without jerks.",
     unit="N/s",
     definition="Largest |F(t + 10 ms) - F(t)| / 10 ms of the force vector (resampled to 1 kHz).",
     streams=("force",),
@@ -358,6 +376,7 @@ def peak_force_rate(context: SessionContext) -> float:
 
 @metric(
     "force_clamp_hits",
+    advice="Never push beyond what the device (and the wall) can take.",
     unit="1",
     definition="Times the runtime's safety layer clamped the force to the device's rated maximum.",
     streams=("events",),
@@ -384,6 +403,7 @@ def _stress_near(context: SessionContext):
 
 @metric(
     "high_stress_area",
+    advice="Spread less stress through the wall: follow the needle's curve.",
     unit="m^2",
     definition=(
         "Tissue surface within 5 mm of the insertion point whose von Mises stress at the moment of "
@@ -405,6 +425,7 @@ def high_stress_area(context: SessionContext) -> float:
 
 @metric(
     "stress_concentration",
+    advice="Avoid concentrating stress: rotate the needle, do not lever it.",
     unit="1",
     definition=(
         "Area-weighted mean von Mises stress within 5 mm of the insertion point divided by its peak there, "
@@ -428,6 +449,7 @@ def stress_concentration(context: SessionContext) -> float:
 
 @metric(
     "peak_stretch",
+    advice="Stretch the wall less: do not pull or lever on the needle.",
     unit="1",
     definition=(
         "Largest stretch statistic lambda = 1 + |d|/h over the session (d: the tip's indentation of the "
@@ -447,6 +469,7 @@ def peak_stretch(context: SessionContext) -> float:
 
 @metric(
     "time_above_strain_limit",
+    advice="Spend less time overstretching the wall.",
     unit="s",
     definition="Time with the stretch statistic lambda above 1.3 (30 % indentation strain: tissue damage).",
     streams=("stretch",),
@@ -465,6 +488,7 @@ def time_above_strain_limit(context: SessionContext) -> float:
 
 @metric(
     "wound_edge_tears",
+    advice="Protect the wound edge: do not lever the needle against it.",
     unit="1",
     definition="Times the wound edge was stressed past the tissue's damage threshold (edge_overstress "
     "events: a bite too near the edge, or a needle levered towards it): a tear risk, a never event.",
@@ -489,6 +513,7 @@ def _insertion_mask(context: SessionContext):
 
 @metric(
     "subordinate_displacement",
+    advice="Keep the assisting hand steady.",
     unit="m",
     definition=(
         "Largest displacement of the subordinate hand from where it was at each pierce, during the "
@@ -513,6 +538,7 @@ def subordinate_displacement(context: SessionContext) -> float:
 
 @metric(
     "subordinate_activity",
+    advice="Let the assisting hand hold, not chase.",
     unit="m",
     definition="Path length of the subordinate hand during the insertions (pierce to end of passage).",
     streams=("subordinate_displacement", "events"),
@@ -531,6 +557,7 @@ def subordinate_activity(context: SessionContext) -> float:
 
 @metric(
     "subordinate_path_length",
+    advice="Move the assisting hand less.",
     unit="m",
     definition="Length the subordinate hand travels within its movements, measured as path_length is.",
     streams=("subordinate_displacement",),

@@ -5,7 +5,7 @@ cut from the list), then the rest of safety (:data:`SAFETY_GROUP`: partial-thick
 punctures, excessive force, the tissue's load), the quality of the stitch (placement), then
 efficiency (motion, insertion, the remaining forces, the assisting hand); within each, by how far
 outside the experts' interquartile band the value lies, in band widths. Each item carries a
-sentence a supervisor would say (:data:`ADVICE`, one per registered metric, checked by a test),
+sentence a supervisor would say (each metric's ``advice`` in the registry, required when it registers),
 so the CLI, the dashboard and the report say the same thing. Strengths are the metrics better
 than the experts' middle half (then the safety and quality metrics level with it), in the same
 order. :func:`session_feedback` gives both for one session, :func:`participant_feedback` for a
@@ -44,49 +44,6 @@ SAFETY_GROUP = (
 excessive force, and the load on the tissue (stress, stretch, the wound edge)."""
 
 QUALITY_GROUPS = ("placement",)
-
-ADVICE: dict[str, str] = {
-    "task_time": "Work through the steps without pauses; speed follows a settled routine.",
-    "path_length": "Move the holder less: plan each bite and go straight to it.",
-    "movement_count": "Make fewer, deliberate movements instead of many corrections.",
-    "economy_of_motion": "Take the direct route between the steps.",
-    "log_dimensionless_jerk": "Move smoothly: start and stop the holder gently.",
-    "spectral_arc_length": "Move smoothly, in one flowing motion per step.",
-    "idle_time": "Keep the hands working; decide the next move before finishing this one.",
-    "tip_speed_before_pierce": "Approach the wall more slowly and in control.",
-    "tip_speed_after_pierce": "Drive the needle through the wall more slowly.",
-    "entry_angle_error_deg": "Meet the wall at a right angle before you push.",
-    "attempts": "Commit to one entry: set the angle, then pierce in one attempt.",
-    "regrabs": "Load the needle once where you need it, to avoid re-grasping.",
-    "contact_to_pierce_time": "Once the tip is on the wall, pierce decisively.",
-    "peak_force": "Use less force: let the needle's curve do the work.",
-    "mean_force": "Keep the load on the tissue lower throughout the bite.",
-    "rms_force": "Keep the load on the tissue lower throughout the bite.",
-    "force_at_insertion": "Pierce with less force: a sharp, square entry needs less.",
-    "peak_force_rate": "Load the tissue gradually, without jerks.",
-    "force_clamp_hits": "Never push beyond what the device (and the wall) can take.",
-    "high_stress_area": "Spread less stress through the wall: follow the needle's curve.",
-    "stress_concentration": "Avoid concentrating stress: rotate the needle, do not lever it.",
-    "peak_stretch": "Stretch the wall less: do not pull or lever on the needle.",
-    "time_above_strain_limit": "Spend less time overstretching the wall.",
-    "wound_edge_tears": "Protect the wound edge: do not lever the needle against it.",
-    "subordinate_displacement": "Keep the assisting hand steady.",
-    "subordinate_activity": "Let the assisting hand hold, not chase.",
-    "subordinate_path_length": "Move the assisting hand less.",
-    "bite_error_entry": "Enter at the planned bite width from the edge.",
-    "bite_error_exit": "Come out at the planned bite width from the edge.",
-    "entry_to_target": "Aim the needle tip at the entry mark before piercing.",
-    "exit_to_target": "Bring the needle out at the exit mark: rotate along its curve.",
-    "bite_asymmetry": "Take equal bites on both sides of the wound.",
-    "full_thickness_fraction": "Take every bite through the full thickness of the wall.",
-    "spacing_error": "Space the stitches as planned.",
-    "spacing_variation": "Keep the spacing between stitches even.",
-    "needle_track_offset": "Follow the needle's own curve through the wall.",
-    "tissue_swept_area": "Sweep less tissue: rotate the needle about its centre.",
-    "wound_edge_stress": "Load the wound edge less while passing the needle.",
-    "back_wall_catches": "Never catch the back wall: keep the lumen in view on every bite.",
-    "extra_punctures": "Place only the planned stitches; each extra puncture is a leak point.",
-}
 
 
 def kind_of(metric: str) -> str:
@@ -141,7 +98,7 @@ def _ranked(rows: Sequence[dict], positions: tuple[str, ...], side: str) -> list
                 "kind": kind_of(row["metric"]),
                 "widths": band_widths_outside(value, q1, q3, row["better"], side),
                 "position": row["versus_experts"],
-                "advice": ADVICE.get(row["metric"], REGISTRY[row["metric"]].definition),
+                "advice": REGISTRY[row["metric"]].advice,
                 "row": row,
             }
         )

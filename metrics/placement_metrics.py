@@ -31,6 +31,7 @@ def _over_stitches(context: SessionContext, per_stitch: Callable[[StitchPlacemen
 
 @metric(
     "bite_error_entry",
+    advice="Enter at the planned bite width from the edge.",
     unit="m",
     definition="Mean over stitches of |entry point's distance from the wound edge - the task's target bite|.",
     streams=("stitches",),
@@ -44,6 +45,7 @@ def bite_error_entry(context: SessionContext) -> float:
 
 @metric(
     "bite_error_exit",
+    advice="Come out at the planned bite width from the edge.",
     unit="m",
     definition="Mean over stitches of |exit point's distance from the wound edge - the task's target "
     "exit bite| (the entry's target unless the task states one).",
@@ -58,6 +60,7 @@ def bite_error_exit(context: SessionContext) -> float:
 
 @metric(
     "entry_to_target",
+    advice="Aim the needle tip at the entry mark before piercing.",
     unit="m",
     definition="Mean over stitches of the distance from the entry point to the nearest target entry mark.",
     streams=("stitches",),
@@ -71,6 +74,7 @@ def entry_to_target(context: SessionContext) -> float:
 
 @metric(
     "exit_to_target",
+    advice="Bring the needle out at the exit mark: rotate along its curve.",
     unit="m",
     definition="Mean over stitches of the distance from the exit point to the nearest target exit mark.",
     streams=("stitches",),
@@ -84,6 +88,7 @@ def exit_to_target(context: SessionContext) -> float:
 
 @metric(
     "bite_asymmetry",
+    advice="Take equal bites on both sides of the wound.",
     unit="m",
     definition="Mean over stitches of |(entry distance from the wound edge - its target) - (exit distance "
     "- its target)|: a bite that takes as much tissue on the way out as the template asks for the way "
@@ -102,6 +107,7 @@ def bite_asymmetry(context: SessionContext) -> float:
 
 @metric(
     "full_thickness_fraction",
+    advice="Take every bite through the full thickness of the wall.",
     unit="1",
     definition="Fraction of stitches whose needle came out through the far (luminal) surface, i.e. "
     "through every wall layer; a stitch out through the cut edge missed the intima, one without an "
@@ -122,6 +128,7 @@ def full_thickness_fraction(context: SessionContext) -> float:
 
 @metric(
     "spacing_error",
+    advice="Space the stitches as planned.",
     unit="m",
     definition="Mean over successive stitches of |their distance along the wound - the task's target "
     "spacing| (a row of stitches; NaN for a single stitch or a task without a row).",
@@ -139,6 +146,7 @@ def spacing_error(context: SessionContext) -> float:
 
 @metric(
     "spacing_variation",
+    advice="Keep the spacing between stitches even.",
     unit="1",
     definition="Coefficient of variation (standard deviation / mean) of the distances along the wound "
     "between successive stitches: 0 for an even row (at least three stitches).",
@@ -162,6 +170,7 @@ PASSAGE_REF = (
 
 @metric(
     "needle_track_offset",
+    advice="Follow the needle's own curve through the wall.",
     unit="m",
     definition="Mean over stitches of the mean distance, while the needle is in the wall, from the "
     "stitch's entry point to the needle's own curve: near 0 when the wrist turns the needle along its "
@@ -177,6 +186,7 @@ def needle_track_offset(context: SessionContext) -> float:
 
 @metric(
     "tissue_swept_area",
+    advice="Sweep less tissue: rotate the needle about its centre.",
     unit="m^2",
     definition="Mean over stitches of the wall the needle swept beyond its own track: the sideways "
     "movement of the needle at the entry hole times the length of needle inside the wall, summed over "
@@ -192,6 +202,7 @@ def tissue_swept_area(context: SessionContext) -> float:
 
 @metric(
     "wound_edge_stress",
+    advice="Load the wound edge less while passing the needle.",
     unit="Pa",
     definition="Mean over stitches of the peak von Mises stress of the elements on the wound's cut faces "
     "during the stitch (the tissue model's linear far field under the recorded needle load): a bite too "
@@ -207,6 +218,7 @@ def wound_edge_stress(context: SessionContext) -> float:
 
 @metric(
     "back_wall_catches",
+    advice="Never catch the back wall: keep the lumen in view on every bite.",
     unit="1",
     definition="Pierces in through the vessel's luminal surface (entry face within 45 deg of the far "
     "normal): the needle caught the back wall, which narrows or closes the vessel.",
@@ -222,6 +234,7 @@ def back_wall_catches(context: SessionContext) -> float:
 
 @metric(
     "extra_punctures",
+    advice="Place only the planned stitches; each extra puncture is a leak point.",
     unit="1",
     definition="Stitches beyond the task's target marks: each a further hole through the wall (a "
     "withdrawn and re-inserted needle), never fewer than 0.",

@@ -28,6 +28,7 @@ class Metric:
     """One per-session metric.
 
     better: ``"lower"`` or ``"higher"``, which values indicate more skill.
+    advice: required when registering (:func:`metric`): a new metric brings its own feedback.
     streams: the session streams it needs (``SessionStreams`` attribute names, or
     ``"events"``); without them the value is NaN.
     bounds: the values the metric can take (a time or an angle error is never negative,
@@ -43,6 +44,9 @@ class Metric:
     group: str
     compute: Callable[[SessionContext], float]
     bounds: tuple[float, float] = (-math.inf, math.inf)
+    advice: str = ""
+    """What a better attempt does, in a sentence a supervisor would say (the feedback a trainee reads
+    when the metric is worse than the experts': :mod:`metrics.feedback`)."""
 
     def __post_init__(self) -> None:
         if self.better not in (LOWER, HIGHER):
@@ -91,7 +95,7 @@ class Registry:
         return list(self) if names is None else [self[n] for n in names]
 
     def describe(self):
-        """The registry as a DataFrame (name, unit, better, streams, group, definition, reference)."""
+        """The registry as a DataFrame (name, unit, better, streams, group, definition, advice, reference)."""
         import pandas as pd
 
         return pd.DataFrame(
@@ -104,6 +108,7 @@ class Registry:
                     "group": m.group,
                     "streams": ", ".join(m.streams),
                     "definition": m.definition,
+                    "advice": m.advice,
                     "reference": m.reference,
                 }
                 for m in self
@@ -119,16 +124,22 @@ def metric(
     *,
     unit: str,
     definition: str,
+    advice: str,
     streams: tuple[str, ...] = (),
     better: str,
     reference: str,
     group: str,
     bounds: tuple[float, float] = (0.0, math.inf),
 ) -> Callable[[Callable[[SessionContext], float]], Callable[[SessionContext], float]]:
-    """Decorator registering a metric function in :data:`REGISTRY` (by default a non-negative quantity)."""
+    """Decorator registering a metric function in :data:`REGISTRY` (by default a non-negative quantity);
+    ``advice``: what a better attempt does, one sentence ending in a full stop."""
+    if not advice.endswith(".") or len(advice) >= 90:
+        raise MetricsError(f"metric {name!r}: advice must be one sentence under 90 characters, ending in '.'")
 
     def register(function: Callable[[SessionContext], float]) -> Callable[[SessionContext], float]:
-        REGISTRY.add(Metric(name, unit, definition, streams, better, reference, group, function, bounds))
+        REGISTRY.add(
+            Metric(name, unit, definition, streams, better, reference, group, function, bounds, advice)
+        )
         return function
 
     return register
