@@ -85,9 +85,7 @@ def main() -> None:
                 f"{len(result.metrics)} metrics: {times[-1]:.2f} s",
                 flush=True,
             )
-    print(
-        f"JIGSAWS benchmark, one task: median {statistics.median(times):.2f} s of {len(times)} (bar: 30 s)"
-    )
+    print(f"JIGSAWS benchmark, one task: median {statistics.median(times):.2f} s of {len(times)} (bar: 30 s)")
 
 
 if __name__ == "__main__":

@@ -128,8 +128,7 @@ def on_demand_change_seconds(model: TissueModel, triangle: np.ndarray, repeats: 
     """Time to answer a new contact triangle whose columns are not cached yet."""
 
     def change() -> None:
-        with model._column_lock:
-            model._columns.clear()
+        model.drop_cached_columns()
         model.contact(triangle)
 
     return median_seconds(change, repeats)

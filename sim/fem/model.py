@@ -15,55 +15,36 @@ a memory-bounded cache (on-demand mode).
 
 from __future__ import annotations
 
-import threading
 import time
-from collections import OrderedDict
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Mapping
 from functools import cached_property
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import ModelError
-from sim.fem import cache
+from sim.fem import cache, checks, stress
 from sim.fem.assembly import (
     SparsityPattern,
-    displacement_gradients,
     element_stiffness,
-    principal_stretches,
     shape_gradients,
-    small_strain,
-    von_mises_stress,
 )
-from sim.fem.condensation import condensed_inverse, node_dofs, sparse_cholesky
+from sim.fem.checks import fixed_nodes_of
+from sim.fem.columns import ColumnCache
+from sim.fem.condensation import node_dofs, sparse_cholesky
 from sim.fem.material import Material, MaterialSpec, describe_materials, element_lame
+from sim.fem.precomputation import Precomputation, condensed, woodbury_composite
 from sim.fem.solution import ContactHandle, ContactSolution
 from sim.fem.surface import SurfaceGeometry
-from sim.mesh.tetmesh import TetMesh, signed_volumes
+from sim.mesh.tetmesh import TetMesh
 
 # Penalty constant C = factor x the largest diagonal entry of K. The constraint
 # error of a penalty spring is about (local stiffness / C), i.e. ~1e-5 relative.
 DEFAULT_PENALTY_FACTOR = 1e5
 # Memory budget of the on-demand column cache.
 DEFAULT_COLUMN_CACHE_BYTES = 1024 * 2**20
-
-
-@dataclass
-class Precomputation:
-    """The condensed inverse over the contact candidates, and how it was obtained."""
-
-    nodes: NDArray[np.int64]
-    matrix: NDArray[np.float64]
-    seconds: dict[str, float] = field(default_factory=dict)
-    from_cache: bool = False
-
-    @property
-    def nbytes(self) -> int:
-        return int(self.matrix.nbytes)
 
 
 class TissueModel:
@@ -94,21 +75,21 @@ class TissueModel:
         self.mesh = mesh
         self.material = material
         self._lame = element_lame(mesh.regions, mesh.region_names, material)
-        nodes = _node_ids(fixed_nodes, mesh.n_nodes, "fixed_nodes")
-        extra = _ids(fixed_dofs, 3 * mesh.n_nodes, "fixed_dofs")
+        nodes = checks.node_ids(fixed_nodes, mesh.n_nodes, "fixed_nodes")
+        extra = checks.ids(fixed_dofs, 3 * mesh.n_nodes, "fixed_dofs")
         self.fixed_dofs = np.union1d(node_dofs(nodes), extra)
         if self.fixed_dofs.size == 0:
             raise ModelError(
                 "no fixed nodes or dofs: the tissue would float freely; fix at least "
                 "the nodes the vessel is held by (e.g. mesh.node_sets['z0'])"
             )
-        _check_rigid_motion_fixed(mesh.points, self.fixed_dofs)
+        checks.check_rigid_motion_fixed(mesh.points, self.fixed_dofs)
         self.clamped_nodes = np.flatnonzero(np.bincount(self.fixed_dofs // 3, minlength=mesh.n_nodes) == 3)
         """Nodes held on all three axes."""
         if contact_nodes is None:
             candidates = np.setdiff1d(mesh.surface_nodes, self.clamped_nodes)
         else:
-            candidates = _node_ids(contact_nodes, mesh.n_nodes, "contact_nodes")
+            candidates = checks.node_ids(contact_nodes, mesh.n_nodes, "contact_nodes")
         if candidates.size == 0:
             raise ModelError("the model has no contact-candidate nodes (every surface node is fixed)")
         self.contact_nodes = candidates
@@ -117,19 +98,13 @@ class TissueModel:
         self._penalty_factor = penalty_factor
         self._requested_penalty = penalty
         self._precomputed: Precomputation | None = None
-        self._columns: OrderedDict[int, _CachedColumns] = OrderedDict()
-        self.evicted_columns: set[int] = set()
-        self.spot_solved: list[int] = []
-        """Nodes whose columns a contact had to solve when it needed them (not solved ahead)."""
-        """Nodes whose cached columns were dropped for the memory budget (telemetry: a contact
-        that must solve one of these again was prefetched, then evicted before it was used)."""
-        self._column_budget = column_cache_bytes
-        self._column_lock = threading.Lock()
+        # solve_columns looked up at each solve, not bound now (a test or a worker may replace it)
+        self._column_cache = ColumnCache(
+            lambda nodes: self.solve_columns(nodes), node_dofs(candidates), column_cache_bytes
+        )
         self._inverse_of: tuple[TissueModel, float] | None = None  # (base, s): K0 = s K0_base
         self.surface = SurfaceGeometry(mesh)
         """The surface's normals, element lookup and the tissue depth under each surface node."""
-        self.column_solver: Callable[[NDArray[np.int64]], NDArray[np.float64]] | None = None
-        """Solves on-demand columns in place of :meth:`solve_columns` (e.g. in a worker process)."""
 
     # -- assembly --------------------------------------------------------------
     @cached_property
@@ -209,7 +184,7 @@ class TissueModel:
         if self._inverse_of is not None:
             return self._inverse_of[0].needs_solve(node, full)
         precomputed = not full and self._precomputed is not None and self._candidate_row[node] >= 0
-        return not precomputed and node not in self._columns
+        return not precomputed and node not in self._column_cache
 
     def _stiffness_scale_of(self, base: TissueModel) -> float | None:
         """s with K0 = s K0_base, or None."""
@@ -238,29 +213,16 @@ class TissueModel:
         return None
 
     def surface_von_mises(self, displacement: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(F,) von Mises stress (Pa) of the element under each exterior triangle, from a full field."""
-        elements = self.mesh.surface_elements
-        grad = displacement_gradients(
-            self.element_gradients[elements], self.mesh.tets[elements], displacement
-        )
-        return self.surface_von_mises_of_gradients(grad)
+        """See :func:`sim.fem.stress.surface_von_mises`."""
+        return stress.surface_von_mises(self.mesh, self.element_gradients, self._lame, displacement)
 
     def surface_von_mises_of_gradients(self, gradients: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(F,) von Mises stress (Pa) of the elements under the exterior triangles, from their (F, 3, 3)
-        displacement gradients."""
-        elements = self.mesh.surface_elements
-        lam, mu = self._lame
-        return von_mises_stress(small_strain(gradients), lam[elements], mu[elements])
+        """See :func:`sim.fem.stress.surface_von_mises_of_gradients`."""
+        return stress.surface_von_mises_of_gradients(self.mesh, self._lame, gradients)
 
     def surface_gradient_map(self, columns: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(F * 9, c) map from weights of the columns of a (3N, c) displacement basis to the
-        displacement gradients of the elements under the exterior triangles (row-major (F, 3, 3)):
-        gradients are linear in the displacement, so a whole-field handle's gradients for any
-        reactions are this map times them (one product instead of a gather and an einsum)."""
-        elements = self.mesh.surface_elements
-        basis = columns.reshape(self.mesh.n_nodes, 3, columns.shape[1])[self.mesh.tets[elements]]
-        gradients = np.einsum("maic,maj->mijc", basis, self.element_gradients[elements])
-        return np.ascontiguousarray(gradients.reshape(-1, columns.shape[1]))
+        """See :func:`sim.fem.stress.surface_gradient_map`."""
+        return stress.surface_gradient_map(self.mesh, self.element_gradients, columns)
 
     # -- precomputation ----------------------------------------------------------
     def cache_key(self) -> str:
@@ -268,8 +230,8 @@ class TissueModel:
         return cache.cache_key(
             self.mesh.content_hash,
             describe_materials(self.material),
-            _array_hash(self.fixed_dofs),
-            _array_hash(self.contact_nodes),
+            checks.array_hash(self.fixed_dofs),
+            checks.array_hash(self.contact_nodes),
             repr(self.penalty),
         )
 
@@ -291,28 +253,10 @@ class TissueModel:
             )
             return self._precomputed
         directory = Path(cache_dir) if cache_dir is not None else cache.default_cache_dir()
-        key = self.cache_key()
-        start = time.perf_counter()
-        matrix = cache.load_cached(directory, key) if use_cache else None
-        expected = (3 * len(self.contact_nodes),) * 2
-        if matrix is not None and matrix.shape == expected:
-            result = Precomputation(self.contact_nodes, matrix, {"load": time.perf_counter() - start}, True)
-        else:
-            result = self._compute_condensed()
-            if use_cache:
-                cache.store_cached(directory, key, result.matrix)
-        self._precomputed = result
-        return result
-
-    def _compute_condensed(self) -> Precomputation:
-        timings = {}
-        start = time.perf_counter()
-        matrix = self.penalised_stiffness()
-        timings["assembly"] = time.perf_counter() - start
-        start = time.perf_counter()
-        inverse = condensed_inverse(matrix, node_dofs(self.contact_nodes), timings)
-        timings["condensation"] = time.perf_counter() - start
-        return Precomputation(self.contact_nodes, inverse, timings)
+        self._precomputed = condensed(
+            self.penalised_stiffness, self.contact_nodes, self.cache_key(), directory if use_cache else None
+        )
+        return self._precomputed
 
     @property
     def precomputation(self) -> Precomputation | None:
@@ -326,12 +270,7 @@ class TissueModel:
         derived from the condensed inverse by the exact 3x3 Woodbury update
         Phi_j = G_:j (I + C G_jj)^-1.
         """
-        g = self._require_precomputed().matrix
-        n = len(self.contact_nodes)
-        diagonal = g.reshape(n, 3, n, 3)[np.arange(n), :, np.arange(n), :]  # (n, 3, 3) G_jj
-        correction = np.linalg.inv(np.eye(3) + self.penalty * diagonal)  # (n, 3, 3)
-        blocks = np.einsum("rjk,jkl->rjl", g.reshape(3 * n, n, 3), correction)
-        return blocks.reshape(3 * n, 3 * n)
+        return woodbury_composite(self._require_precomputed().matrix, self.penalty)
 
     def _require_precomputed(self) -> Precomputation:
         if self._precomputed is None:
@@ -348,34 +287,40 @@ class TissueModel:
         ahead: bool = False,
     ) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs, only their ``rows`` (dof ids), or only the
-        candidates' dofs (kept beside each cached column, cut when it was solved): cached ones
-        reused, the rest solved together in one multi-right-hand-side solve (on-demand mode).
-        A contact change so copies (3n, 3k) rows, never whole (3N, 3k) blocks. Nodes solved for
-        a contact (not ``ahead`` of it, as prefetching does) are logged in :attr:`spot_solved`."""
+        candidates' dofs, from the column cache (:class:`sim.fem.columns.ColumnCache`; a model that
+        shares its inverse reads its base's, divided by the scale)."""
         if self._inverse_of is not None:
             base, scale = self._inverse_of
             return base._nodes_columns(nodes, rows, at_candidates=at_candidates, ahead=ahead) / scale
-        with self._column_lock:
-            known = {int(n): self._columns[int(n)] for n in nodes if int(n) in self._columns}
-            for n in known:
-                self._columns.move_to_end(n)
-        missing = [int(n) for n in nodes if int(n) not in known]
-        if missing:
-            if not ahead:
-                self.spot_solved.extend(missing)
-            solve = self.column_solver or self.solve_columns
-            solved = solve(np.array(missing, dtype=np.int64))
-            with self._column_lock:
-                for i, node in enumerate(missing):
-                    known[node] = self._columns[node] = _CachedColumns.of(
-                        solved[:, 3 * i : 3 * i + 3], self._candidate_dofs
-                    )
-                self._evict_columns()
-        if at_candidates:
-            return np.hstack([known[int(n)].at_candidates for n in nodes])
-        if rows is None:
-            return np.hstack([known[int(n)].full for n in nodes])
-        return np.hstack([known[int(n)].full[rows] for n in nodes])
+        return self._column_cache.columns(nodes, rows, at_candidates=at_candidates, ahead=ahead)
+
+    @property
+    def column_solver(self) -> Callable[[NDArray[np.int64]], NDArray[np.float64]] | None:
+        """Solves on-demand columns in place of :meth:`solve_columns` (e.g. in a worker process)."""
+        return self._column_cache.solver
+
+    @column_solver.setter
+    def column_solver(self, solver: Callable[[NDArray[np.int64]], NDArray[np.float64]] | None) -> None:
+        self._column_cache.solver = solver
+
+    @property
+    def spot_solved(self) -> list[int]:
+        """Nodes whose columns a contact had to solve when it needed them (not solved ahead)."""
+        return self._column_cache.spot_solved
+
+    @property
+    def cached_columns(self) -> int:
+        """How many nodes' K0^-1 columns the column cache holds now."""
+        return len(self._column_cache)
+
+    def drop_cached_columns(self) -> None:
+        """Empty the column cache (what a contact change costs from cold is then measurable)."""
+        self._column_cache.clear()
+
+    @property
+    def evicted_columns(self) -> set[int]:
+        """Nodes whose cached columns the memory budget dropped."""
+        return self._column_cache.evicted
 
     def solve_columns(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs, in one multi-right-hand-side solve."""
@@ -383,19 +328,11 @@ class TissueModel:
         rhs[node_dofs(np.asarray(nodes, dtype=np.int64)), np.arange(3 * len(nodes))] = 1.0
         return self._factor(rhs)
 
-    def _evict_columns(self) -> None:
-        """Drop least recently used columns beyond the memory budget (lock held)."""
-        used = sum(c.nbytes for c in self._columns.values())
-        while len(self._columns) > 1 and used > self._column_budget:
-            node, dropped = self._columns.popitem(last=False)
-            used -= dropped.nbytes
-            self.evicted_columns.add(node)
-
     def prefetch(self, nodes: ArrayLike, full: bool = False) -> None:
         """Solve and cache the on-demand columns of ``nodes`` ahead of contact (in precomputed
         mode only those of nodes outside the precomputed candidates are needed, unless ``full``:
         the whole columns the local-stress operator reads)."""
-        ids = _node_ids(nodes, self.mesh.n_nodes, "nodes")
+        ids = checks.node_ids(nodes, self.mesh.n_nodes, "nodes")
         if self._precomputed is not None and not full:
             ids = ids[self._candidate_row[ids] < 0]
         if ids.size:
@@ -412,10 +349,10 @@ class TissueModel:
         loads = np.asarray(loads, dtype=np.float64).reshape(3 * len(ids), -1)
         if all(not self.needs_solve(int(n), full=True) for n in ids):
             return self.columns_at(ids, dofs) @ loads
-        _node_ids(ids, self.mesh.n_nodes, "nodes")
+        checks.node_ids(ids, self.mesh.n_nodes, "nodes")
         rhs = np.zeros((3 * self.mesh.n_nodes, loads.shape[1]), order="F")
         np.add.at(rhs, node_dofs(ids), loads)
-        _ids(dofs, 3 * self.mesh.n_nodes, "rows")
+        checks.ids(dofs, 3 * self.mesh.n_nodes, "rows")
         return self._factor(rhs)[dofs]
 
     def node_columns(self, nodes: ArrayLike, rows: ArrayLike | None = None) -> NDArray[np.float64]:
@@ -429,13 +366,9 @@ class TissueModel:
         the displacement of those dofs per unit force on each node (m/N). Cached columns are
         reused; the rest are solved (by the column worker when one is attached) and cached."""
         ids, dofs = np.asarray(nodes).ravel(), np.asarray(rows).ravel()
-        _node_ids(ids, self.mesh.n_nodes, "nodes")  # checked; the order given is the columns' order
-        _ids(dofs, 3 * self.mesh.n_nodes, "rows")
+        checks.node_ids(ids, self.mesh.n_nodes, "nodes")  # checked; the order given is the columns' order
+        checks.ids(dofs, 3 * self.mesh.n_nodes, "rows")
         return self._nodes_columns(ids.astype(np.int64), dofs.astype(np.int64))
-
-    @cached_property
-    def _candidate_dofs(self) -> NDArray[np.int64]:
-        return node_dofs(self.contact_nodes)
 
     def _contact_columns(self, nodes: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
         """(G rows x 3k columns, G_JJ block, ids of the rows) for a contact set."""
@@ -482,12 +415,12 @@ class TissueModel:
     def compliance_block(self, nodes: ArrayLike) -> NDArray[np.float64]:
         """(3k, 3k) block of K0^-1 (m/N) at the nodes' dofs: displacement per unit nodal force
         (precomputed where the nodes are candidates, solved on demand and cached otherwise)."""
-        ids = _contact_ids(nodes, self.mesh.n_nodes)
+        ids = checks.contact_ids(nodes, self.mesh.n_nodes)
         return self._contact_columns(ids)[1]
 
     def contact(self, nodes: ArrayLike) -> ContactHandle:
         """A per-tick handle for a fixed contact set (e.g. a triangle's 3 nodes)."""
-        ids = _contact_ids(nodes, self.mesh.n_nodes)
+        ids = checks.contact_ids(nodes, self.mesh.n_nodes)
         columns, block, rows = self._contact_columns(ids)
         return ContactHandle(ids, self.penalty, block, columns, rows)
 
@@ -497,7 +430,7 @@ class TissueModel:
         with this model's own factor); each use is then two small products, where
         ``solve(..., full_field=True)`` costs a sparse solve every time (17 ms on the 10k
         artery). For the display layer, which shows one contact set for many frames."""
-        ids = _contact_ids(nodes, self.mesh.n_nodes)
+        ids = checks.contact_ids(nodes, self.mesh.n_nodes)
         columns = self.solve_columns(ids)
         every_node = np.arange(self.mesh.n_nodes)
         return ContactHandle(ids, self.penalty, columns[node_dofs(ids)], columns, every_node)
@@ -522,7 +455,7 @@ class TissueModel:
         """
         if method not in ("exact", "superposition"):
             raise ModelError(f"method must be 'exact' or 'superposition'; got {method!r}")
-        nodes, intended = _parse_contacts(contacts, self.mesh.n_nodes)
+        nodes, intended = checks.parse_contacts(contacts, self.mesh.n_nodes)
         columns, block, rows = self._contact_columns(nodes)
         a = intended.reshape(-1)
         c = self.penalty
@@ -555,17 +488,8 @@ class TissueModel:
         return alone.reshape(-1)
 
     def element_fields(self, displacement: NDArray[np.float64]) -> dict[str, object]:
-        """Element strain, von Mises stress (Pa), largest principal stretch, relative volume change."""
-        grad_u = displacement_gradients(self.element_gradients, self.mesh.tets, displacement)
-        lam, mu = self._lame
-        deformed = signed_volumes(self.mesh.points + displacement, self.mesh.tets).sum()
-        strain = small_strain(grad_u)
-        return {
-            "element_strain": strain,
-            "von_mises": von_mises_stress(strain, lam, mu),
-            "max_stretch": principal_stretches(grad_u)[:, -1],
-            "volume_change": float(deformed / self.mesh.volume - 1.0),
-        }
+        """See :func:`sim.fem.stress.element_fields`."""
+        return stress.element_fields(self.mesh, self.element_gradients, self._lame, displacement)
 
     # -- surface geometry and depth (sim.fem.surface), through the facade ---------------
     def warm_contact_caches(self) -> None:
@@ -609,91 +533,6 @@ class TissueModel:
     def biphase(self) -> None:
         """The biphase law's parameters: none for one linear phase."""
         return None
-
-
-class _CachedColumns(NamedTuple):
-    """One node's three K0^-1 columns (3N, 3), and their rows at the contact candidates' dofs."""
-
-    full: NDArray[np.float64]
-    at_candidates: NDArray[np.float64]
-
-    @classmethod
-    def of(cls, columns: NDArray[np.float64], candidate_dofs: NDArray[np.int64]) -> _CachedColumns:
-        full = np.ascontiguousarray(columns)
-        at_candidates = np.ascontiguousarray(full[candidate_dofs])
-        full.flags.writeable = at_candidates.flags.writeable = False
-        return cls(full, at_candidates)
-
-    @property
-    def nbytes(self) -> int:
-        return self.full.nbytes + self.at_candidates.nbytes
-
-
-def _check_rigid_motion_fixed(points: NDArray[np.float64], fixed_dofs: NDArray[np.int64]) -> None:
-    """Raise unless the fixed dofs stop all six rigid-body modes (else K0 is singular)."""
-    nodes, axes = fixed_dofs // 3, fixed_dofs % 3
-    centred = points[nodes] - points[nodes].mean(axis=0)
-    scale = max(float(np.abs(centred).max()), 1e-300)
-    modes = np.zeros((len(fixed_dofs), 6))
-    modes[np.arange(len(fixed_dofs)), axes] = 1.0
-    for k in range(3):  # rotation about axis k: (e_k x x) at each fixed dof
-        modes[:, 3 + k] = np.cross(np.eye(3)[k], centred / scale)[np.arange(len(fixed_dofs)), axes]
-    rank = np.linalg.matrix_rank(modes, tol=1e-8 * max(1.0, np.sqrt(len(fixed_dofs))))
-    if rank < 6:
-        raise ModelError(
-            f"the fixed nodes/dofs leave {6 - rank} rigid-body mode(s) free, so the tissue can move "
-            "without deforming; fix at least three non-collinear nodes (e.g. a face or the vessel ends)"
-        )
-
-
-def _ids(values: ArrayLike, limit: int, name: str) -> NDArray[np.int64]:
-    array = np.asarray(values).ravel()
-    if array.size == 0:
-        return np.zeros(0, dtype=np.int64)
-    if not np.issubdtype(array.dtype, np.integer):
-        raise ModelError(f"{name} must be integer ids; got dtype {array.dtype}")
-    bad = array[(array < 0) | (array >= limit)]
-    if bad.size:
-        raise ModelError(f"{name} contains id {bad[0]} outside 0..{limit - 1}")
-    return np.unique(array.astype(np.int64))
-
-
-def _node_ids(values: ArrayLike, n_nodes: int, name: str) -> NDArray[np.int64]:
-    return _ids(values, n_nodes, name)
-
-
-def _contact_ids(nodes: ArrayLike, n_nodes: int) -> NDArray[np.int64]:
-    array = np.asarray(nodes, dtype=np.int64).ravel()
-    ids = _ids(array, n_nodes, "contact nodes")
-    if len(ids) != len(array):
-        raise ModelError(f"contact nodes must be distinct; got {array.tolist()}")
-    return array
-
-
-def _parse_contacts(contacts: Mapping[int, ArrayLike], n_nodes: int) -> tuple[NDArray, NDArray]:
-    if not contacts:
-        raise ModelError("contacts is empty: give at least one node id -> intended displacement")
-    nodes = _contact_ids(list(contacts), n_nodes)
-    intended = np.array([np.asarray(contacts[k], dtype=np.float64) for k in contacts])
-    if intended.shape != (len(nodes), 3):
-        raise ModelError(f"each intended displacement must be 3 numbers (m); got shape {intended.shape[1:]}")
-    if not np.all(np.isfinite(intended)):
-        raise ModelError("intended displacements must be finite numbers (m)")
-    return nodes, intended
-
-
-def _array_hash(array: NDArray) -> str:
-    import hashlib
-
-    return hashlib.sha256(np.ascontiguousarray(array).tobytes()).hexdigest()
-
-
-def fixed_nodes_of(mesh: TetMesh, names: Sequence[str]) -> NDArray[np.int64]:
-    """Union of named node sets, e.g. ``fixed_nodes_of(mesh, ["end0", "end1"])``."""
-    missing = [n for n in names if n not in mesh.node_sets]
-    if missing:
-        raise ModelError(f"mesh has no node set {missing[0]!r} (sets: {sorted(mesh.node_sets)})")
-    return np.unique(np.concatenate([mesh.node_sets[n] for n in names]))
 
 
 __all__ = ["Material", "Precomputation", "TissueModel", "fixed_nodes_of"]

@@ -306,9 +306,7 @@ def test_a_row_of_passes_never_jumps_between_stitches():
     """Between two bites the hand moves smoothly: no step in holder position over any 1 ms tick is
     larger than the passes themselves make (a jump was 3.2 m/s of recorded tip speed)."""
     needle = Needle.curved()
-    passes = [
-        SuturingPass(needle, [0.0105, y, 0.0015], [0, 0, 1], [1, 0, 0]) for y in (0.003, 0.005, 0.007)
-    ]
+    passes = [SuturingPass(needle, [0.0105, y, 0.0015], [0, 0, 1], [1, 0, 0]) for y in (0.003, 0.005, 0.007)]
     trajectory, total = sequence_of_passes(passes)
     positions = np.array([trajectory(t)[0].position for t in np.arange(0.0, total, 0.001)])
     speeds = np.linalg.norm(np.diff(positions, axis=0), axis=1) / 0.001

@@ -397,7 +397,7 @@ def test_on_demand_cache_is_memory_bounded(cube):
     model = TissueModel(cube, Material(20e3, 0.45), cube.node_sets["z0"], column_cache_bytes=4 * column_bytes)
     for node in cube.node_sets["z1"][:10]:
         model.solve({int(node): (0, 0, -1e-4)})
-    assert len(model._columns) == 4
+    assert model.cached_columns == 4 and len(model.evicted_columns) == 6
 
 
 # -- errors -----------------------------------------------------------------------------------
