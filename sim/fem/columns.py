@@ -18,6 +18,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.fem.condensation import node_dofs
+
 Solver = Callable[[NDArray[np.int64]], NDArray[np.float64]]
 
 
@@ -109,3 +111,26 @@ class ColumnCache:
             node, dropped = self._columns.popitem(last=False)
             used -= dropped.nbytes
             self.evicted.add(node)
+
+
+def mixed_columns(
+    g: NDArray[np.float64],
+    nodes: NDArray[np.int64],
+    rows: NDArray[np.int64],
+    on_demand: Callable[..., NDArray[np.float64]],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(columns at the candidates' rows, G_JJ block) for a contact set of candidate nodes (``rows``:
+    their row in the precomputed G, -1 for a node that is not a candidate) and others (e.g. an exit
+    through a face that is not a contact candidate), whose columns ``on_demand(nodes, dofs)`` or
+    ``on_demand(nodes, at_candidates=True)`` gives; exact either way."""
+    inside = rows >= 0
+    in_pos, out_pos = node_dofs(np.flatnonzero(inside)), node_dofs(np.flatnonzero(~inside))
+    outside = nodes[~inside]  # their columns of K0^-1, at the candidates' and the contact's dofs
+    columns = np.empty((g.shape[0], 3 * len(nodes)))
+    columns[:, in_pos] = g[:, node_dofs(rows[inside])]
+    columns[:, out_pos] = on_demand(outside, at_candidates=True)
+    block = np.empty((3 * len(nodes), 3 * len(nodes)))
+    block[:, out_pos] = on_demand(outside, node_dofs(nodes))
+    block[np.ix_(in_pos, in_pos)] = columns[np.ix_(node_dofs(rows[inside]), in_pos)]
+    block[np.ix_(out_pos, in_pos)] = block[np.ix_(in_pos, out_pos)].T
+    return columns, block

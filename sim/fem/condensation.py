@@ -137,3 +137,12 @@ def condensed_inverse_multi_rhs(matrix: sp.csc_matrix, kept: NDArray[np.int64]) 
 def node_dofs(nodes: NDArray[np.int64]) -> NDArray[np.int64]:
     """Node-major dof ids (3 per node) of the given nodes."""
     return (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
+
+
+def superposed_reactions(block: NDArray[np.float64], a: NDArray[np.float64], penalty: float) -> NDArray:
+    """The paper's run-time superposition: each contact node's reaction from its own single-contact
+    solution, R_j = C (I + C G_jj)^-1 a_j (``block``: G_JJ, ``a``: the intended displacements)."""
+    k = len(a) // 3
+    diagonal = block.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :]
+    alone = penalty * np.linalg.solve(np.eye(3) + penalty * diagonal, a.reshape(k, 3, 1))
+    return alone.reshape(-1)

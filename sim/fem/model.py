@@ -32,8 +32,8 @@ from sim.fem.assembly import (
     shape_gradients,
 )
 from sim.fem.checks import fixed_nodes_of
-from sim.fem.columns import ColumnCache
-from sim.fem.condensation import node_dofs, sparse_cholesky
+from sim.fem.columns import ColumnCache, mixed_columns
+from sim.fem.condensation import node_dofs, sparse_cholesky, superposed_reactions
 from sim.fem.material import Material, MaterialSpec, describe_materials, element_lame
 from sim.fem.precomputation import Precomputation, condensed, woodbury_composite
 from sim.fem.solution import ContactHandle, ContactSolution
@@ -378,27 +378,10 @@ class TissueModel:
                 dofs_local = node_dofs(rows)
                 columns = self._precomputed.matrix[:, dofs_local]
                 return columns, columns[dofs_local], self.contact_nodes
-            return self._mixed_columns(nodes, rows)
+            mixed = mixed_columns(self._precomputed.matrix, nodes, rows, self._nodes_columns)
+            return (*mixed, self.contact_nodes)
         columns = self._nodes_columns(nodes, at_candidates=True)
         block = self._nodes_columns(nodes, node_dofs(nodes))
-        return columns, block, self.contact_nodes
-
-    def _mixed_columns(
-        self, nodes: NDArray[np.int64], rows: NDArray[np.int64]
-    ) -> tuple[NDArray, NDArray, NDArray]:
-        """Precomputed columns for candidate nodes, on-demand columns for the others (e.g. an exit
-        through a face that is not a contact candidate); exact either way."""
-        g = self._precomputed.matrix
-        inside = rows >= 0
-        in_pos, out_pos = node_dofs(np.flatnonzero(inside)), node_dofs(np.flatnonzero(~inside))
-        outside = nodes[~inside]  # their columns of K0^-1, at the candidates' and the contact's dofs
-        columns = np.empty((g.shape[0], 3 * len(nodes)))
-        columns[:, in_pos] = g[:, node_dofs(rows[inside])]
-        columns[:, out_pos] = self._nodes_columns(outside, at_candidates=True)
-        block = np.empty((3 * len(nodes), 3 * len(nodes)))
-        block[:, out_pos] = self._nodes_columns(outside, node_dofs(nodes))
-        block[np.ix_(in_pos, in_pos)] = columns[np.ix_(node_dofs(rows[inside]), in_pos)]
-        block[np.ix_(out_pos, in_pos)] = block[np.ix_(in_pos, out_pos)].T
         return columns, block, self.contact_nodes
 
     # -- solving -------------------------------------------------------------------------
@@ -462,7 +445,7 @@ class TissueModel:
         if method == "exact":
             reactions = c * np.linalg.solve(np.eye(len(a)) + c * block, a)
         else:
-            reactions = self._superposed_reactions(block, a)
+            reactions = superposed_reactions(block, a, c)
         full_field = full_field or fields
         if full_field:
             rhs = np.zeros(3 * self.mesh.n_nodes)
@@ -477,15 +460,6 @@ class TissueModel:
             largest = float(np.linalg.norm(intended, axis=1).max())
             extra["stretch_ratio"] = 1.0 + largest / self.tissue_depth(int(nodes[0]))
         return ContactSolution(nodes, intended, reactions.reshape(-1, 3), shown, displacement, **extra)
-
-    def _superposed_reactions(self, block: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray:
-        """The paper's run-time superposition: each node's reaction from its own
-        single-contact solution (R_j = C (I + C G_jj)^-1 a_j), displacements summed."""
-        c = self.penalty
-        k = len(a) // 3
-        diagonal = block.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :]
-        alone = c * np.linalg.solve(np.eye(3) + c * diagonal, a.reshape(k, 3, 1))
-        return alone.reshape(-1)
 
     def element_fields(self, displacement: NDArray[np.float64]) -> dict[str, object]:
         """See :func:`sim.fem.stress.element_fields`."""
