@@ -13,11 +13,9 @@ refusal is logged with the station, session and reason.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import logging
 import math
-import os
 import re
 import threading
 import time as clock
@@ -26,20 +24,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.ipc as ipc
 
-from recorder.integrity import CHECKSUM_NAME, scan_journal
+from recorder.ingest_journal import GroupCommit, Journal
+from recorder.integrity import CHECKSUM_NAME
 from recorder.layout import EVENTS_JOURNAL, HEADER_FILE, SAMPLES_JOURNAL, write_json_atomically
 from recorder.remote import (
-    MAX_BATCH_BYTES,
-    MAX_HEADER_BYTES,
     STREAMS,
     RemoteError,
     decode_batch,
     float_values,
     stream_schema,
-    unpack_frame,
 )
 from recorder.schema import SCHEMA_VERSION
 from recorder.writer import finalize
@@ -51,160 +45,6 @@ BATCH_DIGESTS = "batch-digests.json"
 """Written at close: each stored batch's SHA-256 per stream, so a batch re-sent to a closed session
 is checked against what was stored, also after a restart (the journals are gone by then)."""
 _NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
-
-
-def _schema_message(schema: pa.Schema) -> bytes:
-    buffer = io.BytesIO()
-    with ipc.new_stream(buffer, schema):
-        pass
-    return buffer.getvalue()[:-8]  # without the end-of-stream marker
-
-
-class _Journal:
-    """One stream's append-only journal: the last stored sequence and sample time, and appends."""
-
-    def __init__(self, path: Path, schema: pa.Schema, checksummed: bool = True) -> None:
-        """``checksummed``: every stored batch carries its checksum (the header's
-        ``journal_checksum``); a journal from before checksums is read without requiring them."""
-        self.path, self.schema, self.checksummed = path, schema, checksummed
-        self.last_sequence, self.last_time = -1, -math.inf
-        self.digests: dict[int, bytes] = {}  # sequence -> SHA-256 of the stored batch message
-        self.cut: dict[str, Any] | None = None  # what a restart cut from the journal (damage)
-        self._closing = threading.Lock()
-        if path.exists():  # after a restart the journal is the truth
-            self._replay()
-        self._sink = open(path, "ab")
-        if self._sink.tell() == 0:
-            self._sink.write(_schema_message(schema))
-            self._sync()
-
-    def _replay(self) -> None:
-        """Read back what was accepted, verifying every batch's checksum; cut what follows the
-        verified prefix (a batch torn by a crash, or damaged on disk) so appends stay readable."""
-        scan = scan_journal(self.path, self.schema, require_checksums=self.checksummed)
-        data = self.path.read_bytes()[: scan.verified_bytes]
-        ends = [*scan.offsets[1:], scan.verified_bytes][: len(scan.offsets)]
-        for batch, metadata, start, end in zip(scan.batches, scan.metadata, scan.offsets, ends, strict=True):
-            self.last_sequence = int(metadata[b"sequence"])
-            self.digests[self.last_sequence] = hashlib.sha256(data[start:end]).digest()
-            if batch.num_rows:
-                self.last_time = float(batch.column(0)[-1].as_py())
-        cut = scan.cut()
-        if cut is not None:
-            self.cut = cut
-            log.error("journal %s: cut %d bytes after batch %d: %s", self.path, cut["bytes"],
-                      self.last_sequence, cut["reason"])  # fmt: skip
-            with open(self.path, "rb+") as handle:
-                handle.truncate(len(data))
-                os.fsync(handle.fileno())
-
-    def _sync(self) -> None:
-        self._sink.flush()
-        os.fsync(self._sink.fileno())
-
-    def append(self, sequence: int, batch: pa.RecordBatch, message: bytes) -> None:
-        """Append the station's IPC batch message (its sequence in its metadata) to the page cache;
-        durable after the next ``fsync`` of ``fileno`` (``sync`` or the group commit)."""
-        self._sink.write(message)
-        self._sink.flush()
-        self.last_sequence = sequence
-        self.digests[sequence] = hashlib.sha256(message).digest()
-        if batch.num_rows:
-            self.last_time = float(batch.column(0)[-1].as_py())
-
-    def sync(self) -> None:
-        """Make everything appended so far durable (a closed journal was synced when it closed)."""
-        with self._closing:
-            if not self._sink.closed:
-                os.fsync(self._sink.fileno())
-
-    def close(self) -> None:
-        with self._closing:
-            if not self._sink.closed:
-                self._sync()
-                self._sink.close()
-
-
-class GroupCommit:
-    """Makes journals durable for many concurrent writers with few fsyncs and one thread hop.
-
-    The event loop appends (to the page cache) and awaits ``durable(journal)``; one thread
-    repeatedly takes every journal waited on, fsyncs each (in parallel, without the interpreter
-    lock), then resolves all of that round's waiters in one call into the loop. Anything written
-    before ``durable`` was awaited is covered by the round that serves it.
-    """
-
-    def __init__(self, parallel_fsyncs: int = 8) -> None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        self._waiting: list[tuple[_Journal, Any]] = []
-        self._lock = threading.Lock()
-        self._wake = threading.Event()
-        self._stop = False
-        self._fsyncs = ThreadPoolExecutor(parallel_fsyncs, thread_name_prefix="vascsim-fsync")
-        self._thread = threading.Thread(target=self._run, name="vascsim-group-commit", daemon=True)
-        self._thread.start()
-
-    async def durable(self, journal: _Journal) -> None:
-        import asyncio
-
-        future = asyncio.get_running_loop().create_future()
-        with self._lock:
-            self._waiting.append((journal, future))
-        self._wake.set()
-        await future
-
-    def _run(self) -> None:
-        while True:
-            self._wake.wait()
-            self._wake.clear()
-            with self._lock:
-                waiting, self._waiting = self._waiting, []
-            if self._stop and not waiting:
-                return
-            if not waiting:
-                continue
-            journals = list({id(j): j for j, _ in waiting}.values())
-            errors = dict(zip(map(id, journals), self._fsyncs.map(_sync_error, journals), strict=True))
-            by_loop: dict[Any, list] = {}
-            for journal, future in waiting:
-                by_loop.setdefault(future.get_loop(), []).append((future, errors[id(journal)]))
-            for loop, results in by_loop.items():
-                try:
-                    loop.call_soon_threadsafe(_resolve, results)
-                except RuntimeError:  # that loop has closed: nobody is waiting any more
-                    pass
-
-    def close(self) -> None:
-        self._stop = True
-        self._wake.set()
-        self._thread.join()
-        self._fsyncs.shutdown()
-
-
-def _sync_error(journal: _Journal) -> OSError | None:
-    try:
-        journal.sync()
-    except OSError as error:
-        return error
-    return None
-
-
-def _outcome_unread(future) -> None:
-    """Done-callback of an answer its station left before reading: take its outcome (a refusal or
-    a durability error has nobody to go to; what was staged stays in the journal)."""
-    if not future.cancelled():
-        future.exception()
-
-
-def _resolve(results: list) -> None:
-    for future, error in results:
-        if future.done():
-            continue
-        if error is None:
-            future.set_result(None)
-        else:
-            future.set_exception(RemoteError(503, f"journal could not be made durable: {error}"))
 
 
 def _write_digests(path: Path, digests: dict[str, dict[int, bytes]]) -> None:
@@ -243,13 +83,13 @@ class _RemoteSession:
         self.closed_counts: dict[str, int] | None = None
         # what each stored batch was, once closed (kept beside the session: the journals are gone)
         self.closed_digests: dict[str, dict[int, bytes]] = {}
-        self.journals: dict[str, _Journal] = {}
+        self.journals: dict[str, Journal] = {}
         if header.get("status") != "recording":
             self.closed_counts = dict(header.get("remote", {}).get("batches", {}))
             self.closed_digests = _read_digests(directory / BATCH_DIGESTS)
         else:
             for stream, schema in STREAMS.items():
-                self.journals[stream] = _Journal(
+                self.journals[stream] = Journal(
                     directory / JOURNALS[stream], schema, header.get("journal_checksum") == CHECKSUM_NAME
                 )
 
@@ -317,7 +157,7 @@ class IngestStore:
 
     def stage(
         self, session: _RemoteSession, stream: str, sequence: int, body: bytes
-    ) -> tuple[dict[str, Any], _Journal | None]:
+    ) -> tuple[dict[str, Any], Journal | None]:
         """Check one batch and append it to its journal, not yet durable: the acknowledgement to
         send once the returned journal is synced (None: nothing to wait for), or RemoteError."""
         stream_schema(stream)
@@ -461,187 +301,8 @@ def _refuse_non_finite(value: Any, what: str) -> None:
 
 
 def create_app(store: IngestStore):
-    """The ingest web application (Starlette): the HTTP and WebSocket routes of :mod:`recorder.remote`.
+    """The ingest web application (:mod:`recorder.ingest_app`; imported here lazily, so the recorder
+    loads without the web stack)."""
+    from recorder.ingest_app import ingest_app
 
-    Batches are checked and appended on the event loop and acknowledged once the group commit
-    has made them durable; session set-up, header and close (file work) run in worker threads.
-    """
-    from starlette.applications import Starlette
-    from starlette.concurrency import run_in_threadpool
-    from starlette.requests import Request
-    from starlette.responses import JSONResponse
-    from starlette.routing import Route, WebSocketRoute
-    from starlette.websockets import WebSocket, WebSocketDisconnect
-
-    def refused(station: str | None, session_id: str, error: RemoteError) -> dict[str, Any]:
-        log.warning("refused station %s session %s: %s %s", station, session_id, error.status, error)
-        return {"status": error.status, "error": str(error)}
-
-    async def read_body(request: Request, limit: int) -> bytes:
-        declared = request.headers.get("content-length")
-        if declared is not None and declared.isdigit() and int(declared) > limit:
-            raise RemoteError(413, f"request of {declared} bytes exceeds {limit}")
-        body = bytearray()
-        async for chunk in request.stream():
-            body += chunk
-            if len(body) > limit:
-                raise RemoteError(413, f"request exceeds {limit} bytes")
-        return bytes(body)
-
-    async def read_json(request: Request) -> Any:
-        try:
-            return json.loads(await read_body(request, MAX_HEADER_BYTES), parse_constant=_no_constant)
-        except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise RemoteError(422, f"body is not JSON: {error}") from error
-
-    async def open_session(station: str, session_id: str) -> _RemoteSession:
-        opened = store.opened(station, session_id)
-        return opened if opened is not None else await run_in_threadpool(store.session, station, session_id)
-
-    async def store_batch(station: str, session_id: str, stream: str, sequence: int, body: bytes):
-        """Stage one batch now (in arrival order); returns an awaitable of its acknowledgement."""
-        answer, journal = store.stage(await open_session(station, session_id), stream, sequence, body)
-
-        async def acknowledged() -> dict[str, Any]:
-            if journal is not None:
-                await store.group_commit.durable(journal)
-            return answer
-
-        return acknowledged()
-
-    async def answer(request: Request, work: Callable[[str], Any]) -> JSONResponse:
-        session_id = request.path_params["session_id"]
-        station = store.station_for(request.headers.get("authorization"))
-        try:
-            if station is None:
-                raise RemoteError(401, "missing or unknown station token")
-            return JSONResponse(await work(station))
-        except RemoteError as error:
-            return JSONResponse(
-                {"error": refused(station, session_id, error)["error"]}, status_code=error.status
-            )
-
-    async def batches(request: Request) -> JSONResponse:
-        async def work(station: str) -> dict[str, Any]:
-            stream, sequence = request.path_params["stream"], request.path_params["sequence"]
-            stream_schema(stream)
-            if not sequence.isdigit():
-                raise RemoteError(422, f"sequence {sequence!r} is not a non-negative integer")
-            body = await read_body(request, MAX_BATCH_BYTES)
-            session_id = request.path_params["session_id"]
-            return await (await store_batch(station, session_id, stream, int(sequence), body))
-
-        return await answer(request, work)
-
-    async def header(request: Request) -> JSONResponse:
-        async def work(station: str) -> dict[str, Any]:
-            body = await read_json(request)
-            return await run_in_threadpool(store.set_header, station, request.path_params["session_id"], body)
-
-        return await answer(request, work)
-
-    async def close(request: Request) -> JSONResponse:
-        async def work(station: str) -> dict[str, Any]:
-            body = await read_json(request)
-            return await run_in_threadpool(
-                store.close_session, station, request.path_params["session_id"], body
-            )
-
-        return await answer(request, work)
-
-    async def text_frame(station: str, session_id: str, text: str | None) -> dict[str, Any]:
-        try:
-            request = json.loads(text or "", parse_constant=_no_constant)
-        except json.JSONDecodeError as error:
-            raise RemoteError(422, f"text frame is not JSON: {error}") from error
-        op = request.get("op") if isinstance(request, dict) else None
-        if op == "header":
-            done = await run_in_threadpool(store.set_header, station, session_id, request.get("header"))
-        elif op == "close":
-            done = await run_in_threadpool(store.close_session, station, session_id, request)
-        else:
-            raise RemoteError(422, f"unknown operation {op!r}; text frames are 'header' or 'close'")
-        return {"status": 200, "op": op, **done}
-
-    async def websocket_stream(websocket: WebSocket) -> None:
-        """Frames are handled in arrival order; answers go back in the same order, each batch's
-        once it is durable, while later frames are already being checked and appended."""
-        import asyncio
-
-        session_id = websocket.path_params["session_id"]
-        station = store.station_for(websocket.headers.get("authorization"))
-        await websocket.accept()
-        if station is None:
-            await websocket.send_json(
-                refused(None, session_id, RemoteError(401, "missing or unknown station token"))
-            )
-            await websocket.close(code=1008, reason="missing or unknown station token")
-            return
-        # Each answer is a task from the moment its frame is staged: a batch's wait for durability
-        # joins the next group-commit round at once (not after the answers before it), and an
-        # answer the station leaves before reading still runs to its end instead of being dropped.
-        answers: asyncio.Queue[asyncio.Future | None] = asyncio.Queue()
-
-        async def send_answers() -> None:
-            while (pending := await answers.get()) is not None:
-                try:
-                    result = {"status": 200, **await pending}
-                except RemoteError as error:
-                    result = refused(station, session_id, error)
-                await websocket.send_json(result)
-
-        def ready(result: dict[str, Any]) -> asyncio.Future:
-            future = asyncio.get_running_loop().create_future()
-            future.set_result(result)
-            return future
-
-        sender = asyncio.create_task(send_answers())
-        try:
-            while True:
-                message = await websocket.receive()
-                if message["type"] == "websocket.disconnect":
-                    break
-                try:
-                    if message.get("bytes") is not None:
-                        stream, sequence, body = unpack_frame(message["bytes"])
-                        acknowledged = await store_batch(station, session_id, stream, sequence, body)
-                        await answers.put(asyncio.ensure_future(acknowledged))
-                    else:
-                        await answers.put(ready(await text_frame(station, session_id, message.get("text"))))
-                except RemoteError as error:
-                    await answers.put(ready(refused(station, session_id, error)))
-        except WebSocketDisconnect:
-            pass
-        finally:
-            await answers.put(None)
-            try:
-                await sender
-            except (WebSocketDisconnect, RuntimeError):
-                pass  # the station left before its last answers
-            finally:
-                while not answers.empty():  # answers nobody will read: their outcome is not needed
-                    pending = answers.get_nowait()
-                    if pending is not None:
-                        pending.add_done_callback(_outcome_unread)
-
-    from starlette.exceptions import HTTPException
-
-    async def http_error(request: Request, error: HTTPException) -> JSONResponse:
-        """Routing errors (404, 405 with its Allow header) in the one error shape."""
-        return JSONResponse(
-            {"error": str(error.detail)}, status_code=error.status_code, headers=error.headers
-        )
-
-    async def server_error(request: Request, error: Exception) -> JSONResponse:
-        log.exception("ingest request %s %s failed", request.method, request.url.path)
-        return JSONResponse({"error": f"internal error: {type(error).__name__}"}, status_code=500)
-
-    return Starlette(
-        routes=[
-            Route("/api/sessions/{session_id}/header", header, methods=["PUT"]),
-            Route("/api/sessions/{session_id}/close", close, methods=["POST"]),
-            Route("/api/sessions/{session_id}/{stream}/{sequence}", batches, methods=["POST"]),
-            WebSocketRoute("/api/sessions/{session_id}/ws", websocket_stream),
-        ],
-        exception_handlers={HTTPException: http_error, Exception: server_error},
-    )
+    return ingest_app(store)
