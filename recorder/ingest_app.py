@@ -123,22 +123,22 @@ async def batches(request: Request) -> JSONResponse:
 
 async def header(request: Request) -> JSONResponse:
     """PUT the session's header."""
-    store = _store(request)
-
-    async def work(station: str) -> dict[str, Any]:
-        body = await read_json(request)
-        return await run_in_threadpool(store.set_header, station, request.path_params["session_id"], body)
-
-    return await answer(request, work)
+    return await _with_json_body(request, _store(request).set_header)
 
 
 async def close(request: Request) -> JSONResponse:
     """POST the session's end: its journals become verified Parquet."""
-    store = _store(request)
+    return await _with_json_body(request, _store(request).close_session)
+
+
+async def _with_json_body(
+    request: Request, action: Callable[[str, str, Any], dict[str, Any]]
+) -> JSONResponse:
+    """``action(station, session, body)`` in a worker thread (file work), with the JSON body."""
 
     async def work(station: str) -> dict[str, Any]:
         body = await read_json(request)
-        return await run_in_threadpool(store.close_session, station, request.path_params["session_id"], body)
+        return await run_in_threadpool(action, station, request.path_params["session_id"], body)
 
     return await answer(request, work)
 
