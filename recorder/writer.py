@@ -25,12 +25,9 @@ Session directory: ``header.json``, ``samples.arrows`` / ``events.arrows``
 from __future__ import annotations
 
 import math
-import mmap
 import os
-import re
 import threading
 import time as clock
-import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -38,95 +35,46 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
-import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from recorder._ring import RingProducer
-from recorder.integrity import CHECKSUM_NAME, scan_journal, sealed
+from recorder.batches import (
+    TRANSPOSE_BLOCK_ROWS,
+    columns_of,
+    events_batch,
+    read_journal,
+    same_values,
+    samples_batch,
+)
+from recorder.finalize import finalize, recover
+from recorder.integrity import CHECKSUM_NAME, sealed
 from recorder.layout import (
-    EVENTS_FILE,
     EVENTS_JOURNAL,
     HEADER_FILE,
     SAMPLES_FILE,
     SAMPLES_JOURNAL,
-    read_header,
     sha256_of,
     write_json_atomically,
+)
+from recorder.ring import (
+    COUNTER_CELLS,
+    DROPPED,
+    FIRST_DROPPED,
+    HEAD,
+    LAST_DROPPED,
+    TAIL,
+    release_ring,
+    ring_mapping,
+    salvage_ring,
 )
 from recorder.scene import write_scene
 from recorder.schema import (
     EVENT_SCHEMA,
-    INTEGER_COLUMNS,
     SAMPLE_COLUMNS,
     SAMPLE_SCHEMA,
     SCHEMA_VERSION,
     RecorderError,
 )
-
-TRANSPOSE_BLOCK_ROWS = 512
-"""Rows transposed at a time: a block of rows (139 kB) stays in cache while it is scattered into
-columns, 4x faster than one strided copy of the whole flush (which re-reads each row per column)."""
-
-
-def columns_of(rows: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(n, columns) rows as a C-contiguous (columns, n) array, transposed block by block."""
-    columns = np.empty((rows.shape[1], rows.shape[0]))
-    for start in range(0, rows.shape[0], TRANSPOSE_BLOCK_ROWS):
-        stop = start + TRANSPOSE_BLOCK_ROWS
-        columns[:, start:stop] = rows[start:stop].T
-    return columns
-
-
-_INTEGER_DTYPES = {name: np.dtype(str(kind)) for name, kind in INTEGER_COLUMNS.items()}
-"""NumPy dtypes of the integer columns (``DataType.to_pandas_dtype`` would import pandas: 0.3 s)."""
-
-
-def samples_batch(rows: NDArray[np.float64]) -> pa.RecordBatch:
-    """An Arrow batch of the sample schema from (n, columns) float rows."""
-    columns = columns_of(rows)
-    arrays = []
-    for i, name in enumerate(SAMPLE_COLUMNS):
-        kind = _INTEGER_DTYPES.get(name)
-        column = columns[i]
-        arrays.append(pa.array(column.astype(kind) if kind is not None else column))
-    return pa.RecordBatch.from_arrays(arrays, schema=SAMPLE_SCHEMA)
-
-
-def events_batch(events: list[tuple]) -> pa.RecordBatch:
-    """An Arrow batch of the event schema from event tuples (see ``SessionWriter.event``)."""
-    columns = list(zip(*events, strict=True)) if events else [[] for _ in EVENT_SCHEMA]
-    return pa.RecordBatch.from_arrays(
-        [pa.array(c, type=f.type) for c, f in zip(columns, EVENT_SCHEMA, strict=True)],
-        schema=EVENT_SCHEMA,
-    )
-
-
-RING_DIRECTORY = Path("/dev/shm")
-"""Where a writer's ring lives as a file (tmpfs: memory, as fast as an anonymous mapping, and still
-there after the recording process dies). Without it, or without room, the ring is anonymous."""
-
-
-def _ring_mapping(size: int) -> tuple[mmap.mmap, Path | None]:
-    """A shared mapping of ``size`` bytes, and the tmpfs file behind it (None: anonymous)."""
-    if RING_DIRECTORY.is_dir():
-        path = RING_DIRECTORY / f"vascsim-ring-{uuid.uuid4().hex}"
-        try:
-            descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
-            try:
-                os.posix_fallocate(descriptor, 0, size)  # no room: refused here, never a SIGBUS later
-                return mmap.mmap(descriptor, size), path
-            finally:
-                os.close(descriptor)
-        except OSError:
-            path.unlink(missing_ok=True)
-    return mmap.mmap(-1, size), None
-
-
-HEAD, TAIL, DROPPED, FIRST_DROPPED, LAST_DROPPED = 0, 8, 16, 17, 18
-"""Cells after the ring: rows written (producer), rows flushed (writer), and the drop count and
-time range since the last flush. Head and tail sit 64 bytes apart, on cache lines of their own:
-the producer's record() never misses on a line the writer has just written."""
-COUNTER_CELLS = 24
 
 
 class SessionWriter:
@@ -158,7 +106,7 @@ class SessionWriter:
         # real-time haptic process) records straight into this writer; backed by a tmpfs file
         # where possible, so a crash of this process leaves every recorded row for recover()
         width = len(SAMPLE_COLUMNS)
-        self._mapping, self._ring_file = _ring_mapping(8 * (capacity * width + COUNTER_CELLS))
+        self._mapping, self._ring_file = ring_mapping(8 * (capacity * width + COUNTER_CELLS))
         shared = np.frombuffer(self._mapping, dtype=np.float64)
         self._ring = shared[: capacity * width].reshape(capacity, width)
         self._counters = shared[capacity * width :]  # see HEAD, TAIL, DROPPED, FIRST_DROPPED, LAST_DROPPED
@@ -376,199 +324,20 @@ def _warm_flush_path() -> None:
             stream.write_batch(batch, custom_metadata=sealed(batch))
 
 
-def read_journal(path: Path, schema: pa.Schema, require_checksums: bool = False) -> tuple[pa.Table, bool]:
-    """Every verified batch of an IPC journal up to the first that does not verify (torn, damaged,
-    or failing its checksum); the flag says whether anything after them was cut off."""
-    scan = scan_journal(path, schema, require_checksums)
-    return pa.Table.from_batches(scan.batches, schema=schema), scan.cut() is not None
-
-
-def same_values(a: pa.Table, b: pa.Table) -> bool:
-    """Column-by-column equality, NaN equal to NaN (Table.equals treats NaN as different)."""
-    if a.num_rows != b.num_rows or a.column_names != b.column_names:
-        return False
-    for name in a.column_names:
-        x, y = a.column(name).to_numpy(zero_copy_only=False), b.column(name).to_numpy(zero_copy_only=False)
-        if x.dtype.kind == "f":
-            if not np.array_equal(x, y, equal_nan=True):
-                return False
-        elif x.tolist() != y.tolist():
-            return False
-    return True
-
-
-def finalize(
-    directory: Path, status: str, extra: dict[str, Any] | None = None, salvaged: pa.RecordBatch | None = None
-) -> dict[str, Any]:
-    """Journals -> verified Parquet files with SHA-256 in the header; journals removed last.
-
-    Each journal is read up to its first batch that fails to verify; what was cut is recorded in
-    the header (``samples.cut`` / ``events.cut``). ``salvaged``: sample rows recovered from the
-    recording's memory after the journal's last batch (see ``recover``)."""
-    header = read_header(directory)
-    required = header.get("journal_checksum") == CHECKSUM_NAME
-    staged: list[tuple[Path, Path]] = []  # (verified temporary, its final name): replaced together
-    try:
-        for journal, target, schema, key in (
-            (SAMPLES_JOURNAL, SAMPLES_FILE, SAMPLE_SCHEMA, "samples"),
-            (EVENTS_JOURNAL, EVENTS_FILE, EVENT_SCHEMA, "events"),
-        ):
-            if not (directory / journal).is_file():
-                raise RecorderError(f"{directory / journal} is missing; the session cannot be finished")
-            scan = scan_journal(directory / journal, schema, required)
-            batches = scan.batches + ([salvaged] if key == "samples" and salvaged is not None else [])
-            table = pa.Table.from_batches(batches, schema=schema)
-            temporary = directory / (target + ".tmp")
-            staged.append((temporary, directory / target))
-            pq.write_table(table, temporary, compression="zstd")
-            if not same_values(pq.read_table(temporary), table):
-                raise RecorderError(f"verification of {temporary} failed; the journal {journal} is kept")
-            header[key] = _stream_entry(target, temporary, table, scan.cut())
-        for temporary, final in staged:  # only once both verified: a failure leaves no Parquet behind
-            os.replace(temporary, final)
-    finally:
-        for temporary, _ in staged:
-            temporary.unlink(missing_ok=True)
-    header.update(extra or {})
-    header["status"] = status
-    header["closed_unix"] = clock.time()
-    write_json_atomically(directory / HEADER_FILE, header)
-    for journal in (SAMPLES_JOURNAL, EVENTS_JOURNAL):
-        (directory / journal).unlink(missing_ok=True)
-    return header
-
-
-def _stream_entry(name: str, written: Path, table: pa.Table, cut: dict[str, Any] | None) -> dict[str, Any]:
-    """A finished stream's header entry: its file, rows, SHA-256, time range and what was cut."""
-    entry: dict[str, Any] = {"file": name, "rows": table.num_rows, "sha256": sha256_of(written)}
-    entry["torn_tail_cut"] = cut is not None
-    if cut is not None:
-        entry["cut"] = cut
-    if name == SAMPLES_FILE and table.num_rows:
-        times = table.column("time").to_numpy()
-        entry["time_range_s"] = [float(times[0]), float(times[-1])]
-    return entry
-
-
-_RING_NAME = re.compile(r"vascsim-ring-[0-9a-f]{32}")
-
-
-def _ring_path(header: dict[str, Any]) -> Path | None:
-    """The header's ring file, if it names one of ours (a header is data someone could edit)."""
-    ring = header.get("ring")
-    name = ring.get("file") if isinstance(ring, dict) else None
-    if not isinstance(name, str):
-        return None
-    path = Path(name)
-    return path if path.parent == RING_DIRECTORY and _RING_NAME.fullmatch(path.name) else None
-
-
-def release_ring(header: dict[str, Any]) -> None:
-    """Remove a session's ring file (after close or recovery: its rows are in the journal now)."""
-    path = _ring_path(header)
-    if path is not None:
-        path.unlink(missing_ok=True)
-
-
-def salvage_ring(
-    header: dict[str, Any], durable: pa.Table
-) -> tuple[pa.RecordBatch | None, dict[str, Any] | None, str | None]:
-    """The rows a dead recording process had recorded after its journal's last verified batch.
-
-    Returns (rows or None if there were none, the ring's counters, or None with the reason the
-    ring could not be used). The ring is checked before anything is taken from it: our own file,
-    the layout the header states, a row count that continues the journal without a gap, its
-    copy of the journal's last row equal to that row, times that go on from the journal's.
-    """
-    path = _ring_path(header)
-    ring = header.get("ring") if isinstance(header.get("ring"), dict) else {}
-    if path is None:
-        return None, None, "the ring was not kept in a file (no tmpfs at /dev/shm, or no room)"
-    if not path.exists():
-        return None, None, f"the ring file {path} is gone (the machine restarted?)"
-    capacity, width = ring.get("capacity"), ring.get("width")
-    if type(capacity) is not int or capacity < 1 or width != len(SAMPLE_COLUMNS):
-        return None, None, f"the header's ring layout {ring} is not one this vascsim writes"
-    cells = np.fromfile(path, dtype=np.float64)
-    if cells.size != capacity * width + COUNTER_CELLS:
-        return None, None, f"the ring file {path} holds {cells.size} cells, not the header's layout"
-    rows, counters = cells[: capacity * width].reshape(capacity, width), cells[capacity * width :]
-    head, dropped, kept = counters[HEAD], counters[DROPPED], durable.num_rows
-    if not (np.isfinite(head) and head == int(head) and kept <= head <= kept + capacity):
-        return None, None, f"the ring's row count {head} does not continue the journal's {kept} rows"
-    head = int(head)
-    if kept and kept - 1 >= head - capacity:  # the ring still holds the journal's last row
-        last = samples_batch(rows[(kept - 1) % capacity][None, :])
-        if not same_values(pa.Table.from_batches([last]), durable.slice(kept - 1)):
-            return None, None, "the ring's copy of the journal's last row differs (not this session's ring)"
-    found = {"rows_recorded": head, "dropped_unflushed": int(dropped) if np.isfinite(dropped) else None}
-    if head == kept:
-        return None, found, None
-    unflushed = rows[np.arange(kept, head) % capacity]
-    times = unflushed[:, 0]
-    start = durable.column("time")[-1].as_py() if kept else -math.inf
-    if not np.isfinite(times).all() or np.any(np.diff(times) < 0) or times[0] < start:
-        return None, None, "the ring's unflushed rows do not go on in time from the journal"
-    codes = unflushed[:, [SAMPLE_COLUMNS.index(name) for name in INTEGER_COLUMNS]]
-    if not (np.isfinite(codes).all() and np.array_equal(codes, np.round(codes))):
-        return None, None, "the ring's unflushed rows hold codes that are not integers"
-    batch = samples_batch(unflushed)
-    return batch, found, None
-
-
-def recover(directory: str | Path) -> dict[str, Any]:
-    """Turn the journals a crash left behind into a valid session marked ``recovered``.
-
-    The journals are kept up to their first batch that fails to verify (torn or damaged: what
-    was cut is recorded). If the recording process died but the machine did not, its ring
-    (tmpfs) still holds every row it recorded: rows after the journal's last batch are checked
-    and kept, and the header says so. The header records, measured: the last durable sample
-    (``durable_until_s``), the last kept one (``recovered_until_s``), the time between them
-    (``unflushed_s``) and what may be lost (``lost_at_most_s``: 0 when the ring accounted for
-    every recorded row, null when the ring was gone and the extent is unknown).
-    """
-    directory = Path(directory)
-    if not (directory / SAMPLES_JOURNAL).exists():
-        raise RecorderError(f"{directory} has no journal to recover (nothing was being recorded there)")
-    if not (directory / HEADER_FILE).exists():
-        raise RecorderError(f"{directory} has a journal but no header.json; cannot tell which session it is")
-    header = read_header(directory)
-    if header.get("schema_version") != SCHEMA_VERSION:
-        raise RecorderError(
-            f"{directory / HEADER_FILE}: schema version {header.get('schema_version')!r} is not one this "
-            f"vascsim writes ({SCHEMA_VERSION}); the journal is left as it is"
-        )
-    required = header.get("journal_checksum") == CHECKSUM_NAME
-    durable, _ = read_journal(directory / SAMPLES_JOURNAL, SAMPLE_SCHEMA, required)
-    salvaged, ring, problem = salvage_ring(header, durable)
-    durable_until = float(durable.column("time")[-1].as_py()) if durable.num_rows else None
-    kept_until = float(salvaged.column(0)[-1].as_py()) if salvaged is not None else durable_until
-    interval = header.get("flush_interval_s")
-    if ring is not None:
-        missing = ring["dropped_unflushed"]
-        note = (
-            f"every sample recorded was kept ({durable.num_rows} from the journal, "
-            f"{0 if salvaged is None else salvaged.num_rows} from the recording's memory)"
-            + (f"; {missing} samples the recorder could not keep up with were dropped" if missing else "")
-            + (f"; events after {durable_until:.3f} s may be missing" if durable_until is not None else "")
-        )
-    else:
-        note = (
-            f"{problem}: samples recorded after the last durable one were lost and how many is "
-            f"unknown (the writer made its journal durable every {interval} s)"
-        )
-    lost = {
-        "recovered": True,
-        "durable_until_s": durable_until,
-        "recovered_until_s": kept_until,
-        "lost_after_s": kept_until,
-        "unflushed_s": None if durable_until is None or kept_until is None else kept_until - durable_until,
-        "salvaged_samples": 0 if salvaged is None else salvaged.num_rows,
-        "lost_at_most_s": 0.0 if ring is not None else None,
-        "loss_note": note,
-    }
-    if ring is not None and ring["dropped_unflushed"]:
-        lost["dropped_samples"] = header.get("dropped_samples", 0) + ring["dropped_unflushed"]
-    finished = finalize(directory, "recovered", lost, salvaged)
-    release_ring(header)
-    return finished
+__all__ = [  # what other modules and tests import from here (docs/architecture.md: the module map)
+    "EVENTS_JOURNAL",
+    "SAMPLES_FILE",
+    "SAMPLES_JOURNAL",
+    "TRANSPOSE_BLOCK_ROWS",
+    "SessionWriter",
+    "columns_of",
+    "events_batch",
+    "finalize",
+    "read_journal",
+    "recover",
+    "release_ring",
+    "salvage_ring",
+    "same_values",
+    "samples_batch",
+    "sha256_of",
+]
