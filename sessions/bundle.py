@@ -1,6 +1,6 @@
 """A study as one self-contained archive: catalog rows and stream files, with checksums.
 
-``export_study`` writes a ZIP holding ``manifest.json`` (the study, its participants, the
+``export_study`` (:mod:`sessions.bundle_export`) writes a ZIP holding ``manifest.json`` (the study, its participants, the
 tasks they used, and every session with its files, metric results, ratings and
 annotations) and ``files/<session uid>/<file name>`` for each stream file. Every file's
 SHA-256 is in the manifest and the manifest's own SHA-256 is in ``manifest.sha256``.
@@ -32,11 +32,16 @@ from typing import Any
 
 from sqlalchemy import select
 
+from sessions.bundle_export import export_study
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
 from sessions.manifest import (
     BUNDLE_FORMAT,
     BUNDLE_VERSION,
+    CHUNK,
+    MANIFEST,
+    MANIFEST_CHECKSUM,
     MAX_MANIFEST_BYTES,
+    SESSION_FIELDS,
     Manifest,
     parse_manifest,
 )
@@ -51,186 +56,13 @@ from sessions.models import (
     Study,
     Task,
 )
-from sessions.signing import SIGNATURE, sign, trusted_fingerprint
+from sessions.signing import SIGNATURE, trusted_fingerprint
 from sessions.signing import verify as verify_signature
-from sessions.status import SCORABLE, SessionStatus
-
-MANIFEST = "manifest.json"
-MANIFEST_CHECKSUM = "manifest.sha256"
-_CHUNK = 1 << 20
-
-_PARTICIPANT_FIELDS = (
-    "code",
-    "level",
-    "years_experience",
-    "handedness",
-    "group_label",
-    "synthetic",
-    "created_at",
-)
-_SESSION_FIELDS = ("uid", "device", "clock", "trial", "phase", "status", "started_at", "ended_at", "error")
-
-
-def _when(value: datetime | None) -> str | None:
-    return None if value is None else value.isoformat()
+from sessions.status import SCORABLE
 
 
 def _parse_when(value: str | None) -> datetime | None:
     return None if value is None else datetime.fromisoformat(value)
-
-
-def _row(obj: Any, fields: tuple[str, ...]) -> dict[str, Any]:
-    out = {}
-    for name in fields:
-        value = getattr(obj, name)
-        out[name] = _when(value) if isinstance(value, datetime) else value
-    return out
-
-
-def _session_files(row: Session) -> list[tuple[StreamFile, Path]]:
-    """Each catalogued file of a session with where it is on disk (a directory of files, or
-    for imported data such as JIGSAWS, the one file the session's ``directory`` names)."""
-    where = Path(row.directory)
-    pairs = []
-    for record in sorted(row.files, key=lambda f: f.name):
-        path = where if where.is_file() and where.name == record.name else where / record.name
-        pairs.append((record, path))
-    return pairs
-
-
-def export_study(
-    catalog: Catalog, study_name: str, out: str | Path, progress=None, sign_key: str | Path | None = None
-) -> dict[str, Any]:
-    """Write study ``study_name`` to the archive ``out``; returns a summary (path, sessions, files,
-    bytes, signing key). Files are checked against their catalogued SHA-256 as they are copied; a
-    file that changed or vanished since it was recorded stops the export with an error naming it.
-    ``sign_key``: a site's Ed25519 private key (:mod:`sessions.signing`) signing the manifest."""
-    out = Path(out)
-    with catalog.session() as orm:
-        study = catalog.study(orm, study_name)
-        participants = list(
-            orm.scalars(
-                select(Participant).where(Participant.study_id == study.id).order_by(Participant.code)
-            )
-        )
-        manifest: dict[str, Any] = {
-            "format": BUNDLE_FORMAT,
-            "version": BUNDLE_VERSION,
-            "study": {
-                "name": study.name,
-                "description": study.description,
-                "created_at": _when(study.created_at),
-            },
-            "participants": [_row(p, _PARTICIPANT_FIELDS) for p in participants],
-            # the study's declared analysis, every version, so an import analyses it the same way
-            "analyses": [
-                {
-                    "version": d.version,
-                    "settings": d.settings,
-                    "author": d.author,
-                    "note": d.note,
-                    "created_at": _when(d.created_at),
-                }
-                for d in study.analyses
-            ],
-            "tasks": {},
-            "sessions": [],
-        }
-        copies: list[tuple[str, Path, str]] = []
-        for person in participants:
-            for row in sorted(person.sessions, key=lambda s: (s.trial, s.uid)):
-                if row.status == SessionStatus.RUNNING:
-                    raise CatalogError(
-                        f"session {row.uid} of study {study_name!r} is still running; finish it or "
-                        f"`vascsim recover {row.uid}` before exporting"
-                    )
-                manifest["tasks"][row.task.name] = {
-                    "scenario": row.task.scenario,
-                    "parameters": row.task.parameters,
-                }
-                where = Path(row.directory)
-                entry = _row(row, _SESSION_FIELDS)
-                entry.update(
-                    participant=person.code,
-                    task=row.task.name,
-                    single_file=where.is_file(),
-                    files=[],
-                    metrics=[
-                        {"metric": m.metric, "value": m.value, "registry_version": m.registry_version}
-                        for m in sorted(row.metrics, key=lambda m: (m.registry_version, m.metric))
-                    ],
-                    ratings=[
-                        {
-                            "rater": r.rater,
-                            "instrument": r.instrument,
-                            "item": r.item,
-                            "score": r.score,
-                            "created_at": _when(r.created_at),
-                        }
-                        for r in row.ratings
-                    ],
-                    annotations=[
-                        {
-                            "author": a.author,
-                            "time_s": a.time_s,
-                            "text": a.text,
-                            "created_at": _when(a.created_at),
-                        }
-                        for a in row.annotations
-                    ],
-                )
-                for record, path in _session_files(row):
-                    entry["files"].append(
-                        {"name": record.name, "sha256": record.sha256, "bytes": record.bytes}
-                    )
-                    copies.append((f"files/{row.uid}/{record.name}", path, record.sha256))
-                manifest["sessions"].append(entry)
-    if not manifest["sessions"]:
-        raise CatalogError(f"study {study_name!r} has no sessions to export")
-    text = json.dumps(manifest, indent=1, sort_keys=True).encode()
-    signature = sign(text, sign_key) if sign_key is not None else None  # a bad key fails before writing
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = out.with_name(out.name + ".partial")
-    total = 0
-    try:
-        with zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as archive:
-            for arcname, path, expected in copies:
-                total += _copy_checked(path, archive, arcname, expected)
-                if progress is not None:
-                    progress(arcname)
-            archive.writestr(MANIFEST, text)
-            archive.writestr(MANIFEST_CHECKSUM, hashlib.sha256(text).hexdigest() + "\n")
-            if signature is not None:
-                archive.writestr(SIGNATURE, signature)
-        partial.replace(out)
-    finally:
-        partial.unlink(missing_ok=True)
-    return {
-        "bundle": str(out),
-        "sessions": len(manifest["sessions"]),
-        "files": len(copies),
-        "bytes": total,
-        "signed_by": None if signature is None else json.loads(signature)["key"],
-    }
-
-
-def _copy_checked(path: Path, archive: zipfile.ZipFile, arcname: str, expected: str) -> int:
-    if not path.is_file():
-        raise CatalogError(
-            f"stream file {path} is missing; the catalog lists it (checksum {expected[:12]}...)"
-        )
-    digest = hashlib.sha256()
-    size = 0
-    with path.open("rb") as source, archive.open(arcname, "w", force_zip64=True) as target:
-        while chunk := source.read(_CHUNK):
-            digest.update(chunk)
-            target.write(chunk)
-            size += len(chunk)
-    if digest.hexdigest() != expected:
-        raise CatalogError(
-            f"stream file {path} no longer matches its catalogued SHA-256; it changed after recording"
-        )
-    return size
 
 
 def _read_member(archive: zipfile.ZipFile, name: str, limit: int, bundle: str | Path) -> bytes | None:
@@ -321,7 +153,7 @@ def _digest(archive: zipfile.ZipFile, info: zipfile.ZipInfo, size: int) -> str |
     """SHA-256 of a member, reading at most ``size`` + 1 bytes (None: it held more than ``size``)."""
     digest, seen = hashlib.sha256(), 0
     with archive.open(info) as member:
-        while chunk := member.read(min(_CHUNK, size + 1 - seen)):
+        while chunk := member.read(min(CHUNK, size + 1 - seen)):
             seen += len(chunk)
             if seen > size:
                 return None
@@ -458,7 +290,7 @@ def _extract(bundle: str | Path, manifest: Manifest, staging: Path) -> None:
                     archive.open(f"files/{entry.uid}/{record.name}") as member,
                     (folder / record.name).open("wb") as target,
                 ):
-                    shutil.copyfileobj(member, target, _CHUNK)
+                    shutil.copyfileobj(member, target, CHUNK)
 
 
 def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: dict[str, tuple]) -> int:
@@ -498,7 +330,7 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
             participant_id=people[entry.participant].id,
             task_id=tasks[entry.task].id,
             directory=str(directory),
-            **entry.model_dump(include=set(_SESSION_FIELDS)),
+            **entry.model_dump(include=set(SESSION_FIELDS)),
         )
         orm.add(session)
         orm.flush()
@@ -528,3 +360,6 @@ def _count_differing(entry, fresh: dict[str, float], version: str) -> int:
         )
         count += not same
     return count
+
+
+__all__ = ["export_study", "import_bundle", "read_manifest", "verify_bundle"]

@@ -24,6 +24,21 @@ MAX_MEMBER_BYTES = 8 * 2**30
 """Largest stream file a bundle may hold (a one-hour 1 kHz session is well under 1 GiB)."""
 MAX_BUNDLE_BYTES = 256 * 2**30
 """Largest total of a bundle's stream files."""
+MANIFEST = "manifest.json"
+MANIFEST_CHECKSUM = "manifest.sha256"
+CHUNK = 1 << 20
+"""Bytes copied at a time between an archive and a file."""
+PARTICIPANT_FIELDS = (
+    "code",
+    "level",
+    "years_experience",
+    "handedness",
+    "group_label",
+    "synthetic",
+    "created_at",
+)
+SESSION_FIELDS = ("uid", "device", "clock", "trial", "phase", "status", "started_at", "ended_at", "error")
+"""The catalog columns a bundle carries for each participant and session, by name."""
 MAX_MANIFEST_BYTES = 64 * 2**20
 
 _PLAIN_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,199}$")

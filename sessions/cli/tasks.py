@@ -219,6 +219,4 @@ def tasks_add(
     for line in quality.lines():
         click.echo(click.wrap_text(line, 78, subsequent_indent="  "))
     where = ", ".join(f"{1e3 * v:.2f}" for v in spec.entry)
-    click.echo(
-        f"task {name} added: one bite at ({where}) mm, held on {', '.join(fixed) or 'nothing'}"
-    )
+    click.echo(f"task {name} added: one bite at ({where}) mm, held on {', '.join(fixed) or 'nothing'}")
