@@ -1,8 +1,8 @@
 """A study as one self-contained archive: catalog rows and stream files, with checksums.
 
-``export_study`` (:mod:`sessions.bundle_export`) writes a ZIP holding ``manifest.json`` (the study, its participants, the
-tasks they used, and every session with its files, metric results, ratings and
-annotations) and ``files/<session uid>/<file name>`` for each stream file. Every file's
+``export_study`` (:mod:`sessions.bundle_export`) writes a ZIP holding ``manifest.json``
+(the study, its participants, the tasks they used, and every session with its files, metric
+results, ratings and annotations) and ``files/<session uid>/<file name>`` for each stream file. Every file's
 SHA-256 is in the manifest and the manifest's own SHA-256 is in ``manifest.sha256``.
 
 A checksum anyone can recompute proves nothing against deliberate edits, so
