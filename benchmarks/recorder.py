@@ -50,7 +50,7 @@ from recorder.remote import encode_batch, pack_frame  # noqa: E402
 from recorder.writer import samples_batch  # noqa: E402
 from sessions.config import prepare_rendering  # noqa: E402
 from sim.runtime.cpu import IdlePolling, stolen_seconds  # noqa: E402
-from sim.runtime.realtime import _set_all_threads, _sleep_until  # noqa: E402
+from sim.runtime.osrt import set_all_threads, sleep_until  # noqa: E402
 from sim.tissue_presets import tissue_preset  # noqa: E402
 
 ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
@@ -64,7 +64,7 @@ def paced_cost(directory: str, seconds: float = 10.0) -> tuple[np.ndarray, np.nd
     start = time.perf_counter()
     lag: list[float] = []
     for i in range(len(costs)):
-        _sleep_until(start + i * 1e-3)  # as the haptic loop waits: sleep, then spin the last 0.3 ms
+        sleep_until(start + i * 1e-3)  # as the haptic loop waits: sleep, then spin the last 0.3 ms
         row[COLUMN["time"]] = i * 1e-3
         t0 = time.perf_counter_ns()
         writer.record(row)
@@ -104,17 +104,17 @@ def forked_cost(directory: str, seconds: float = 10.0, poll: bool = True, view: 
         row = np.zeros(len(SAMPLE_COLUMNS))
         recorded = memoryview(row) if view else row
         for i in range(calls):
-            _sleep_until(start + i * 1e-3)
+            sleep_until(start + i * 1e-3)
             row[0] = i * 1e-3
             t0 = time.perf_counter_ns()
             writer.record(recorded)
             costs[i] = (time.perf_counter_ns() - t0) * 1e-9
         os._exit(0)
     if len(cpus) > 1:
-        _set_all_threads(set(cpus[:-1]))
+        set_all_threads(set(cpus[:-1]))
     with IdlePolling(haptic_core) if poll else contextlib.nullcontext():  # as run_realtime does
         os.waitpid(pid, 0)
-    _set_all_threads(set(cpus))
+    set_all_threads(set(cpus))
     while writer.durable_samples < calls:
         time.sleep(0.01)
     writer.close()
@@ -191,7 +191,7 @@ def paced_floor(calls: int = 10_000) -> np.ndarray:
     costs = np.empty(calls)
     start = time.perf_counter() + 0.05
     for i in range(calls):
-        _sleep_until(start + i * 1e-3)
+        sleep_until(start + i * 1e-3)
         t0 = time.perf_counter_ns()
         nothing(row)
         costs[i] = (time.perf_counter_ns() - t0) * 1e-9

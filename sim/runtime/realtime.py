@@ -18,18 +18,29 @@ device whose handle is opened lazily on first read).
 from __future__ import annotations
 
 import contextlib
-import functools
 import gc
 import os
 import signal
 import sys
 import threading
 import time as clock
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import numpy as np
 
 from sim.runtime.cpu import IdlePolling
+from sim.runtime.osrt import (
+    PR_SET_PDEATHSIG,
+    leave_last_core_to_haptics,
+    libc_functions,
+    lock_memory,
+    process_prepared,
+    read_all,
+    set_all_threads,
+    sleep_until,
+    try_realtime_priority,
+    wait_for,
+)
 from sim.runtime.prefetch import WORKER_NICENESS
 from sim.runtime.shared import (
     Arena,
@@ -45,14 +56,11 @@ from sim.runtime.shared import (
 from sim.runtime.simulation import LAYERS, HapticLog, LayerProcessError, RunResult, RuntimeEvent, Simulation
 from sim.runtime.telemetry import LoopTelemetry
 
-SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
 LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
 """SCHED_FIFO priorities of the FEM and graphics threads (the haptic process has 50). They sleep
 most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
 the column worker's or the display's CPU time, which showed as contact-change latency."""
-PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
-PR_SET_THP_DISABLE, PR_GET_THP_DISABLE = 41, 42  # prctl options: no transparent huge pages
 GIL_SWITCH_INTERVAL = 2e-4
 """s a thread may keep the interpreter lock while another waits for it (Python's default is 5 ms):
 the FEM thread waking for its step must not wait out a graphics frame's collision query."""
@@ -102,7 +110,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         finally:
             os._exit(status)
     os.close(errors_write)
-    previous_affinity = _leave_last_core_to_haptics(pin_cpus)
+    previous_affinity = leave_last_core_to_haptics(pin_cpus)
     # the haptic core idles by polling, not halting, between ticks (sim.runtime.cpu)
     polling = IdlePolling() if previous_affinity else contextlib.nullcontext()
     try:
@@ -113,13 +121,13 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
             _run_other_layers(simulation, duration, control)
     finally:
         control.request_stop()
-        _wait_for(pid, timeout=5.0)
+        wait_for(pid, timeout=5.0)
         if display_pid is not None:
-            _wait_for(display_pid, timeout=10.0)
+            wait_for(display_pid, timeout=10.0)
         if previous_affinity is not None:
-            _set_all_threads(previous_affinity)
-    child_error = _read_all(errors_read)
-    failed = _read_all(display_errors)
+            set_all_threads(previous_affinity)
+    child_error = read_all(errors_read)
+    failed = read_all(display_errors)
     if failed:  # the session went on without its view; the failure is recorded, with its message
         simulation.events.append(RuntimeEvent("layer_failed", 0.0, "display", failed))
     if display_pid is not None:
@@ -129,28 +137,6 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     )
 
 
-def _leave_last_core_to_haptics(pin_cpus: bool) -> set[int] | None:
-    """Move every thread of this process (BLAS pools and GL workers included) off the haptic core.
-
-    Returns the previous affinity, or None when nothing was changed.
-    """
-    if not pin_cpus or not hasattr(os, "sched_setaffinity"):
-        return None
-    cpus = os.sched_getaffinity(0)
-    if len(cpus) < 2:
-        return None
-    _set_all_threads(set(sorted(cpus)[:-1]))
-    return cpus
-
-
-def _set_all_threads(cpus: set[int]) -> None:
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            os.sched_setaffinity(int(tid), cpus)
-        except OSError:  # a thread that just ended
-            continue
-
-
 def _wait_until_ready(pid: int, control: ControlBlock, errors: int, timeout: float = 60.0) -> None:
     """Block until the haptic process has finished its set-up; a :class:`LayerProcessError` with the
     child's own message when it died trying."""
@@ -158,7 +144,7 @@ def _wait_until_ready(pid: int, control: ControlBlock, errors: int, timeout: flo
     while not control.haptic_ready:
         finished, _ = os.waitpid(pid, os.WNOHANG)
         if finished:
-            reason = _read_all(errors, close=False) or "no message"
+            reason = read_all(errors, close=False) or "no message"
             raise LayerProcessError(f"haptic: the haptic process exited during its set-up ({reason})")
         if clock.monotonic() > deadline:
             raise LayerProcessError(f"haptic: the haptic process was not ready after {timeout:.0f} s")
@@ -225,7 +211,7 @@ def _stop_with_parent(parent: int, control: ControlBlock) -> None:
     that forked it dies, killed included. An orphaned haptic loop would go on commanding the
     device. Linux sends the child SIGTERM then (PR_SET_PDEATHSIG); elsewhere nothing changes."""
     signal.signal(signal.SIGTERM, lambda signum, frame: control.request_stop())
-    libc = _libc()
+    libc = libc_functions()
     if libc is None:
         return
     libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
@@ -256,8 +242,8 @@ def _haptic_process(
         if len(cpus) > 1:
             os.sched_setaffinity(0, {cpus[-1]})
     threadpool_limits(1)
-    _try_realtime_priority()
-    _lock_memory()
+    try_realtime_priority()
+    lock_memory()
     # The child inherits the whole heap: a full garbage collection would walk it for
     # milliseconds. Freeze what exists and collect nothing during the loop (the loop's
     # own garbage is freed by reference counting).
@@ -276,7 +262,7 @@ def _haptic_process(
     try:
         while True:
             deadline = start + step * period
-            _sleep_until(deadline)
+            sleep_until(deadline)
             now = clock.perf_counter() - start
             if control.stop_requested or now > duration:
                 break
@@ -303,92 +289,12 @@ def _haptic_process(
         control.haptic_state = ControlBlock.FINISHED
 
 
-def _try_realtime_priority(priority: int = 50) -> bool:
-    """SCHED_FIFO for the calling thread where permitted (root or CAP_SYS_NICE).
-
-    With both cores busy, the kernel balances other processes onto the haptic core
-    and preempts the 1 kHz loop for milliseconds; a real-time class stops that. The
-    loop sleeps most of each period, so the kernel's RT throttling never engages.
-    """
-    if not hasattr(os, "sched_setscheduler"):
-        return False
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError):
-        return False
-    return True
-
-
-@contextlib.contextmanager
-def process_prepared() -> Iterator[None]:
-    """This process's settings for the length of a run, put back after; enter it before anything
-    of the run is forked, so that the forked processes inherit both.
-
-    - The heap is collected once and frozen: a full collection walks every object of this process
-      (the meshes, the scene, the libraries), 20-45 ms that would stall the FEM and graphics
-      threads mid-run; frozen, the run's collections scan only what the run allocates.
-    - No new transparent huge pages, and khugepaged leaves the memory alone
-      (``PR_SET_THP_DISABLE``; the flag belongs to the process, so a killed run leaves nothing
-      behind). NumPy asks for huge pages on its large arrays, and khugepaged collapses them 2 MB
-      at a time. Traced on the haptic core (``benchmarks/runtime.py --trace``): a collapse ran
-      6.3 ms there without giving way to the woken haptic process, since this guest kernel
-      preempts only at its voluntary points; all 16 guest-side periods over 3 ms of a 60 s
-      artery run were such kernel threads. Huge pages already mapped stay.
-    """
-    libc = _libc()
-    previous = -1 if libc is None else libc.prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0)
-    if previous >= 0:  # else not Linux, or a kernel without the option: left as it is
-        libc.prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
-    gc.collect()
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
-        if previous >= 0:
-            libc.prctl(PR_SET_THP_DISABLE, previous, 0, 0, 0)
-
-
-@functools.cache
-def _libc():
-    """The C library through ctypes (prctl, mlockall), or None where it cannot be loaded."""
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl  # noqa: B018 - not every C library has it
-    except (OSError, AttributeError):
-        return None
-    return libc
-
-
-def _lock_memory() -> bool:
-    """Keep the haptic process's pages resident (it is off transparent huge pages already: the
-    setting of :func:`process_prepared` is inherited).
-
-    Large allocations elsewhere on the machine can make a page fault wait for
-    memory compaction for milliseconds; locked, pre-faulted memory never does.
-    """
-    libc = _libc()
-    # MCL_FUTURE only: locking the inherited heap (MCL_CURRENT) would copy every
-    # copy-on-write page of the parent, seconds of work for a large precomputation.
-    return libc is not None and libc.mlockall(2) == 0
-
-
 def _paced_wind_down(simulation: Simulation, now: float, period: float) -> None:
     """Bring the device force to zero within the rate limit, one tick at a time."""
     for when, force in simulation.safety.stop_sequence(now, period):
-        _sleep_until(clock.perf_counter() + period)
+        sleep_until(clock.perf_counter() + period)
         simulation.device.write_force(force)
         simulation.haptic_log.append(when, np.zeros(3), False, force)
-
-
-def _sleep_until(deadline: float) -> None:
-    remaining = deadline - clock.perf_counter()
-    if remaining > SPIN_MARGIN:
-        clock.sleep(remaining - SPIN_MARGIN)
-    while clock.perf_counter() < deadline:
-        pass
 
 
 def _run_other_layers(simulation: Simulation, duration: float, control: ControlBlock) -> None:
@@ -440,7 +346,7 @@ def _layer_loop(
 ) -> None:
     """Steps at start + k * period; with ``wake``, also one step whenever it is set between two."""
     if layer in LAYER_PRIORITIES:
-        _try_realtime_priority(LAYER_PRIORITIES[layer])
+        try_realtime_priority(LAYER_PRIORITIES[layer])
     period = simulation.settings.period(layer)
     start = control.start
     record = simulation.telemetry[layer].record
@@ -479,30 +385,6 @@ def _layer_loop(
             k += int(late / period)
 
 
-def _wait_for(pid: int, timeout: float) -> None:
-    deadline = clock.monotonic() + timeout
-    while clock.monotonic() < deadline:
-        try:
-            done, _ = os.waitpid(pid, os.WNOHANG)
-        except ChildProcessError:  # already reaped (it died during its set-up)
-            return
-        if done:
-            return
-        clock.sleep(0.01)
-    os.kill(pid, 9)
-    os.waitpid(pid, 0)
-
-
-def _read_all(fd: int, close: bool = True) -> str:
-    """Everything a child wrote to its error pipe (the child has exited: the pipe is at its end)."""
-    chunks = []
-    while chunk := os.read(fd, 4096):
-        chunks.append(chunk)
-    if close:
-        os.close(fd)
-    return b"".join(chunks).decode(errors="replace")
-
-
 def _collect(
     simulation: Simulation,
     shared_log: SharedHapticLog,
@@ -534,3 +416,6 @@ def _collect(
     result = simulation.run_result(end, wall)
     result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in LAYERS}
     return result
+
+
+__all__ = ["LAYER_PRIORITIES", "START_DELAY", "process_prepared", "run_realtime"]
