@@ -8,6 +8,7 @@ session) implements :class:`Device`. The haptic layer calls ``read`` and
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -16,6 +17,9 @@ from numpy.typing import NDArray
 
 from sim.errors import VascsimError
 from sim.needle import Pose
+
+Trajectory = Callable[[float], tuple[Pose, bool]]
+"""A scripted hand: time (s) -> the holder's pose and whether its grip is closed."""
 
 
 class DeviceError(VascsimError):
