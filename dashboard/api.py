@@ -20,7 +20,7 @@ from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
 from sessions import accounts, ratings
-from sessions.models import Participant, Session, StationToken, Study, User
+from sessions.models import Participant, Session, User
 from sessions.status import SessionStatus
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
@@ -423,53 +423,18 @@ def live_station(request: Request, station: str, session_id: str, viewer: Watche
     return _event_stream(request, directory, lambda: (directory / SAMPLES_JOURNAL).exists())
 
 
-# -- administration ---------------------------------------------------------------------
-def _user_record(user: User, linked: list[tuple[int, str]]) -> dict:
-    return {
-        "id": user.id,
-        "username": user.username,
-        "role": user.role,
-        "active": user.active,
-        "created_at": user.created_at,
-        "participant_ids": [pid for pid, _ in linked],
-        "participants": [code for _, code in linked],  # STUDY:CODE, as a supervisor knows them
-    }
-
-
-def _linked(orm, user_id: int) -> list[tuple[int, str]]:
-    rows = orm.execute(
-        select(Participant.id, Study.name, Participant.code)
-        .join(Study, Participant.study_id == Study.id)
-        .where(Participant.user_id == user_id)
-        .order_by(Study.name, Participant.code)
-    ).all()
-    return [(pid, f"{study}:{code}") for pid, study, code in rows]
-
-
+# -- administration (the catalog store's; docs/architecture.md) -------------------------
 @router.get("/users", summary="Accounts (admin)")
 def users(request: Request, viewer: Admin) -> list[dict]:
-    with _state(request).catalog.session() as orm:
-        return [
-            _user_record(u, _linked(orm, u.id)) for u in orm.scalars(select(User).order_by(User.username))
-        ]
+    return [user.as_dict() for user in _state(request).store.users()]
 
 
 @router.post("/users", status_code=201, summary="Create an account (admin)", responses=CONFLICT)
 def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
-    with _state(request).catalog.session() as orm:
-        catalog = _state(request).catalog
-        # every participant is resolved before the account exists: an unknown code creates nothing
-        chosen = accounts.participants_by_code(orm, catalog, body.participants)
-        for participant_id in body.participant_ids:
-            participant = orm.get(Participant, participant_id)
-            if participant is None:
-                raise not_found(f"participant {participant_id}")
-            chosen.append(participant)
-        user = accounts.create_user(orm, body.username, body.password, body.role)
-        for participant in chosen:
-            accounts.link_participant(orm, user, participant)
-        orm.flush()
-        return _user_record(user, _linked(orm, user.id))
+    made = _state(request).store.create_user(
+        body.username, body.password, body.role, body.participants, body.participant_ids
+    )
+    return made.as_dict()
 
 
 @router.put(
@@ -478,43 +443,21 @@ def create_user(request: Request, body: NewUser, viewer: Admin) -> dict:
     responses=CONFLICT,
 )
 def set_user_participants(request: Request, user_id: Id, body: LinkedParticipants, viewer: Admin) -> dict:
-    with _state(request).catalog.session() as orm:
-        user = orm.get(User, user_id)
-        if user is None:
-            raise not_found(f"user {user_id}")
-        chosen = accounts.participants_by_code(orm, _state(request).catalog, body.participants)
-        accounts.set_participants(orm, user, chosen)
-        orm.flush()
-        return _user_record(user, _linked(orm, user.id))
+    return _state(request).store.set_user_participants(user_id, body.participants).as_dict()
 
 
 @router.patch(
     "/users/{user_id}", summary="Change an account's role, state or password (admin)", responses=CONFLICT
 )
 def change_user(request: Request, user_id: Id, body: UserChange, viewer: Admin) -> dict:
-    with _state(request).catalog.session() as orm:
-        user = orm.get(User, user_id)
-        if user is None:
-            raise not_found(f"user {user_id}")
-        if user.id == viewer.user_id and (body.active is False or (body.role and body.role != "admin")):
-            raise DashboardError(409, "an admin cannot deactivate or demote their own account")
-        if body.role is not None:
-            user.role = accounts.check_role(body.role)
-        if body.active is not None:
-            accounts.set_active(orm, user, body.active)
-        if body.password is not None:
-            accounts.set_password(orm, user, body.password)
-        return _user_record(user, _linked(orm, user.id))
+    store = _state(request).store
+    changed = store.change_user(user_id, viewer.user_id, body.role, body.active, body.password)
+    return changed.as_dict()
 
 
 @router.get("/stations", summary="Station ingest tokens (admin; the tokens themselves are never shown again)")
 def stations(request: Request, viewer: Admin) -> list[dict]:
-    with _state(request).catalog.session() as orm:
-        rows = orm.scalars(select(StationToken).order_by(StationToken.station))
-        return [
-            {"id": r.id, "station": r.station, "created_at": r.created_at, "revoked_at": r.revoked_at}
-            for r in rows
-        ]
+    return [station.as_dict() for station in _state(request).store.stations()]
 
 
 @router.post(
@@ -524,23 +467,16 @@ def stations(request: Request, viewer: Admin) -> list[dict]:
     responses=CONFLICT,
 )
 def create_station(request: Request, body: NewStation, viewer: Admin) -> dict:
-    with _state(request).catalog.session() as orm:
-        row, token = accounts.create_station_token(orm, body.station)
-        return {"id": row.id, "station": row.station, "token": token}
+    row, token = _state(request).store.issue_station_token(body.station)
+    return {"id": row.id, "station": row.station, "token": token}
 
 
 @router.delete("/stations/{token_id}", summary="Revoke a station's token (admin)")
 def revoke_station(request: Request, token_id: Id, viewer: Admin) -> dict:
-    with _state(request).catalog.session() as orm:
-        row = accounts.revoke_station_token(orm, token_id)
-        return {"id": row.id, "station": row.station, "revoked_at": row.revoked_at}
+    row = _state(request).store.revoke_station_token(token_id)
+    return {"id": row.id, "station": row.station, "revoked_at": row.revoked_at}
 
 
 @router.post("/studies", status_code=201, summary="Create a study (admin)", responses=CONFLICT)
 def create_study(request: Request, body: NewStudy, viewer: Admin) -> dict:
-    catalog = _state(request).catalog
-    with catalog.session() as orm:
-        if orm.scalar(select(Study.id).where(Study.name == body.name)) is not None:
-            raise DashboardError(409, f"study {body.name!r} already exists")
-        study = catalog.study(orm, body.name, create=True, description=body.description)
-        return {"id": study.id, "name": study.name, "description": study.description}
+    return _state(request).store.create_study(body.name, body.description).as_dict()

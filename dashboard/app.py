@@ -22,6 +22,7 @@ from metrics.units import significant
 from recorder.ingest import IngestStore
 from recorder.ingest import create_app as create_ingest_app
 from sessions.catalog import Catalog
+from sessions.store import CatalogStore
 
 HERE = Path(__file__).parent
 SECURITY_HEADERS = {
@@ -68,6 +69,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
     )
     app.state.settings = settings
     app.state.catalog = catalog
+    app.state.store = CatalogStore(catalog)  # administration through the domain store (sessions.store)
     app.state.ingest = ingest_store
     app.state.analyses = AnalysisCache(app.state.catalog)
     app.state.signals = SignalCache(settings.home)

@@ -15,16 +15,8 @@ from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
 from dashboard import queries
-from dashboard.api import Id, LinkedParticipants, NewStation, NewStudy, NewUser, UserChange, sign_in, sign_out
-from dashboard.api import change_user as api_change_user
-from dashboard.api import create_station as api_create_station
-from dashboard.api import create_study as api_create_study
-from dashboard.api import create_user as api_create_user
+from dashboard.api import Id, NewStation, NewStudy, NewUser, sign_in, sign_out
 from dashboard.api import live as api_live
-from dashboard.api import revoke_station as api_revoke_station
-from dashboard.api import set_user_participants as api_set_user_participants
-from dashboard.api import stations as api_stations
-from dashboard.api import users as api_users
 from dashboard.auth import (
     PRE_LOGIN_COOKIE,
     STAFF,
@@ -198,24 +190,13 @@ def _admin_page(request: Request, viewer: Viewer, message: str | None = None, to
         request,
         "admin.html",
         viewer,
-        users=api_users(request, viewer),
-        stations=api_stations(request, viewer),
+        users=[user.as_dict() for user in request.app.state.store.users()],
+        stations=[station.as_dict() for station in request.app.state.store.stations()],
         roles=ROLES,
-        participant_codes=_participant_codes(request),
+        participant_codes=request.app.state.store.participant_codes(),
         message=message,
         token=token,
     )
-
-
-def _participant_codes(request: Request) -> list[str]:
-    """Every participant as STUDY:CODE, for the account form's picker."""
-    from sessions.models import Participant, Study
-
-    with request.app.state.catalog.session() as orm:
-        rows = orm.execute(
-            select(Study.name, Participant.code).join(Participant, Participant.study_id == Study.id)
-        ).all()
-    return sorted(f"{study}:{code}" for study, code in rows)
 
 
 @router.get("/admin", response_class=HTMLResponse)
@@ -251,10 +232,11 @@ def admin_create_user(
     def create():
         if role not in ROLES:
             raise DashboardError(422, f"choose a role: one of {', '.join(ROLES)}")
-        chosen = _written_participants(participants)
-        return api_create_user(
-            request, NewUser(username=username, password=password, role=role, participants=chosen), viewer
+        form = NewUser(
+            username=username, password=password, role=role, participants=_written_participants(participants)
         )
+        store = request.app.state.store
+        return store.create_user(form.username, form.password, form.role, form.participants).as_dict()
 
     return _admin_action(request, viewer, create, f"created user {username!r}")
 
@@ -272,8 +254,8 @@ def admin_link_participants(
     participants: Annotated[str, Form(max_length=2000)] = "",
 ) -> Response:
     def link():
-        body = LinkedParticipants(participants=_written_participants(participants))
-        return api_set_user_participants(request, user_id, body, viewer)
+        store = request.app.state.store
+        return store.set_user_participants(user_id, _written_participants(participants)).as_dict()
 
     return _admin_action(request, viewer, link, "participants linked")
 
@@ -289,8 +271,8 @@ def admin_change_user(
     def change():
         if role and role not in ROLES:
             raise DashboardError(422, f"role {role!r} is not one of {', '.join(ROLES)}")
-        body = UserChange(role=role or None, active=None if not active else active == "true")
-        return api_change_user(request, user_id, body, viewer)
+        wanted = None if not active else active == "true"
+        return request.app.state.store.change_user(user_id, viewer.user_id, role or None, wanted).as_dict()
 
     return _admin_action(request, viewer, change, "account updated")
 
@@ -302,7 +284,7 @@ def admin_create_station(
     return _admin_action(
         request,
         viewer,
-        lambda: api_create_station(request, NewStation(station=station), viewer),
+        lambda: _issued(request, NewStation(station=station).station),
         "token issued",
     )
 
@@ -310,7 +292,10 @@ def admin_create_station(
 @router.post("/admin/stations/{token_id}/revoke", response_class=HTMLResponse)
 def admin_revoke_station(request: Request, token_id: Id, viewer: Admin) -> Response:
     return _admin_action(
-        request, viewer, lambda: api_revoke_station(request, token_id, viewer), "token revoked"
+        request,
+        viewer,
+        lambda: request.app.state.store.revoke_station_token(token_id).as_dict(),
+        "token revoked",
     )
 
 
@@ -324,6 +309,15 @@ def admin_create_study(
     return _admin_action(
         request,
         viewer,
-        lambda: api_create_study(request, NewStudy(name=name, description=description), viewer),
+        lambda: _new_study(request, NewStudy(name=name, description=description)),
         f"created study {name!r}",
     )
+
+
+def _issued(request: Request, station: str) -> dict:
+    row, token = request.app.state.store.issue_station_token(station)
+    return {"id": row.id, "station": row.station, "token": token}
+
+
+def _new_study(request: Request, form: NewStudy) -> dict:
+    return request.app.state.store.create_study(form.name, form.description).as_dict()

@@ -5,10 +5,10 @@ from __future__ import annotations
 import sys
 
 import click
-from sqlalchemy import select
 
 from sessions.cli.base import open_catalog, print_json, user_errors
-from sessions.models import ROLES, Participant, User
+from sessions.models import ROLES
+from sessions.store import CatalogStore
 
 
 def _password(value: str | None) -> str:
@@ -38,17 +38,9 @@ def users() -> None:
 @user_errors
 def users_add(username: str, role: str, participants: tuple[str, ...], password_stdin: bool) -> None:
     """Create an account; the password is prompted for (10+ characters) and stored as an Argon2id hash."""
-    from sessions.accounts import AccountError, create_user, link_participant
-
     password = sys.stdin.readline().rstrip("\n") if password_stdin else _password(None)
     catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        user = create_user(orm, username, password, role)
-        for item in participants:
-            study_name, _, code = item.partition(":")
-            if not code:
-                raise AccountError(f"--participant takes STUDY:CODE; got {item!r}")
-            link_participant(orm, user, catalog.participant(orm, catalog.study(orm, study_name), code))
+    CatalogStore(catalog).create_user(username, password, role, participants)  # nothing made on an error
     click.echo(f"created {role} account {username!r}")
 
 
@@ -58,13 +50,10 @@ def users_add(username: str, role: str, participants: tuple[str, ...], password_
 def users_list(as_json: bool) -> None:
     """Every account with its role, state and linked participants."""
     catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        rows = []
-        for user in orm.scalars(select(User).order_by(User.username)):
-            codes = orm.scalars(select(Participant.code).where(Participant.user_id == user.id)).all()
-            rows.append(
-                {"username": user.username, "role": user.role, "active": user.active, "participants": codes}
-            )
+    rows = [
+        {"username": u.username, "role": u.role, "active": u.active, "participants": list(u.participants)}
+        for u in CatalogStore(catalog).users()
+    ]  # participants as STUDY:CODE, as the dashboard shows them
     if as_json:
         print_json(rows)
         return

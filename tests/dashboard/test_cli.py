@@ -30,7 +30,7 @@ def test_users_add_list_and_passwd(home):
     )
     assert linked.exit_code == 0, linked.output
     listed = runner.invoke(main, ["users", "list"])
-    assert listed.output.splitlines() == ["ada: admin", "tom: trainee -> T01"]
+    assert listed.output.splitlines() == ["ada: admin", "tom: trainee -> course:T01"]  # as the dashboard says
     for args, stdin, message in (
         (
             ["users", "add", "ada", "--role", "admin", "--password-stdin"],
