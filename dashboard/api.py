@@ -20,7 +20,7 @@ from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
 from sessions import accounts, ratings
-from sessions.models import Participant, Session, User
+from sessions.models import Session, User
 from sessions.status import SessionStatus
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
@@ -357,22 +357,7 @@ def download(request: Request, uid: str, name: str, viewer: Anyone) -> FileRespo
 @router.get("/live", summary="Stations recording now: local sessions and remote stations")
 def live(request: Request, viewer: Watcher) -> dict:
     state = _state(request)
-    with state.catalog.session() as orm:
-        running = orm.execute(
-            select(Session.uid, Participant.code, Session.started_at)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(Session.status == SessionStatus.RUNNING)
-            .order_by(Session.started_at.desc())
-        ).all()
-    stations = []
-    root = state.settings.ingest_root
-    if root.is_dir():
-        for journal in sorted(root.glob(f"*/*/{SAMPLES_JOURNAL}")):
-            stations.append({"station": journal.parent.parent.name, "session": journal.parent.name})
-    return {
-        "sessions": [{"uid": u, "participant": c, "started_at": a} for u, c, a in running],
-        "stations": stations,
-    }
+    return queries.recording_now(state.catalog, state.settings.ingest_root)
 
 
 def _event_stream(request: Request, directory: Path, still_running) -> StreamingResponse:

@@ -16,7 +16,6 @@ from starlette.concurrency import run_in_threadpool
 
 from dashboard import queries
 from dashboard.api import Id, NewStation, NewStudy, NewUser, sign_in, sign_out
-from dashboard.api import live as api_live
 from dashboard.auth import (
     PRE_LOGIN_COOKIE,
     STAFF,
@@ -167,7 +166,9 @@ def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
 
 @router.get("/live", response_class=HTMLResponse)
 def live_page(request: Request, viewer: Watcher) -> Response:
-    return render(request, "live.html", viewer, running=api_live(request, viewer))
+    state = request.app.state
+    running = queries.recording_now(state.catalog, state.settings.ingest_root)
+    return render(request, "live.html", viewer, running=running)
 
 
 @router.get("/live/sessions/{uid}", response_class=HTMLResponse)

@@ -6,6 +6,8 @@ belongs to somebody else answers exactly like an id that does not exist.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pandas as pd
 from sqlalchemy import func, select
 
@@ -25,10 +27,11 @@ from metrics.report import (
 )
 from metrics.study import practice_mask
 from metrics.units import display_unit, in_display_units
+from recorder.layout import SAMPLES_JOURNAL
 from sessions.catalog import Catalog
 from sessions.models import Annotation, Participant, Session, Study, Task, User
 from sessions.review import against_band, expert_band, session_stitches
-from sessions.status import SCORABLE
+from sessions.status import SCORABLE, SessionStatus
 
 ATTENTION_AFTER_TRIALS = 5
 """A trainee not yet proficient after this many practice sessions needs a supervisor's look."""
@@ -386,3 +389,23 @@ def signal_bands(rows: list[dict]) -> dict:
         factor = SIGNALS[signal][1]
         bands[signal] = {"low": factor * row["expert_q1"], "high": factor * row["expert_q3"], "label": label}
     return bands
+
+
+def recording_now(catalog: Catalog, ingest_root: Path) -> dict:
+    """Sessions recording now: local ones (catalog status running, newest first) and the remote
+    stations streaming to the ingest (a samples journal under ``ingest_root/STATION/SESSION``)."""
+    with catalog.session() as orm:
+        running = orm.execute(
+            select(Session.uid, Participant.code, Session.started_at)
+            .join(Participant, Session.participant_id == Participant.id)
+            .where(Session.status == SessionStatus.RUNNING)
+            .order_by(Session.started_at.desc())
+        ).all()
+    stations = []
+    if ingest_root.is_dir():
+        for journal in sorted(ingest_root.glob(f"*/*/{SAMPLES_JOURNAL}")):
+            stations.append({"station": journal.parent.parent.name, "session": journal.parent.name})
+    return {
+        "sessions": [{"uid": u, "participant": c, "started_at": a} for u, c, a in running],
+        "stations": stations,
+    }
