@@ -47,7 +47,7 @@ from time import perf_counter
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.collision.mesh import CollisionMesh, TriangleContact, segment_ends
+from sim.collision.mesh import CollisionMesh, TriangleContact
 from sim.fem import Tissue
 from sim.fem.fields import LocalStress, contact_depth
 from sim.needle import Needle, Pose, rotation_about
@@ -61,6 +61,7 @@ from sim.needle_events import (
 )
 from sim.needle_forces import NeedleForces
 from sim.needle_load import KernelLoad, kernel_factory
+from sim.needle_passage import GraphicsRateTracking
 
 
 def _checked_region_forces(
@@ -85,7 +86,7 @@ def _checked_region_forces(
     return checked
 
 
-class NeedleInteraction:
+class NeedleInteraction(GraphicsRateTracking):
     """State machine of one needle against one tissue (see the module docstring)."""
 
     def __init__(
@@ -222,170 +223,6 @@ class NeedleInteraction:
     def tip_velocity(self) -> NDArray[np.float64]:
         """The tip's velocity (m/s, world) between the last two FEM steps."""
         return np.array(self._tip_velocity)
-
-    # -- graphics rate ----------------------------------------------------------------
-    def graphics_step(self, time: float) -> list[NeedleEvent]:
-        """Global CD of the whole needle; promotes, exits, completes passages, flags implausible hits."""
-        vertices = self.needle_vertices()
-        return self.apply_global(time, vertices, self.collision.query(vertices))
-
-    def apply_global(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
-        """Act on global-CD hits computed elsewhere (the graphics thread) for these needle vertices."""
-        events: list[NeedleEvent] = []
-        if self.state == "free":
-            events += self._promote(time, vertices, hits)
-        elif self.state == "contact":
-            events += self._check_contact(time, vertices, hits)
-        elif self.state in ("pierced", "exited"):
-            events += self._track_passage(time, vertices, hits)
-        return self._new_implausible_only(events)
-
-    def _new_implausible_only(self, events: list[NeedleEvent]) -> list[NeedleEvent]:
-        """Report an implausible condition when it starts, not on every frame it lasts."""
-        current = {(e.detail, e.triangle) for e in events if e.kind == "implausible_hit"}
-        fresh = [
-            e
-            for e in events
-            if e.kind != "implausible_hit" or (e.detail, e.triangle) not in self._implausible_active
-        ]
-        self._implausible_active = current
-        return fresh
-
-    def _promote(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
-        if len(hits) == 0:
-            return []
-        if not hits.entering[0]:
-            # The part of the needle nearest the tip crosses a surface from inside the tissue
-            # without having pierced it: entry through the wrong face.
-            return [
-                self._event("implausible_hit", time, hits, 0, "needle inside the tissue without piercing")
-            ]
-        if hits.segment[0] != 0:
-            return [
-                self._event(
-                    "implausible_hit",
-                    time,
-                    hits,
-                    0,
-                    f"first crossing on needle segment {hits.segment[0]}, not at the tip",
-                )
-            ]
-        point = hits.points(*segment_ends(vertices))[0]
-        self.contacts = [TriangleContact.from_hit(self.collision, hits, 0, point)]
-        self.state = "contact"
-        self.forces = self.forces_at(self.contacts[0].triangle)
-        self._handle = None
-        self._load = None
-        tangent = self.tip_tangent()
-        return [
-            self._event("contact_start", time, hits, 0, "", entry_angle_deg(tangent, self.contacts[0].normal))
-        ]
-
-    def _check_contact(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
-        """While in contact, flag crossings well away from the contact point.
-
-        Near the contact the needle's body dips below the undeformed surface as the
-        tip presses in (the collision mesh ignores the needle's own deformation), so
-        only crossings farther than the contact triangle's size plus 2 mm count.
-        """
-        contact = self.contacts[0]
-        corners = self.collision.corners[contact.triangle]
-        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 2e-3
-        points = hits.points(*segment_ends(vertices))
-        away = np.flatnonzero(np.linalg.norm(points - contact.point, axis=1) > reach)
-        return [
-            self._event("implausible_hit", time, hits, int(k), "needle touches the tissue elsewhere")
-            for k in away[:1]
-        ]
-
-    def _track_passage(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
-        entry = self.contacts[0]
-        points = hits.points(*segment_ends(vertices)) if len(hits) else np.zeros((0, 3))
-        # the crossing back through the entry surface: the entry triangle, or (on a fine mesh, as the
-        # needle's body sweeps a little sideways) an entering crossing the wall still holds
-        near_entry = np.array(
-            [bool(hits.entering[k]) and self._holds(entry, points[k]) for k in range(len(hits))], dtype=bool
-        )
-        through_entry = np.flatnonzero((hits.triangle == entry.triangle) | near_entry)
-        still_held = [
-            c
-            for c in self.contacts
-            if np.any(hits.triangle == c.triangle) or self._crosses_plane_near(vertices, c)
-        ]
-        if not still_held:
-            return [self._let_go(time, "pull_through", entry, "needle pulled clear of the wall")]
-        events = []
-        entry_rank = int(through_entry[0]) if through_entry.size else len(hits)
-        ahead = range(entry_rank)  # crossings nearer the tip than the entry
-        exits = [k for k in ahead if not hits.entering[k]]
-        walls = [k for k in ahead if hits.entering[k]]
-        if self.state == "pierced" and exits:
-            k = exits[-1]
-            point = points[k]
-            self.contacts = [entry, TriangleContact.from_hit(self.collision, hits, k, point)]
-            self.state = "exited"
-            self._handle = None
-            self._load = None
-            events.append(
-                self._event(
-                    "exit",
-                    time,
-                    hits,
-                    k,
-                    "",
-                    entry_angle_deg(-self.tip_tangent(), self.collision.normals[hits.triangle[k]]),
-                )
-            )
-        for k in walls:
-            events.append(self._event("implausible_hit", time, hits, k, "needle enters a second wall"))
-        return events
-
-    def _crosses_plane_near(self, vertices: NDArray, contact: TriangleContact) -> bool:
-        """Whether the needle still crosses the entry plane close to the entry point (see :meth:`_holds`)."""
-        point = self._needle_point_at_plane(vertices, contact)
-        return point is not None and self._holds(contact, point)
-
-    def _holds(self, contact: TriangleContact, point: NDArray) -> bool:
-        """Whether the wall still holds the needle crossing its plane at ``point``: within the
-        nominated triangle's size plus 1 mm of the contact point, so a needle held sideways in the
-        wound still counts as passing through it, and one whose other end crosses the plane far
-        away (as it is pulled clear) does not."""
-        corners = self.collision.corners[contact.triangle]
-        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 1e-3
-        return float(np.linalg.norm(point - contact.point)) <= reach
-
-    @staticmethod
-    def _needle_point_at_plane(vertices: NDArray, contact: TriangleContact) -> NDArray | None:
-        """Where the needle crosses the contact's plane, the crossing nearest the contact point."""
-        side = vertices.dot(contact.normal) - float(contact.point.dot(contact.normal))
-        sign = np.sign(side)
-        (crossing,) = np.nonzero(sign[:-1] != sign[1:])  # flatnonzero's wrapper costs as much again
-        if crossing.size == 0:
-            return None
-        if crossing.size == 1:  # the usual case: the same arithmetic on one pair of vertices
-            k = int(crossing[0])
-            a, b = side[k], side[k + 1]
-            return vertices[k] + (a / (a - b)) * (vertices[k + 1] - vertices[k])
-        a, b = side[crossing], side[crossing + 1]
-        t = a / (a - b)
-        points = vertices[crossing] + t[:, None] * (vertices[crossing + 1] - vertices[crossing])
-        if len(points) == 1:
-            return points[0]
-        offsets = points - contact.point
-        return points[np.argmin(np.einsum("ij,ij->i", offsets, offsets))]
-
-    def _event(
-        self, kind: str, time: float, hits, k: int, detail: str, angle: float = math.nan
-    ) -> NeedleEvent:
-        return NeedleEvent(
-            kind,
-            time,
-            int(hits.triangle[k]),
-            tuple(float(x) for x in hits.barycentric[k]),
-            angle,
-            self.tip_speed,
-            detail,
-        )
 
     # -- FEM rate -------------------------------------------------------------------------
     def fem_step(self, time: float) -> FemStep:
