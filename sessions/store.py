@@ -19,7 +19,7 @@ from sqlalchemy import select
 
 from sessions import accounts
 from sessions.catalog import AlreadyExists, Catalog, NotFound, WrongState
-from sessions.models import Participant, StationToken, Study, User
+from sessions.models import Participant, Session, StationToken, Study, Task, User
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,24 @@ class StationRecord:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class SessionRecord:
+    """A session as a listing shows it: its catalog id, uid, study, participant code, task, trial,
+    phase, device, status and when it ran."""
+
+    id: int
+    uid: str
+    study: str
+    participant: str
+    task: str
+    trial: int
+    phase: str
+    device: str
+    status: str
+    started_at: datetime
+    ended_at: datetime | None
 
 
 @dataclass(frozen=True)
@@ -139,6 +157,41 @@ class CatalogStore:
                 select(Study.name, Participant.code).join(Participant, Participant.study_id == Study.id)
             ).all()
         return sorted(f"{study}:{code}" for study, code in rows)
+
+    # -- sessions -------------------------------------------------------------------------
+    def sessions(
+        self, study: str | None = None, task: str | None = None, status: str | None = None
+    ) -> list[SessionRecord]:
+        """Sessions in the order they were catalogued, of one study, task or status when given (an
+        unknown study is a NotFound naming the nearest)."""
+        query = (
+            select(
+                Session.id,
+                Session.uid,
+                Study.name,
+                Participant.code,
+                Task.name,
+                Session.trial,
+                Session.phase,
+                Session.device,
+                Session.status,
+                Session.started_at,
+                Session.ended_at,
+            )
+            .join(Participant, Session.participant_id == Participant.id)
+            .join(Study, Participant.study_id == Study.id)
+            .join(Task, Session.task_id == Task.id)
+            .order_by(Session.id)
+        )
+        with self.catalog.session() as orm:
+            if study is not None:
+                self.catalog.study(orm, study)
+                query = query.where(Study.name == study)
+            if task is not None:
+                query = query.where(Task.name == task)
+            if status is not None:
+                query = query.where(Session.status == status)
+            return [SessionRecord(*row) for row in orm.execute(query).all()]
 
     # -- stations -------------------------------------------------------------------------
     def stations(self) -> list[StationRecord]:

@@ -33,15 +33,14 @@ from datetime import UTC, datetime
 from typing import Any
 
 import pandas as pd
-from sqlalchemy import select
 
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.streams import MetricsError
 from metrics.units import display_unit, in_display_units
 from sessions.analysis import analyse_catalog_study
 from sessions.catalog import Catalog, CatalogError
-from sessions.models import Participant, Session, Task
 from sessions.status import SCORABLE
+from sessions.store import CatalogStore, SessionRecord
 
 NAMESPACE = uuid.UUID("6f1d2c1e-5b0a-5d7e-9a43-7c9b2f0e8a11")  # vascsim's statements (uuid5 seeds)
 
@@ -182,25 +181,10 @@ class _Builder:
         return out
 
 
-def _session_rows(catalog: Catalog, study_name: str) -> list[Any]:
-    with catalog.session() as orm:
-        study = catalog.study(orm, study_name)
-        return orm.execute(
-            select(
-                Session.uid,
-                Participant.code,
-                Task.name.label("task"),
-                Session.trial,
-                Session.phase,
-                Session.status,
-                Session.started_at,
-                Session.ended_at,
-            )
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Task, Session.task_id == Task.id)
-            .where(Participant.study_id == study.id)
-            .order_by(Participant.code, Task.name, Session.trial)
-        ).all()
+def _session_rows(catalog: Catalog, study_name: str) -> list[SessionRecord]:
+    """The study's sessions by participant, task and trial (:meth:`sessions.store.CatalogStore.sessions`)."""
+    rows = CatalogStore(catalog).sessions(study_name)
+    return sorted(rows, key=lambda r: (r.participant, r.task, r.trial))
 
 
 def _analyses(catalog: Catalog, study_name: str, tasks: list[str]) -> dict[str, Any]:
@@ -238,7 +222,7 @@ def study_statements(catalog: Catalog, study_name: str, settings: XapiSettings) 
     ended: dict[tuple[str, str, int], datetime] = {}
     for row in rows:
         start = _iso(row.started_at)
-        actor = build.actor(row.code)
+        actor = build.actor(row.participant)
         statements.append(
             _finish(
                 f"{row.uid}|attempted",
@@ -246,7 +230,7 @@ def study_statements(catalog: Catalog, study_name: str, settings: XapiSettings) 
                     "actor": actor,
                     "verb": build.verb("attempted"),
                     "object": build.activity(row.task),
-                    "context": build.context(row.code, row.task, row.uid, cmi5=False, moveon=False),
+                    "context": build.context(row.participant, row.task, row.uid, cmi5=False, moveon=False),
                     "timestamp": start,
                 },
             )
@@ -254,7 +238,7 @@ def study_statements(catalog: Catalog, study_name: str, settings: XapiSettings) 
         if row.status not in SCORABLE:
             continue
         end = row.ended_at or row.started_at
-        ended[(row.code, row.task, row.trial)] = end
+        ended[(row.participant, row.task, row.trial)] = end
         judged = by_session.get(row.uid)
         values = judged["values"] if judged else {}
         task_time = values.get("task_time")
@@ -275,7 +259,7 @@ def study_statements(catalog: Catalog, study_name: str, settings: XapiSettings) 
                     "verb": build.verb("completed"),
                     "object": build.activity(row.task),
                     "result": completed,
-                    "context": build.context(row.code, row.task, row.uid, cmi5=True, moveon=True),
+                    "context": build.context(row.participant, row.task, row.uid, cmi5=True, moveon=True),
                     "timestamp": _iso(end),
                 },
             )
@@ -284,7 +268,7 @@ def study_statements(catalog: Catalog, study_name: str, settings: XapiSettings) 
             continue
         kind = "passed" if judged["passed"] else "failed"
         scaled = judged["raw"] / judged["checks"]
-        context = build.context(row.code, row.task, row.uid, cmi5=True, moveon=True)
+        context = build.context(row.participant, row.task, row.uid, cmi5=True, moveon=True)
         context["extensions"][CMI5_MASTERY] = MASTERY_SCORE
         context["extensions"][f"{build.base}/extensions/phase"] = row.phase
         context["extensions"][f"{build.base}/extensions/trial"] = int(row.trial)

@@ -30,40 +30,24 @@ def sessions() -> None:
 @user_errors
 def sessions_list(study, task, status, as_json) -> None:
     """List sessions (newest last), with the task each ran (trials count per task)."""
-    from sqlalchemy import select
-
     from sessions.analysis import metric_versions
-    from sessions.models import Participant, Session, Study, Task
+    from sessions.store import CatalogStore
 
     catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        query = (
-            select(
-                Session.uid,
-                Study.name,
-                Participant.code,
-                Task.name,
-                Session.trial,
-                Session.phase,
-                Session.device,
-                Session.status,
-            )
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Study, Participant.study_id == Study.id)
-            .join(Task, Session.task_id == Task.id)
-            .order_by(Session.id)
-        )
-        if study:
-            catalog.study(orm, study)
-            query = query.where(Study.name == study)
-        if task:
-            query = query.where(Task.name == task)
-        if status:
-            query = query.where(Session.status == status)
-        found = orm.execute(query.add_columns(Session.id)).all()
-    versions = metric_versions(catalog, [r[-1] for r in found])
+    found = CatalogStore(catalog).sessions(study, task, status)
+    versions = metric_versions(catalog, [r.id for r in found])
     columns = ("session", "study", "participant", "task", "trial", "phase", "device", "status")
-    rows = [dict(zip(columns, r[:-1], strict=True), metrics=versions[r[-1]]) for r in found]
+    rows = [
+        dict(
+            zip(
+                columns,
+                (r.uid, r.study, r.participant, r.task, r.trial, r.phase, r.device, r.status),
+                strict=True,
+            ),
+            metrics=versions[r.id],
+        )
+        for r in found
+    ]
     if as_json:
         print_json(rows)
         return

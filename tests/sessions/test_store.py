@@ -56,3 +56,17 @@ def test_station_tokens_are_shown_once_and_revoked(store):
     assert len(token) >= 32 and [s.station for s in store.stations()] == ["bench-1"]
     assert "token" not in store.stations()[0].as_dict()  # listed without the token
     assert store.revoke_station_token(row.id).revoked_at is not None
+
+
+def test_sessions_are_listed_by_study_task_and_status(demo_catalog):
+    catalog, _ = demo_catalog
+    store = CatalogStore(catalog)
+    every = store.sessions()
+    assert len(every) == 16 and [r.id for r in every] == sorted(r.id for r in every)
+    mine = store.sessions("synthetic-demo", status="complete")
+    assert {r.study for r in mine} == {"synthetic-demo"} and len(mine) == 16
+    assert store.sessions(task="no-such-task") == []
+    with pytest.raises(NotFound, match="no study named 'synthetic-dem'; did you mean 'synthetic-demo'"):
+        store.sessions("synthetic-dem")
+    first = every[0]
+    assert first.uid.startswith("S-") and first.started_at <= (first.ended_at or first.started_at)
