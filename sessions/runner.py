@@ -22,18 +22,16 @@ from metrics.placement import STITCH_QUANTITIES, stitch_table
 from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from sessions.catalog import Catalog, CatalogError, WrongState, metric_results, new_uid, now, stream_file
+from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
 from sessions.config import cache_dir
 from sessions.models import (
     MetricResult,
-    Participant,
     Session,
     StitchResult,
     StreamFile,
-    Study,
-    Task,
 )
 from sessions.status import SCORABLE, SessionStatus
+from sessions.store import CatalogStore
 from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import region_presets, session_tissue, task_preset, task_simulation, task_spec
 from sim.devices import ScriptedDevice, SuturingPass
@@ -315,81 +313,6 @@ def stitch_results(session_id: int, stitches: pd.DataFrame | None) -> list[Stitc
     ]
 
 
-def _with_ratings(catalog: Catalog, study_name: str, wide: pd.DataFrame) -> pd.DataFrame:
-    """Continuous labels for concurrent validity: years of experience, and per instrument the mean
-    over raters of each session's total (column ``<instrument>_total``, e.g. ``grs_total``)."""
-    from sessions.models import Rating
-
-    with catalog.session() as orm:
-        study = catalog.study(orm, study_name)
-        years = dict(
-            orm.execute(
-                select(Participant.code, Participant.years_experience).where(Participant.study_id == study.id)
-            ).all()
-        )
-        totals = orm.execute(
-            select(Session.uid, Rating.instrument, Rating.score)
-            .join(Rating, Rating.session_id == Session.id)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(Participant.study_id == study.id, Rating.item == "total")
-        ).all()
-    wide["years_experience"] = wide["participant_id"].map(years).astype(float)
-    if totals:
-        frame = pd.DataFrame(totals, columns=["session_id", "instrument", "score"])
-        frame["column"] = (
-            frame["instrument"].str.lower().str.replace(r"[^a-z0-9]+", "_", regex=True) + "_total"
-        )
-        means = frame.groupby(["session_id", "column"])["score"].mean().unstack("column")
-        wide = wide.join(means, on="session_id")
-    return wide
-
-
 def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
-    """One row per scored session of a study: ids, label, trial, phase, synthetic flag, task, every
-    metric (trials count per task: an analysis takes one task's sessions)."""
-    with catalog.session() as orm:
-        study = catalog.study(orm, study_name)
-        rows = orm.execute(
-            select(
-                Session.uid,
-                Participant.code,
-                Participant.group_label,
-                Session.trial,
-                Session.phase,
-                Participant.synthetic,
-                Task.name,
-                MetricResult.metric,
-                MetricResult.value,
-            )
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Task, Session.task_id == Task.id)
-            .join(MetricResult, MetricResult.session_id == Session.id)
-            .where(
-                Participant.study_id == study.id,
-                Session.status.in_(SCORABLE),
-                MetricResult.registry_version == REGISTRY_VERSION,
-            )
-        ).all()
-    columns = ["session_id", "participant_id", "label", "trial", "phase", "synthetic", "task"]
-    columns += ["metric", "value"]
-    long = pd.DataFrame(rows, columns=columns)
-    if long.empty:
-        raise WrongState(f"study {study_name!r} has no scored sessions; run `vascsim score` first")
-    ids = columns[:7]
-    wide = long.set_index([*ids, "metric"])["value"].unstack("metric").reset_index()
-    wide.columns.name = None
-    from metrics import REGISTRY
-
-    names = [m.name for m in REGISTRY if m.name in wide.columns]
-    wide = wide[[*ids, *names]].sort_values(["participant_id", "trial"], kind="stable").reset_index(drop=True)
-    wide[names] = wide[names].astype(float)
-    wide = _with_ratings(catalog, study_name, wide)
-    wide["trial"] = wide["trial"].astype(int)
-    wide["synthetic"] = wide["synthetic"].astype(bool)
-    wide.attrs["registry_version"] = REGISTRY_VERSION
-    return wide
-
-
-def studies(catalog: Catalog) -> list[Study]:
-    with catalog.session() as orm:
-        return list(orm.scalars(select(Study).order_by(Study.name)))
+    """See :meth:`sessions.store.CatalogStore.study_table` (the store owns it)."""
+    return CatalogStore(catalog).study_table(study_name)

@@ -15,11 +15,14 @@ from dataclasses import asdict, dataclass
 from datetime import datetime
 from typing import Any
 
+import pandas as pd
 from sqlalchemy import select
 
+from metrics.registry import REGISTRY, REGISTRY_VERSION
 from sessions import accounts
 from sessions.catalog import AlreadyExists, Catalog, NotFound, WrongState
-from sessions.models import Participant, Session, StationToken, Study, Task, User
+from sessions.models import MetricResult, Participant, Rating, Session, StationToken, Study, Task, User
+from sessions.status import SCORABLE
 
 
 @dataclass(frozen=True)
@@ -192,6 +195,82 @@ class CatalogStore:
             if status is not None:
                 query = query.where(Session.status == status)
             return [SessionRecord(*row) for row in orm.execute(query).all()]
+
+    # -- the study table -------------------------------------------------------------------
+    def study_table(self, study_name: str) -> pd.DataFrame:
+        """One row per scored session of a study: ids, label, trial, phase, synthetic flag, task, every
+        metric (trials count per task: an analysis takes one task's sessions)."""
+        with self.catalog.session() as orm:
+            study = self.catalog.study(orm, study_name)
+            rows = orm.execute(
+                select(
+                    Session.uid,
+                    Participant.code,
+                    Participant.group_label,
+                    Session.trial,
+                    Session.phase,
+                    Participant.synthetic,
+                    Task.name,
+                    MetricResult.metric,
+                    MetricResult.value,
+                )
+                .join(Participant, Session.participant_id == Participant.id)
+                .join(Task, Session.task_id == Task.id)
+                .join(MetricResult, MetricResult.session_id == Session.id)
+                .where(
+                    Participant.study_id == study.id,
+                    Session.status.in_(SCORABLE),
+                    MetricResult.registry_version == REGISTRY_VERSION,
+                )
+            ).all()
+        columns = ["session_id", "participant_id", "label", "trial", "phase", "synthetic", "task"]
+        columns += ["metric", "value"]
+        long = pd.DataFrame(rows, columns=columns)
+        if long.empty:
+            raise WrongState(f"study {study_name!r} has no scored sessions; run `vascsim score` first")
+        ids = columns[:7]
+        wide = long.set_index([*ids, "metric"])["value"].unstack("metric").reset_index()
+        wide.columns.name = None
+        names = [m.name for m in REGISTRY if m.name in wide.columns]
+        wide = (
+            wide[[*ids, *names]]
+            .sort_values(["participant_id", "trial"], kind="stable")
+            .reset_index(drop=True)
+        )
+        wide[names] = wide[names].astype(float)
+        wide = self._with_ratings(study_name, wide)
+        wide["trial"] = wide["trial"].astype(int)
+        wide["synthetic"] = wide["synthetic"].astype(bool)
+        wide.attrs["registry_version"] = REGISTRY_VERSION
+        return wide
+
+    def _with_ratings(self, study_name: str, wide: pd.DataFrame) -> pd.DataFrame:
+        """Continuous labels for concurrent validity: years of experience, and per instrument the mean
+        over raters of each session's total (column ``<instrument>_total``, e.g. ``grs_total``)."""
+        with self.catalog.session() as orm:
+            study = self.catalog.study(orm, study_name)
+            years = dict(
+                orm.execute(
+                    select(Participant.code, Participant.years_experience).where(
+                        Participant.study_id == study.id
+                    )
+                ).all()
+            )
+            totals = orm.execute(
+                select(Session.uid, Rating.instrument, Rating.score)
+                .join(Rating, Rating.session_id == Session.id)
+                .join(Participant, Session.participant_id == Participant.id)
+                .where(Participant.study_id == study.id, Rating.item == "total")
+            ).all()
+        wide["years_experience"] = wide["participant_id"].map(years).astype(float)
+        if totals:
+            frame = pd.DataFrame(totals, columns=["session_id", "instrument", "score"])
+            frame["column"] = (
+                frame["instrument"].str.lower().str.replace(r"[^a-z0-9]+", "_", regex=True) + "_total"
+            )
+            means = frame.groupby(["session_id", "column"])["score"].mean().unstack("column")
+            wide = wide.join(means, on="session_id")
+        return wide
 
     # -- stations -------------------------------------------------------------------------
     def stations(self) -> list[StationRecord]:
