@@ -168,7 +168,7 @@ class CatalogStore:
         """Sessions in the order they were catalogued, of one study, task or status when given (an
         unknown study is a NotFound naming the nearest)."""
         query = (
-            select(
+            _sessions_with(
                 Session.id,
                 Session.uid,
                 Study.name,
@@ -181,9 +181,7 @@ class CatalogStore:
                 Session.started_at,
                 Session.ended_at,
             )
-            .join(Participant, Session.participant_id == Participant.id)
             .join(Study, Participant.study_id == Study.id)
-            .join(Task, Session.task_id == Task.id)
             .order_by(Session.id)
         )
         with self.catalog.session() as orm:
@@ -203,7 +201,7 @@ class CatalogStore:
         with self.catalog.session() as orm:
             study = self.catalog.study(orm, study_name)
             rows = orm.execute(
-                select(
+                _sessions_with(
                     Session.uid,
                     Participant.code,
                     Participant.group_label,
@@ -214,8 +212,6 @@ class CatalogStore:
                     MetricResult.metric,
                     MetricResult.value,
                 )
-                .join(Participant, Session.participant_id == Participant.id)
-                .join(Task, Session.task_id == Task.id)
                 .join(MetricResult, MetricResult.session_id == Session.id)
                 .where(
                     Participant.study_id == study.id,
@@ -299,6 +295,15 @@ class CatalogStore:
                 raise AlreadyExists(f"study {name!r} already exists")
             study = self.catalog.study(orm, name, create=True, description=description)
             return StudyRecord(study.id, study.name, study.description)
+
+
+def _sessions_with(*columns):
+    """A query of ``columns`` over sessions joined to their participant and task."""
+    return (
+        select(*columns)
+        .join(Participant, Session.participant_id == Participant.id)
+        .join(Task, Session.task_id == Task.id)
+    )
 
 
 def _user(orm, user_id: int) -> User:
