@@ -297,12 +297,18 @@ def _tetgen(wall: WallSurface, max_edge: float, max_radius_edge: float, min_dihe
 def _tetwild(wall: WallSurface, max_edge: float):
     """fTetWild (pytetwild): robust to self-intersecting or degenerate input; its boundary follows
     the input within 1e-3 of the bounding box's diagonal; slower than TetGen."""
+    import contextlib
+    import tempfile
+
     import pytetwild
 
     scale = 1e3  # fTetWild works in the surface's own units: millimetres keep its tolerances sensible
-    points, tets = pytetwild.tetrahedralize(
-        wall.points * scale, wall.triangles.astype(np.int32), edge_length_abs=max_edge * scale, quiet=True
-    )
+    # fTetWild writes a scratch copy of the surface (__tracked_surface.stl) into the working directory:
+    # it runs in a temporary one, so a user's folder (or the repository, under the tests) stays clean
+    with tempfile.TemporaryDirectory(prefix="vascsim-tetwild-") as scratch, contextlib.chdir(scratch):
+        points, tets = pytetwild.tetrahedralize(
+            wall.points * scale, wall.triangles.astype(np.int32), edge_length_abs=max_edge * scale, quiet=True
+        )
     return np.asarray(points, dtype=np.float64) / scale, np.asarray(tets, dtype=np.int64)
 
 
