@@ -452,8 +452,7 @@ def stations(request: Request, viewer: Admin) -> list[dict]:
     responses=CONFLICT,
 )
 def create_station(request: Request, body: NewStation, viewer: Admin) -> dict:
-    row, token = _state(request).store.issue_station_token(body.station)
-    return {"id": row.id, "station": row.station, "token": token}
+    return _state(request).store.issue_station_token(body.station)
 
 
 @router.delete("/stations/{token_id}", summary="Revoke a station's token (admin)")

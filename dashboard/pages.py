@@ -285,7 +285,7 @@ def admin_create_station(
     return _admin_action(
         request,
         viewer,
-        lambda: _issued(request, NewStation(station=station).station),
+        lambda: request.app.state.store.issue_station_token(NewStation(station=station).station),
         "token issued",
     )
 
@@ -313,11 +313,6 @@ def admin_create_study(
         lambda: _new_study(request, NewStudy(name=name, description=description)),
         f"created study {name!r}",
     )
-
-
-def _issued(request: Request, station: str) -> dict:
-    row, token = request.app.state.store.issue_station_token(station)
-    return {"id": row.id, "station": row.station, "token": token}
 
 
 def _new_study(request: Request, form: NewStudy) -> dict:

@@ -109,7 +109,8 @@ def _ranked(rows: Sequence[dict], positions: tuple[str, ...], side: str) -> list
 def feedback_line(item: dict) -> str:
     """ "Aim the needle tip at the entry mark before piercing. (entry_to_target 0.65 mm; experts
     0.07-0.10 mm, lower is better)": what to do, then the numbers behind it in display units."""
-    return f"{item['advice']} ({_numbers(item['row'])})"
+    value, experts = _numbers(item["row"])
+    return f"{item['advice']} ({value}; {experts})"
 
 
 def strength_line(item: dict) -> str:
@@ -117,21 +118,18 @@ def strength_line(item: dict) -> str:
     better)", or "Level with the experts: ..." for a value inside their band."""
     better = item["position"] == "better"
     lead = "Better than the experts' middle half" if better else "Level with the experts"
-    numbers = _numbers(item["row"]).split("; ", 1)
-    return f"{lead}: {numbers[0]} ({numbers[1]})"
+    value, experts = _numbers(item["row"])
+    return f"{lead}: {value} ({experts})"
 
 
-def _numbers(row: dict) -> str:
+def _numbers(row: dict) -> tuple[str, str]:
+    """("entry_to_target 0.65 mm", "experts 0.07-0.10 mm, lower is better") in display units."""
     shown = row["display"]
     unit = f" {row['display_unit']}" if row["display_unit"] else ""
-    low, high = shown["expert_q1"], shown["expert_q3"]
-    experts = (
-        significant(low)
-        if significant(low) == significant(high)
-        else f"{significant(low)}-{significant(high)}"
-    )
-    value = significant(shown["value"])
-    return f"{row['metric']} {value}{unit}; experts {experts}{unit}, {row['better']} is better"
+    low, high = significant(shown["expert_q1"]), significant(shown["expert_q3"])
+    experts = low if low == high else f"{low}-{high}"
+    value = f"{row['metric']} {significant(shown['value'])}{unit}"
+    return value, f"experts {experts}{unit}, {row['better']} is better"
 
 
 def session_feedback(rows: Sequence[dict], limit: int = 3) -> dict[str, list[dict]]:

@@ -275,12 +275,13 @@ class CatalogStore:
             rows = orm.scalars(select(StationToken).order_by(StationToken.station))
             return [StationRecord(r.id, r.station, r.created_at, r.revoked_at) for r in rows]
 
-    def issue_station_token(self, station: str) -> tuple[StationRecord, str]:
-        """A new ingest token for ``station`` (returned once; only its digest is stored)."""
+    def issue_station_token(self, station: str) -> dict[str, Any]:
+        """A new ingest token for ``station``: {id, station, token} (the token is shown this once;
+        only its digest is stored)."""
         with self.catalog.session() as orm:
             row, token = accounts.create_station_token(orm, station)
             orm.flush()
-            return StationRecord(row.id, row.station, row.created_at, row.revoked_at), token
+            return {"id": row.id, "station": row.station, "token": token}
 
     def revoke_station_token(self, token_id: int) -> StationRecord:
         with self.catalog.session() as orm:

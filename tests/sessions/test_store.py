@@ -52,10 +52,11 @@ def test_refusals_are_typed_and_create_nothing(store):
 
 
 def test_station_tokens_are_shown_once_and_revoked(store):
-    row, token = store.issue_station_token("bench-1")
+    issued = store.issue_station_token("bench-1")
+    token = issued["token"]
     assert len(token) >= 32 and [s.station for s in store.stations()] == ["bench-1"]
     assert "token" not in store.stations()[0].as_dict()  # listed without the token
-    assert store.revoke_station_token(row.id).revoked_at is not None
+    assert store.revoke_station_token(issued["id"]).revoked_at is not None
 
 
 def test_sessions_are_listed_by_study_task_and_status(demo_catalog):
