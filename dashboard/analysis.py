@@ -18,13 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from sqlalchemy import func, select
 
-from metrics.registry import REGISTRY_VERSION
 from metrics.study import StudyAnalysis, oriented
 from sessions.analysis import analyse_catalog_study
-from sessions.catalog import Catalog, NotFound
-from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
+from sessions.store import CatalogStore
 
 CACHED_STUDIES = 16
 
@@ -38,30 +35,15 @@ class CachedAnalysis:
 class AnalysisCache:
     """Per-study analyses keyed by the catalog's state (thread-safe; one computation per study at a time)."""
 
-    def __init__(self, catalog: Catalog) -> None:
-        self.catalog = catalog
+    def __init__(self, store: CatalogStore) -> None:
+        self.store = store
         self._cache: OrderedDict[int, tuple[tuple, CachedAnalysis]] = OrderedDict()
         self._lock = threading.Lock()
         self._study_locks: dict[int, threading.Lock] = {}
         self._derived: OrderedDict[tuple, object] = OrderedDict()
 
     def fingerprint(self, study_id: int) -> tuple:
-        with self.catalog.session() as orm:
-            sessions = orm.execute(
-                select(func.count(Session.id), func.max(Session.id), func.max(Session.ended_at))
-                .join(Participant, Session.participant_id == Participant.id)
-                .where(Participant.study_id == study_id)
-            ).one()
-            results = orm.execute(select(func.count(MetricResult.id), func.max(MetricResult.id))).one()
-            participants = orm.execute(
-                select(func.count(Participant.id), func.max(Participant.id)).where(
-                    Participant.study_id == study_id
-                )
-            ).one()
-            declared = orm.scalar(
-                select(func.max(AnalysisDeclaration.id)).where(AnalysisDeclaration.study_id == study_id)
-            )
-        return (*sessions, *results, *participants, declared, REGISTRY_VERSION)
+        return self.store.study_fingerprint(study_id)
 
     def get(self, study_id: int) -> CachedAnalysis:
         with self._lock:
@@ -94,12 +76,8 @@ class AnalysisCache:
         return value
 
     def _compute(self, study_id: int) -> CachedAnalysis:
-        with self.catalog.session() as orm:
-            study = orm.get(Study, study_id)
-            if study is None:
-                raise NotFound("study", study_id)
-            name = study.name
-        analysis, _ = analyse_catalog_study(self.catalog, name)
+        name = self.store.study(study_id).name
+        analysis, _ = analyse_catalog_study(self.store.catalog, name)
         uid_of = {uid: k for k, uid in enumerate(analysis.sessions["session_id"])}
         return CachedAnalysis(analysis, uid_of)
 

@@ -11,17 +11,16 @@ from fastapi import APIRouter, Depends, Query, Request, Response
 from fastapi import Path as PathParameter
 from fastapi.responses import FileResponse, StreamingResponse
 from pydantic import BaseModel, Field
-from sqlalchemy import select
 
-from dashboard import access, queries
-from dashboard.auth import COOKIE, STAFF, LoginRateLimiter, Viewer, current_viewer, limiter_key, require
+from dashboard import queries
+from dashboard.auth import COOKIE, LoginRateLimiter, Viewer, current_viewer, limiter_key, require
 from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
 from sessions import accounts, ratings
-from sessions.models import Session, User
 from sessions.status import SessionStatus
+from sessions.store import STAFF, UserRecord
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 Staff = Annotated[Viewer, Depends(require(*STAFF))]
@@ -87,7 +86,7 @@ def _state(request: Request):
     return request.app.state
 
 
-def sign_in(request: Request, response: Response, username: str, password: str) -> tuple[User, str]:
+def sign_in(request: Request, response: Response, username: str, password: str) -> tuple[UserRecord, str]:
     """Check the credentials under the rate limit, set the sign-in cookie; (user, CSRF token)."""
     state = _state(request)
     limiter: LoginRateLimiter = state.login_limiter
@@ -97,12 +96,11 @@ def sign_in(request: Request, response: Response, username: str, password: str) 
         error = DashboardError(429, f"too many failed sign-ins for {username!r}; try again in {wait:.0f} s")
         error.retry_after = int(wait) + 1
         raise error
-    with state.catalog.session() as orm:
-        user = accounts.authenticate(orm, username, password)
-        if user is None:
-            limiter.failed(key)
-            raise DashboardError(401, "wrong user name or password")
-        token, csrf = accounts.start_login(orm, user, timedelta(seconds=state.settings.login_lifetime_s))
+    signed = state.store.sign_in(username, password, timedelta(seconds=state.settings.login_lifetime_s))
+    if signed is None:
+        limiter.failed(key)
+        raise DashboardError(401, "wrong user name or password")
+    user, token, csrf = signed
     limiter.succeeded(key)
     response.set_cookie(
         COOKIE,
@@ -119,8 +117,7 @@ def sign_in(request: Request, response: Response, username: str, password: str) 
 def sign_out(request: Request, response: Response) -> None:
     token = request.cookies.get(COOKIE)
     if token:
-        with _state(request).catalog.session() as orm:
-            accounts.end_login(orm, token)
+        _state(request).store.sign_out(token)
     response.delete_cookie(COOKIE, path="/")
 
 
@@ -148,19 +145,19 @@ def me(viewer: Anyone) -> dict:
 
 @router.get("/studies")
 def studies(request: Request, viewer: Anyone) -> list[dict]:
-    return queries.studies(_state(request).catalog, viewer)
+    return queries.studies(_state(request).store, viewer)
 
 
 @router.get("/studies/{study_id}", summary="Study overview: participants, latest scores, who needs attention")
 def study(request: Request, study_id: Id, viewer: Staff) -> dict:
     state = _state(request)
-    return queries.study_overview(state.catalog, state.analyses, viewer, study_id)
+    return queries.study_overview(state.store, state.analyses, viewer, study_id)
 
 
 @router.get("/studies/{study_id}/validity", summary="Construct-validity report", responses=CONFLICT)
 def validity(request: Request, study_id: Id, viewer: Staff) -> dict:
     state = _state(request)
-    return queries.validity_report(state.catalog, state.analyses, viewer, study_id)
+    return queries.validity_report(state.store, state.analyses, viewer, study_id)
 
 
 @router.get(
@@ -173,8 +170,7 @@ def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
     from metrics.report import validity_download
 
     state = _state(request)
-    with state.catalog.session() as orm:
-        name = access.owned_study(orm, viewer, study_id, whole=True).name
+    name = state.store.study(study_id, viewer, whole=True).name
     buffer = io.StringIO()
     validity_download(state.analyses.get(study_id).analysis).to_csv(buffer, index=False)
     return Response(
@@ -198,8 +194,7 @@ def progress_file(request: Request, study_id: Id, kind: str, viewer: Staff) -> R
     if kind not in ("csv", "xlsx"):
         raise not_found(f"progress.{kind}")
     state = _state(request)
-    with state.catalog.session() as orm:
-        name = access.owned_study(orm, viewer, study_id, whole=True).name
+    name = state.store.study(study_id, viewer, whole=True).name
     table = progress_table(state.catalog, name, state.analyses.get(study_id).analysis)
     with tempfile.TemporaryDirectory() as folder:
         path = write_progress(table, Path(folder) / f"progress.{kind}", name)
@@ -229,8 +224,7 @@ def figure(request: Request, study_id: Id, name: str, viewer: Staff) -> FileResp
     if name not in FIGURES:
         raise not_found(f"figure {name!r}")
     state = _state(request)
-    with state.catalog.session() as orm:
-        study_name = access.owned_study(orm, viewer, study_id, whole=True).name
+    study_name = state.store.study(study_id, viewer, whole=True).name
     folder = state.settings.home / "reports" / "dashboard" / str(study_id)
     analysis = state.analyses.get(study_id).analysis
     stamp = folder / ".fingerprint"
@@ -249,7 +243,7 @@ def figure(request: Request, study_id: Id, name: str, viewer: Staff) -> FileResp
 )
 def progress(request: Request, participant_id: Id, viewer: Anyone) -> dict:
     state = _state(request)
-    return queries.participant_progress(state.catalog, state.analyses, viewer, participant_id)
+    return queries.participant_progress(state.store, state.analyses, viewer, participant_id)
 
 
 @router.get("/sessions", summary="Sessions the caller may see, newest first")
@@ -260,19 +254,18 @@ def sessions(
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
 ) -> dict:
-    return queries.session_list(_state(request).catalog, viewer, study_id, limit, offset)
+    return queries.session_list(_state(request).store, viewer, study_id, limit, offset)
 
 
 @router.get("/sessions/{uid}", summary="A session: metrics against the expert band, events, files")
 def session(request: Request, uid: str, viewer: Anyone) -> dict:
     state = _state(request)
-    return queries.session_detail(state.catalog, state.analyses, viewer, uid)
+    return queries.session_detail(state.store, state.analyses, viewer, uid)
 
 
 def _directory(request: Request, viewer: Viewer, uid: str) -> tuple[str, set[str]]:
-    with _state(request).catalog.session() as orm:
-        row = access.owned_session(orm, viewer, uid)
-        return row.directory, {f.name for f in row.files}
+    facts = _state(request).store.session_facts(uid, viewer)
+    return facts.directory, {f.name for f in facts.files}
 
 
 @router.get("/sessions/{uid}/signals", summary="Force, tip speed and local stress over time; events")
@@ -288,8 +281,8 @@ def video(request: Request, uid: str, viewer: Anyone) -> FileResponse:
     if path is None:
         raise DashboardError(
             404,
-            f"session {uid!r} has no replay video yet; render it with "
-            f"`vascsim replay {uid} --vs-group experts`",
+            f"session {uid!r} has no replay video yet; render it from the session's page "
+            f"(staff) or with `vascsim replay {uid} --vs-group experts`",
         )
     return FileResponse(path, media_type="video/mp4" if path.suffix == ".mp4" else "video/webm")
 
@@ -310,16 +303,14 @@ def session_ratings(request: Request, uid: str, viewer: Staff) -> list[dict]:
 )
 def start_replay(request: Request, uid: str, viewer: Staff) -> dict:
     state = _state(request)
-    with state.catalog.session() as orm:
-        access.owned_session(orm, viewer, uid)
+    state.store.session_facts(uid, viewer)  # the reader may see it, or it is not found
     return state.replays.start(uid).as_dict()
 
 
 @router.get("/sessions/{uid}/replay", summary="Whether the session's replay is ready, rendering, or failed")
 def replay_status(request: Request, uid: str, viewer: Anyone) -> dict:
     state = _state(request)
-    with state.catalog.session() as orm:
-        access.owned_session(orm, viewer, uid)
+    state.store.session_facts(uid, viewer)
     job = state.replays.status(uid)
     if job is not None and job.state != "done":
         return job.as_dict()
@@ -357,7 +348,7 @@ def download(request: Request, uid: str, name: str, viewer: Anyone) -> FileRespo
 @router.get("/live", summary="Stations recording now: local sessions and remote stations")
 def live(request: Request, viewer: Watcher) -> dict:
     state = _state(request)
-    return queries.recording_now(state.catalog, state.settings.ingest_root)
+    return queries.recording_now(state.store, state.settings.ingest_root)
 
 
 def _event_stream(request: Request, directory: Path, still_running) -> StreamingResponse:
@@ -379,18 +370,12 @@ def _event_stream(request: Request, directory: Path, still_running) -> Streaming
     responses=CONFLICT,
 )
 def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingResponse:
-    catalog = _state(request).catalog
-    with catalog.session() as orm:
-        row = access.owned_session(orm, viewer, uid)
-        if row.status != SessionStatus.RUNNING:
-            raise DashboardError(409, f"session {uid!r} is {row.status}, not recording")
-        directory = inside(_state(request).settings.home, Path(row.directory))
-
-    def still_running() -> bool:
-        with catalog.session() as orm:
-            return orm.scalar(select(Session.status).where(Session.uid == uid)) == SessionStatus.RUNNING
-
-    return _event_stream(request, directory, still_running)
+    store = _state(request).store
+    facts = store.session_facts(uid, viewer)
+    if facts.session.status != SessionStatus.RUNNING:
+        raise DashboardError(409, f"session {uid!r} is {facts.session.status}, not recording")
+    directory = inside(_state(request).settings.home, Path(facts.directory))
+    return _event_stream(request, directory, lambda: store.is_running(uid))
 
 
 @router.get(

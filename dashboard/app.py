@@ -71,7 +71,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
     app.state.catalog = catalog
     app.state.store = CatalogStore(catalog)  # administration through the domain store (sessions.store)
     app.state.ingest = ingest_store
-    app.state.analyses = AnalysisCache(app.state.catalog)
+    app.state.analyses = AnalysisCache(app.state.store)
     app.state.signals = SignalCache(settings.home)
     app.state.replays = ReplayJobs(app.state.catalog, settings.home)
     app.state.login_limiter = LoginRateLimiter(settings.login_attempts, settings.login_window_s)
@@ -105,10 +105,4 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
 
 def _ingest_store(settings: DashboardSettings, catalog: Catalog) -> IngestStore:
     """Remote stations' ingest store (recorder.ingest), authorised by the catalog's station tokens."""
-    from sessions.accounts import station_for_token
-
-    def station_of(token: str) -> str | None:
-        with catalog.session() as orm:
-            return station_for_token(orm, token)
-
-    return IngestStore(settings.ingest_root, station_of)
+    return IngestStore(settings.ingest_root, CatalogStore(catalog).station_for_token)

@@ -9,12 +9,10 @@ from collections import deque
 from dataclasses import dataclass
 
 from fastapi import Depends, Request
-from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
 from dashboard.errors import DashboardError, forbidden
-from sessions.accounts import login_for
-from sessions.models import Participant
+from sessions.store import Scope
 
 COOKIE = "vascsim_login"
 PRE_LOGIN_COOKIE = "vascsim_prelogin"  # double-submit CSRF token of the sign-in form
@@ -23,24 +21,14 @@ UNSAFE_METHODS = ("POST", "PUT", "PATCH", "DELETE")
 FORM_TYPES = ("application/x-www-form-urlencoded", "multipart/form-data")
 
 
-@dataclass(frozen=True)
-class Viewer:
-    """The signed-in user as every query sees them."""
+@dataclass(frozen=True, kw_only=True)
+class Viewer(Scope):
+    """The signed-in user as every query sees them: their :class:`sessions.store.Scope` (role, a
+    trainee's own participants) with who they are and their sign-in's CSRF token."""
 
     user_id: int
     username: str
-    role: str
     csrf_token: str
-    participant_ids: frozenset[int]  # a trainee's own participants (empty for other roles)
-
-    @property
-    def is_trainee(self) -> bool:
-        return self.role == "trainee"
-
-    @property
-    def sees_accounts(self) -> bool:
-        """Admins and supervisors see which account a participant belongs to; researchers never do."""
-        return self.role in ("admin", "supervisor")
 
 
 class LoginRateLimiter:
@@ -85,18 +73,14 @@ def optional_viewer(request: Request) -> Viewer | None:
     token = request.cookies.get(COOKIE)
     if not token:
         return None
-    catalog = request.app.state.catalog
-    with catalog.session() as orm:
-        found = login_for(orm, token)
-        if found is None:
-            return None
-        user, login = found
-        owned = (
-            frozenset(orm.scalars(select(Participant.id).where(Participant.user_id == user.id)))
-            if user.role == "trainee"
-            else frozenset()
-        )
-        return Viewer(user.id, user.username, user.role, login.csrf_token, owned)
+    found = request.app.state.store.signed_in(token)
+    if found is None:
+        return None
+    user, csrf = found
+    owned = frozenset(user.participant_ids) if user.role == "trainee" else frozenset()
+    return Viewer(
+        role=user.role, participant_ids=owned, user_id=user.id, username=user.username, csrf_token=csrf
+    )
 
 
 async def current_viewer(request: Request) -> Viewer:
@@ -128,7 +112,3 @@ def require(*roles: str):
         return viewer
 
     return check
-
-
-STAFF = ("admin", "supervisor", "researcher")
-"""Roles that see whole studies (researchers pseudonymously)."""

@@ -61,6 +61,22 @@ CONFLICT = {409: ERROR_SCHEMA}
 """Documented on the routes that answer 409: what they would create exists, or the state forbids it."""
 
 
+REMEDIES = {
+    "replace-rating": 'tick “Replace my earlier rating” (over the API: "replace": true) to replace it',
+    "score": "score its sessions first (`vascsim score --study {}` where the catalog is)",
+    "recover": "recover it first (`vascsim recover {}` where the catalog is)",
+}
+"""A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) in the dashboard's words."""
+
+
+def said(error: VascsimError) -> str:
+    """The error's message with its remedy in the dashboard's words (when it names one)."""
+    remedy = getattr(error, "remedy", None)
+    if remedy is None or remedy[0] not in REMEDIES:
+        return str(error)
+    return f"{error}; {REMEDIES[remedy[0]].format(remedy[1])}"
+
+
 def status_of(error: VascsimError) -> int:
     """The HTTP status of a domain error, by its type: not found 404, forbidden 403, already there or
     in the wrong state 409, anything else the request's fault (400)."""
@@ -95,7 +111,7 @@ def install_error_handlers(app) -> None:
         return await _answer(request, error.status, error.message, headers)
 
     async def vascsim_error(request: Request, error: VascsimError) -> Response:
-        return await _answer(request, status_of(error), str(error))
+        return await _answer(request, status_of(error), said(error))
 
     async def http_error(request: Request, error: StarletteHTTPException) -> Response:
         return await _answer(request, error.status_code, str(error.detail))

@@ -11,25 +11,24 @@ from urllib.parse import quote
 from fastapi import APIRouter, Depends, Form, Request
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from pydantic import ValidationError
-from sqlalchemy import select
 from starlette.concurrency import run_in_threadpool
 
 from dashboard import queries
 from dashboard.api import Id, NewStation, NewStudy, NewUser, sign_in, sign_out
 from dashboard.auth import (
     PRE_LOGIN_COOKIE,
-    STAFF,
     Viewer,
     check_csrf,
     current_viewer,
     optional_viewer,
     require,
 )
-from dashboard.errors import DashboardError, status_of
+from dashboard.errors import DashboardError, said, status_of
 from dashboard.signals import replay_video
 from recorder.layout import SAMPLES_FILE
-from sessions.models import ROLES, Participant
+from sessions.models import ROLES
 from sessions.ratings import session_ratings
+from sessions.store import STAFF
 from sim.errors import VascsimError
 
 router = APIRouter(include_in_schema=False)
@@ -103,24 +102,19 @@ def home(request: Request) -> Response:
     viewer = optional_viewer(request)
     if viewer is None:
         return RedirectResponse("/login", status_code=303)
-    catalog = request.app.state.catalog
+    store = request.app.state.store
     if viewer.is_trainee:
-        with catalog.session() as orm:
-            mine = orm.execute(
-                select(Participant.id, Participant.code).where(
-                    Participant.id.in_(viewer.participant_ids or {-1})
-                )
-            ).all()
+        mine = [(p.id, p.code) for p in store.my_participants(viewer)]
         if len(mine) == 1:
             return RedirectResponse(f"/participants/{mine[0][0]}", status_code=303)
         return render(request, "home.html", viewer, studies=[], participants=mine)
-    return render(request, "home.html", viewer, studies=queries.studies(catalog, viewer), participants=[])
+    return render(request, "home.html", viewer, studies=queries.studies(store, viewer), participants=[])
 
 
 @router.get("/studies/{study_id}", response_class=HTMLResponse)
 def study_page(request: Request, study_id: Id, viewer: Staff) -> Response:
     state = request.app.state
-    overview = queries.study_overview(state.catalog, state.analyses, viewer, study_id)
+    overview = queries.study_overview(state.store, state.analyses, viewer, study_id)
     after = queries.ATTENTION_AFTER_TRIALS
     return render(request, "study.html", viewer, overview, overview=overview, attention_after=after)
 
@@ -128,21 +122,21 @@ def study_page(request: Request, study_id: Id, viewer: Staff) -> Response:
 @router.get("/studies/{study_id}/validity", response_class=HTMLResponse)
 def validity_page(request: Request, study_id: Id, viewer: Staff) -> Response:
     state = request.app.state
-    report = queries.validity_report(state.catalog, state.analyses, viewer, study_id)
+    report = queries.validity_report(state.store, state.analyses, viewer, study_id)
     return render(request, "validity.html", viewer, report, report=report)
 
 
 @router.get("/participants/{participant_id}", response_class=HTMLResponse)
 def participant_page(request: Request, participant_id: Id, viewer: Anyone) -> Response:
     state = request.app.state
-    progress = queries.participant_progress(state.catalog, state.analyses, viewer, participant_id)
+    progress = queries.participant_progress(state.store, state.analyses, viewer, participant_id)
     return render(request, "participant.html", viewer, progress, progress=progress)
 
 
 @router.get("/sessions/{uid}", response_class=HTMLResponse)
 def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
     state = request.app.state
-    detail = queries.session_detail(state.catalog, state.analyses, viewer, uid)
+    detail = queries.session_detail(state.store, state.analyses, viewer, uid)
     has_video = replay_video(state.settings.home, uid) is not None
     has_samples = any(f["name"] == SAMPLES_FILE for f in detail["files"])
     data = {
@@ -167,7 +161,7 @@ def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
 @router.get("/live", response_class=HTMLResponse)
 def live_page(request: Request, viewer: Watcher) -> Response:
     state = request.app.state
-    running = queries.recording_now(state.catalog, state.settings.ingest_root)
+    running = queries.recording_now(state.store, state.settings.ingest_root)
     return render(request, "live.html", viewer, running=running)
 
 
@@ -214,7 +208,7 @@ def _admin_action(request: Request, viewer: Viewer, action, done: str) -> Respon
         if isinstance(error, ValidationError):
             message = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in error.errors())
         else:
-            message = str(error)
+            message = said(error)
         page = _admin_page(request, viewer, message=message)
         page.status_code = status
         return page

@@ -1,7 +1,8 @@
 """What each page shows, as plain dictionaries, always filtered by who is asking.
 
-Every lookup by id goes through :mod:`dashboard.access`, so an id that exists but
-belongs to somebody else answers exactly like an id that does not exist.
+The catalog store's scoped reads (:mod:`sessions.store.views`) answer every lookup, so an id that
+exists but belongs to somebody else answers exactly like an id that does not exist; this module only
+composes them with the study's analysis. It holds no query of its own.
 """
 
 from __future__ import annotations
@@ -9,9 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
-from sqlalchemy import func, select
 
-from dashboard.access import owned_participant, owned_session, owned_study, session_filter
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
 from metrics.feedback import metric_groups, participant_feedback, session_feedback
@@ -28,84 +27,47 @@ from metrics.report import (
 from metrics.study import practice_mask
 from metrics.units import display_unit, in_display_units
 from recorder.layout import SAMPLES_JOURNAL
-from sessions.catalog import Catalog
-from sessions.models import Annotation, Participant, Session, Study, Task, User
 from sessions.review import against_band, expert_band, session_stitches
-from sessions.status import SCORABLE, SessionStatus
+from sessions.status import SCORABLE
+from sessions.store import CatalogStore, ParticipantRecord, SessionRecord
 
 ATTENTION_AFTER_TRIALS = 5
 """A trainee not yet proficient after this many practice sessions needs a supervisor's look."""
 
 
-def studies(catalog: Catalog, viewer: Viewer) -> list[dict]:
-    with catalog.session() as orm:
-        query = (
-            select(
-                Study.id,
-                Study.name,
-                Study.description,
-                func.count(func.distinct(Participant.id)),
-                func.count(Session.id),
-            )
-            .outerjoin(Participant, Participant.study_id == Study.id)
-            .outerjoin(Session, Session.participant_id == Participant.id)
-            .group_by(Study.id)
-            .order_by(Study.name)
-        )
-        if viewer.is_trainee:
-            query = query.where(Participant.id.in_(viewer.participant_ids or {-1}))
-        rows = orm.execute(query).all()
+def studies(store: CatalogStore, viewer: Viewer) -> list[dict]:
     return [
-        {"id": i, "name": n, "description": d, "participants": p, "sessions": s} for i, n, d, p, s in rows
+        {
+            "id": r.id,
+            "name": r.name,
+            "description": r.description,
+            "participants": r.participants,
+            "sessions": r.sessions,
+        }
+        for r in store.studies(viewer)
     ]
 
 
-def _participant_rows(orm, viewer: Viewer, study_id: int) -> list[dict]:
-    query = (
-        select(
-            Participant.id,
-            Participant.code,
-            Participant.group_label,
-            Participant.synthetic,
-            func.count(Session.id),
-            func.max(Session.started_at),
-        )
-        .outerjoin(Session, Session.participant_id == Participant.id)
-        .where(Participant.study_id == study_id)
-        .group_by(Participant.id)
-        .order_by(Participant.code)
-    )
-    rows = [
-        {"id": i, "code": c, "group": g, "synthetic": bool(s), "sessions": n, "last_session_at": last}
-        for i, c, g, s, n, last in orm.execute(query).all()
-    ]
+def _participant_row(record: ParticipantRecord, viewer: Viewer) -> dict:
+    row = {
+        "id": record.id,
+        "code": record.code,
+        "group": record.group,
+        "synthetic": record.synthetic,
+        "sessions": record.sessions,
+        "last_session_at": record.last_session_at,
+    }
     if viewer.sees_accounts:
-        accounts = dict(
-            orm.execute(
-                select(Participant.id, User.username)
-                .join(User, Participant.user_id == User.id)
-                .where(Participant.study_id == study_id)
-            ).all()
-        )
-        for row in rows:
-            row["account"] = accounts.get(row["id"])
-    return rows
+        row["account"] = record.account
+    return row
 
 
-def study_overview(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
+def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
     """Participants, their latest score against the benchmark, and who needs attention."""
-    with catalog.session() as orm:
-        study = owned_study(orm, viewer, study_id, whole=True)
-        participants = _participant_rows(orm, viewer, study.id)
-        statuses = dict(
-            orm.execute(
-                select(Session.status, func.count(Session.id))
-                .join(Participant, Session.participant_id == Participant.id)
-                .where(Participant.study_id == study.id)
-                .group_by(Session.status)
-            ).all()
-        )
-        info = {"id": study.id, "name": study.name, "description": study.description}
+    study = store.study(study_id, viewer, whole=True)
+    statuses = store.sessions_by_status(study_id, viewer)
+    participants = [_participant_row(r, viewer) for r in store.study_participants(study_id, viewer)]
+    info = study.as_dict()
     overview = {"study": info, "sessions_by_status": statuses, "participants": participants}
     scored = sum(statuses.get(s, 0) for s in SCORABLE)
     if not scored:
@@ -164,30 +126,31 @@ def _attention_reasons(row: dict, trainees: pd.DataFrame | None) -> list[str]:
 
 
 def participant_progress(
-    catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, participant_id: int
+    store: CatalogStore, analyses: AnalysisCache, viewer: Viewer, participant_id: int
 ) -> dict:
     """Learning curve per benchmarked metric with the benchmark line, pass/fail history, retention."""
-    with catalog.session() as orm:
-        participant = owned_participant(orm, viewer, participant_id)
-        info = {
-            "id": participant.id,
-            "code": participant.code,
-            "group": participant.group_label,
-            "synthetic": participant.synthetic,
-            "study": {"id": participant.study.id, "name": participant.study.name},
-        }
-        sessions = orm.execute(
-            select(Session.uid, Task.name, Session.trial, Session.phase, Session.status, Session.started_at)
-            .join(Task, Session.task_id == Task.id)
-            .where(Session.participant_id == participant.id)
-            .order_by(Session.started_at, Session.id)
-        ).all()
-        study_id = participant.study_id
+    participant = store.participant(participant_id, viewer)
+    sessions = store.participant_sessions(participant_id, viewer)
+    study_id = participant.study_id
+    info = {
+        "id": participant.id,
+        "code": participant.code,
+        "group": participant.group,
+        "synthetic": participant.synthetic,
+        "study": {"id": study_id, "name": participant.study},
+    }
     progress = {
         "participant": info,
         "sessions": [
-            {"uid": u, "task": k, "trial": t, "phase": p, "status": s, "started_at": a}
-            for u, k, t, p, s, a in sessions
+            {
+                "uid": r.uid,
+                "task": r.task,
+                "trial": r.trial,
+                "phase": r.phase,
+                "status": r.status,
+                "started_at": r.started_at,
+            }
+            for r in sessions
         ],
         "curves": [],
         "benchmarks": [],
@@ -226,40 +189,28 @@ def participant_progress(
     return progress
 
 
-def session_detail(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, uid: str) -> dict:
+def session_detail(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer, uid: str) -> dict:
     """A session, its metrics against the expert band (quartiles of expert sessions), events and files."""
-    with catalog.session() as orm:
-        row = owned_session(orm, viewer, uid)
-        participant = row.participant
-        detail = {
-            "uid": row.uid,
-            "status": row.status,
-            "trial": row.trial,
-            "phase": row.phase,
-            "device": row.device,
-            "clock": row.clock,
-            "task": row.task.name,
-            "started_at": row.started_at,
-            "ended_at": row.ended_at,
-            "error": row.error,
-            "participant": {"id": participant.id, "code": participant.code, "group": participant.group_label},
-            "study": {"id": participant.study.id, "name": participant.study.name},
-            "files": [{"name": f.name, "bytes": f.bytes, "sha256": f.sha256} for f in row.files],
-        }
-        values = {
-            m.metric: m.value
-            for m in sorted(row.metrics, key=lambda m: m.id)
-            if m.registry_version == REGISTRY_VERSION
-        }
-        detail["annotations"] = [
-            {
-                "time_s": a.time_s,
-                "text": a.text,
-                "author": a.author if viewer.sees_accounts else None,
-            }
-            for a in orm.scalars(select(Annotation).where(Annotation.session_id == row.id))
-        ]
-        study_id, task_id = participant.study_id, row.task_id
+    facts = store.session_facts(uid, viewer)
+    row = facts.session
+    detail = {
+        "uid": row.uid,
+        "status": row.status,
+        "trial": row.trial,
+        "phase": row.phase,
+        "device": row.device,
+        "clock": facts.clock,
+        "task": row.task,
+        "started_at": row.started_at,
+        "ended_at": row.ended_at,
+        "error": facts.error,
+        "participant": {"id": facts.participant_id, "code": row.participant, "group": facts.group},
+        "study": {"id": facts.study_id, "name": row.study},
+        "files": [f.as_dict() for f in facts.files],
+        "annotations": [a.as_dict() for a in facts.annotations],
+    }
+    values = facts.metrics
+    study_id, task_id, catalog = facts.study_id, facts.task_id, store.catalog
     band = analyses.derived(
         study_id, f"expert-band-{task_id}", lambda: expert_band(catalog, study_id, task_id)
     )
@@ -279,11 +230,10 @@ def target_bite(task: str) -> float | None:
     return None if placement is None else float(placement["target_bite_m"])
 
 
-def validity_report(catalog: Catalog, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
+def validity_report(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer, study_id: int) -> dict:
     """The construct-validity table, per-participant values for box plots, and ROC curves."""
-    with catalog.session() as orm:
-        study = owned_study(orm, viewer, study_id, whole=True)
-        info = {"id": study.id, "name": study.name}
+    study = store.study(study_id, viewer, whole=True)
+    info = {"id": study.id, "name": study.name}
     analysis = analyses.get(study_id).analysis
     settings = analysis.settings
     table = summary_in_display_units(analysis)
@@ -350,26 +300,21 @@ def _shown(frame: pd.DataFrame) -> dict:
     }
 
 
-def session_list(catalog: Catalog, viewer: Viewer, study_id: int | None, limit: int, offset: int) -> dict:
+def session_list(store: CatalogStore, viewer: Viewer, study_id: int | None, limit: int, offset: int) -> dict:
     """Sessions the viewer may see, newest first."""
-    with catalog.session() as orm:
-        query = select(
-            Session.uid, Session.status, Session.trial, Session.phase, Session.started_at, Participant.code
-        )
-        query = query.join(Participant, Session.participant_id == Participant.id).where(
-            session_filter(viewer)
-        )
-        if study_id is not None:
-            query = query.where(Participant.study_id == study_id)
-        total = orm.scalar(select(func.count()).select_from(query.subquery()))
-        rows = orm.execute(
-            query.order_by(Session.started_at.desc(), Session.id.desc()).limit(limit).offset(offset)
-        )
-        items = [
-            {"uid": u, "status": s, "trial": t, "phase": p, "started_at": a, "participant": c}
-            for u, s, t, p, a, c in rows
-        ]
-    return {"total": int(total), "items": items}
+    total, rows = store.visible_sessions(viewer, study_id, limit, offset)
+    items = [
+        {
+            "uid": r.uid,
+            "status": r.status,
+            "trial": r.trial,
+            "phase": r.phase,
+            "started_at": r.started_at,
+            "participant": r.participant,
+        }
+        for r in rows
+    ]
+    return {"total": total, "items": items}
 
 
 SIGNAL_BANDS = {"force": ("peak_force", "experts' peak force, middle half")}
@@ -391,21 +336,17 @@ def signal_bands(rows: list[dict]) -> dict:
     return bands
 
 
-def recording_now(catalog: Catalog, ingest_root: Path) -> dict:
+def recording_now(store: CatalogStore, ingest_root: Path) -> dict:
     """Sessions recording now: local ones (catalog status running, newest first) and the remote
     stations streaming to the ingest (a samples journal under ``ingest_root/STATION/SESSION``)."""
-    with catalog.session() as orm:
-        running = orm.execute(
-            select(Session.uid, Participant.code, Session.started_at)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(Session.status == SessionStatus.RUNNING)
-            .order_by(Session.started_at.desc())
-        ).all()
+    running: list[SessionRecord] = store.running_sessions()
     stations = []
     if ingest_root.is_dir():
         for journal in sorted(ingest_root.glob(f"*/*/{SAMPLES_JOURNAL}")):
             stations.append({"station": journal.parent.parent.name, "session": journal.parent.name})
     return {
-        "sessions": [{"uid": u, "participant": c, "started_at": a} for u, c, a in running],
+        "sessions": [
+            {"uid": r.uid, "participant": r.participant, "started_at": r.started_at} for r in running
+        ],
         "stations": stations,
     }

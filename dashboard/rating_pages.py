@@ -17,17 +17,15 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
-from sqlalchemy import select
 
-from dashboard import access
-from dashboard.auth import STAFF, Viewer, require
-from dashboard.errors import DashboardError, not_found, status_of
+from dashboard.auth import Viewer, require
+from dashboard.errors import DashboardError, not_found, said, status_of
 from dashboard.pages import render
 from dashboard.signals import replay_video
 from metrics.instruments import INSTRUMENTS, instrument
 from metrics.streams import MetricsError
-from sessions.models import Participant, Rating, Session, Task
 from sessions.ratings import add_rating, session_ratings
+from sessions.store import STAFF
 from sim.errors import VascsimError
 
 router = APIRouter(include_in_schema=False)
@@ -42,25 +40,10 @@ def blind_token(request: Request, uid: str) -> str:
 def _study_sessions(request: Request, viewer: Viewer, study_id: int) -> list[dict]:
     """The study's sessions in their blinded order (by token), each with its task and whether this
     rater has rated it."""
-    with request.app.state.catalog.session() as orm:
-        access.owned_study(orm, viewer, study_id, whole=True)
-        rows = orm.execute(
-            select(Session.uid, Task.name)
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Task, Session.task_id == Task.id)
-            .where(Participant.study_id == study_id)
-        ).all()
-        rated = set(
-            orm.scalars(
-                select(Session.uid)
-                .join(Rating, Rating.session_id == Session.id)
-                .join(Participant, Session.participant_id == Participant.id)
-                .where(Participant.study_id == study_id, Rating.rater == viewer.username)
-            )
-        )
+    rows = request.app.state.store.rating_queue(study_id, viewer, viewer.username)
     listed = [
-        {"token": blind_token(request, uid), "task": task, "rated": uid in rated, "uid": uid}
-        for uid, task in rows
+        {"token": blind_token(request, uid), "task": task, "rated": rated, "uid": uid}
+        for uid, task, rated in rows
     ]
     return sorted(listed, key=lambda row: row["token"])
 
@@ -69,13 +52,7 @@ def _unblind(request: Request, viewer: Viewer, token: str) -> tuple[str, int, st
     """(uid, study id, task) of a blinded token; not found for anything else."""
     if len(token) != 24 or not all(c in "0123456789abcdef" for c in token):
         raise not_found("session")
-    with request.app.state.catalog.session() as orm:
-        rows = orm.execute(
-            select(Session.uid, Participant.study_id, Task.name)
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Task, Session.task_id == Task.id)
-            .where(access.session_filter(viewer))
-        ).all()
+    rows = request.app.state.store.visible_session_keys(viewer)
     for uid, study_id, task in rows:
         if hmac.compare_digest(blind_token(request, uid), token):
             return uid, study_id, task
@@ -110,16 +87,14 @@ def _blinded(request: Request, viewer: Viewer, token: str) -> _Target:
 
 
 def _open(request: Request, viewer: Viewer, uid: str) -> _Target:
-    with request.app.state.catalog.session() as orm:
-        row = access.owned_session(orm, viewer, uid)
-        participant = orm.get(Participant, row.participant_id)
-        task = orm.get(Task, row.task_id).name
-        who = {
-            "code": participant.code,
-            "group": participant.group_label,
-            "trial": row.trial,
-            "id": participant.id,
-        }
+    facts = request.app.state.store.session_facts(uid, viewer)
+    task = facts.session.task
+    who = {
+        "code": facts.session.participant,
+        "group": facts.group,
+        "trial": facts.session.trial,
+        "id": facts.participant_id,
+    }
     has_video = replay_video(request.app.state.settings.home, uid) is not None
     video = f"/api/sessions/{uid}/video" if has_video else None
     return _Target(uid, False, f"/sessions/{uid}/rate", f"/sessions/{uid}", task, video, who)
@@ -146,7 +121,7 @@ def _form_page(
         instrument=INSTRUMENTS[instrument_name],
         instruments=list(INSTRUMENTS),
         video=target.video,
-        message=None if problem is None else str(problem),
+        message=None if problem is None else said(problem),
         mine=[r for r in mine if r["instrument"] == instrument_name],
         who=target.who,
     )

@@ -90,7 +90,8 @@ def sessions_of_task(table: pd.DataFrame, task: str | None) -> pd.DataFrame:
         if len(tasks) > 1:
             raise MetricsError(
                 f"the study has sessions of {len(tasks)} tasks ({', '.join(tasks)}); analyse one at a time "
-                "(the analysis setting task, or --task)"
+                "(choose the analysis's task)",
+                remedy=("choose-task", ", ".join(tasks)),
             )
         return table
     if task not in tasks:

@@ -59,7 +59,7 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
         )
     if header.get("status") == "recording":
         if (path / SAMPLES_JOURNAL).exists():
-            raise RecorderError(f"{path} was not closed (a crash?); run `vascsim recover {path}` first")
+            raise RecorderError(f"{path} was not closed (a crash?)", remedy=("recover", str(path)))
         raise RecorderError(f"{path} is still marked as recording but has no journal")
     if version == 1:
         samples = upgraded_samples(

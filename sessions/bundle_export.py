@@ -102,8 +102,9 @@ def export_study(
             for row in sorted(person.sessions, key=lambda s: (s.trial, s.uid)):
                 if row.status == SessionStatus.RUNNING:
                     raise CatalogError(
-                        f"session {row.uid} of study {study_name!r} is still running; finish it or "
-                        f"`vascsim recover {row.uid}` before exporting"
+                        f"session {row.uid} of study {study_name!r} is still running; finish or "
+                        "recover it before exporting",
+                        remedy=("recover", row.uid),
                     )
                 manifest["tasks"][row.task.name] = {
                     "scenario": row.task.scenario,

@@ -53,11 +53,17 @@ class NotFound(CatalogError):
     ("study", "session", ...), so a front-end can say where to list them."""
 
     def __init__(
-        self, kind: str, name: object, known: list[str] | None = None, where: str = "", noun: str = ""
+        self,
+        kind: str,
+        name: object,
+        known: list[str] | None = None,
+        where: str = "",
+        noun: str = "",
+        message: str = "",
     ) -> None:
         nearest = difflib.get_close_matches(str(name), known or [], n=1, cutoff=0.6)
         hint = f"; did you mean {nearest[0]!r}?" if nearest else ""
-        super().__init__(f"no {noun or kind} {name!r}{where}{hint}")
+        super().__init__(message or f"no {noun or kind} {name!r}{where}{hint}")
         self.kind = kind
 
 

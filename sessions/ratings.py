@@ -77,7 +77,8 @@ def store_ratings(catalog: Catalog, ratings: list[SessionRating], replace: bool 
                 if not replace:
                     raise AlreadyExists(
                         f"{rating.rater!r} already rated session {rating.session_uid} with "
-                        f"{rating.instrument.name}; pass --replace to replace that rating"
+                        f"{rating.instrument.name}",
+                        remedy=("replace-rating", rating.session_uid),
                     )
                 orm.execute(delete(Rating).where(mine))
             rows = {**rating.scores, TOTAL: rating.total}

@@ -55,7 +55,7 @@ def replay_inputs(
 ):
     """(session, tissue model, expert sessions) as recorder sessions, checked for a replay."""
     if versus and versus_group:
-        raise CatalogError("give either --vs SESSION or --vs-group GROUP, not both")
+        raise CatalogError("compare with one session or one group, not both")
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         _replayable(row)

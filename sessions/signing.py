@@ -57,7 +57,7 @@ def _private_key(path: Path):
             f"signing key {path} cannot be read as an unencrypted PEM private key ({error})"
         ) from None
     if not isinstance(key, Ed25519PrivateKey):
-        raise CatalogError(f"signing key {path} is not an Ed25519 key; make one with `vascsim keys new`")
+        raise CatalogError(f"signing key {path} is not an Ed25519 key", remedy=("new-key", str(path)))
     return key
 
 

@@ -7,7 +7,15 @@ which always names the input that was wrong. Higher packages subclass it.
 
 
 class VascsimError(Exception):
-    """Base class of every error vascsim raises on purpose."""
+    """Base class of every error vascsim raises on purpose.
+
+    ``remedy`` names what would put it right as (action, subject), e.g. ("recover", "S-1a2b"),
+    ("score", "course"): the message itself carries no front-end's advice, and each front-end says
+    the remedy in its own words (the CLI as the command to run)."""
+
+    def __init__(self, *args: object, remedy: tuple[str, str] | None = None) -> None:
+        super().__init__(*args)
+        self.remedy = remedy
 
 
 class MeshError(VascsimError, ValueError):

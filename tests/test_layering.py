@@ -1,6 +1,7 @@
 """The package layering and the web-free core, checked on the real import graph."""
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -53,3 +54,47 @@ def test_each_command_is_registered_where_its_module_says():
     for name, command in main.commands.items():
         expected = "dashboard.cli" if name == "serve" else "sessions.cli."
         assert command.callback.__module__.startswith(expected), name
+
+
+FRONT_ENDS = ("sessions/cli/", "dashboard/")
+CLI_ADVICE = re.compile(r"`vascsim|(^|\s)--[a-z]")
+
+
+def raised_messages(path: Path):
+    """(line, the string parts of the message) of every ``raise Error(...)`` in a module."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call):
+            parts = [
+                c.value
+                for argument in node.exc.args
+                for c in ast.walk(argument)
+                if isinstance(c, ast.Constant) and isinstance(c.value, str)
+            ]
+            yield node.lineno, "".join(parts)
+
+
+def test_library_errors_carry_no_command_line_advice():
+    """A library's message names what is wrong; what to run is the CLI's to say (from the error's
+    ``remedy``), so the dashboard never tells a supervisor to pass a flag."""
+    advising = [
+        f"{path.relative_to(ROOT)}:{line}"
+        for package in ORDER
+        for path in (ROOT / package).rglob("*.py")
+        if not str(path.relative_to(ROOT)).startswith(FRONT_ENDS)
+        for line, message in raised_messages(path)
+        if CLI_ADVICE.search(message)
+    ]
+    assert advising == []
+
+
+def test_each_front_end_says_a_remedy_in_its_own_words():
+    from dashboard.errors import said
+    from sessions.catalog import AlreadyExists, WrongState
+    from sessions.cli.base import remedy_in_words
+
+    rated = AlreadyExists("'sup' already rated session S-1 with GRS", remedy=("replace-rating", "S-1"))
+    assert remedy_in_words(rated) == "; pass --replace to replace that rating"
+    assert "Replace my earlier rating" in said(rated) and "--replace" not in said(rated)
+    unscored = WrongState("study 'course' has no scored sessions", remedy=("score", "course"))
+    assert remedy_in_words(unscored) == "; run `vascsim score --study course` first"
+    assert said(WrongState("plain")) == "plain" and remedy_in_words(WrongState("plain")) == ""

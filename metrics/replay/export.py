@@ -229,7 +229,8 @@ def export_replay(
         expert_scene = SceneReplay(medoid, tissue, reference.medoid, settings.fps)
     elif settings.mode == "side-by-side":
         raise MetricsError(
-            "side-by-side needs an expert session to show beside this one (--vs or --vs-group)"
+            "side-by-side needs an expert session or group to show beside this one",
+            remedy=("choose-versus", ""),
         )
     bands = {} if reference is None else {name: reference.phase_band(name) for name in ("force", "tip_speed")}
     timings["re-simulation"] = time.perf_counter() - started

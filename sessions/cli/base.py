@@ -30,6 +30,25 @@ LISTED_BY = {
 only what is missing)."""
 
 
+REMEDIES = {
+    "recover": "run `vascsim recover {}` first",
+    "score": "run `vascsim score --study {}` first",
+    "new-key": "make one with `vascsim keys new`",
+    "replace-rating": "pass --replace to replace that rating",
+    "choose-task": "pass --task, one of {}",
+    "choose-versus": "pass --vs SESSION or --vs-group GROUP",
+}
+"""A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) as the command that applies it."""
+
+
+def remedy_in_words(error: VascsimError) -> str:
+    """ "; " and the CLI's words for the error's remedy, or "" when it names none."""
+    remedy = getattr(error, "remedy", None)
+    if remedy is None or remedy[0] not in REMEDIES:
+        return ""
+    return "; " + REMEDIES[remedy[0]].format(remedy[1])
+
+
 def user_errors(command: Callable[..., Any]) -> Callable[..., Any]:
     """Turn vascsim errors into a one-line message and exit status 1 (no traceback)."""
 
@@ -41,7 +60,8 @@ def user_errors(command: Callable[..., Any]) -> Callable[..., Any]:
             from sessions.catalog import NotFound
 
             hint = LISTED_BY.get(getattr(error, "kind", None)) if isinstance(error, NotFound) else None
-            click.echo(f"vascsim: error: {error}" + (f" (list them with `{hint}`)" if hint else ""), err=True)
+            said = f"vascsim: error: {error}" + (f" (list them with `{hint}`)" if hint else "")
+            click.echo(said + remedy_in_words(error), err=True)
             sys.exit(1)
 
     return wrapper
@@ -69,6 +89,14 @@ def open_catalog():
     catalog = Catalog(database_url(home))
     click.get_current_context().call_on_close(catalog.close)  # no pooled connection outlives the command
     return catalog, home
+
+
+def open_store():
+    """(the catalog's store, the data home): what a command reads and changes goes through the store."""
+    from sessions.store import CatalogStore
+
+    catalog, home = open_catalog()
+    return CatalogStore(catalog), home
 
 
 def progress_bar(transient: bool = False):

@@ -51,6 +51,7 @@ def demo(small: bool, as_json: bool) -> None:
     """
     from metrics.report import compact_caption, compact_summary, composite_summary, summary_table
     from sessions.demo import DEMO_STUDY, DemoSize, run_demo
+    from sessions.store import CatalogStore
 
     catalog, home = open_catalog()
     size = DemoSize(2, 2, 3, 3, True) if small else DemoSize()
@@ -104,8 +105,7 @@ def demo(small: bool, as_json: bool) -> None:
             f"replay a trainee against the experts: vascsim replay {first_trainee.iloc[0]} "
             "--vs-group experts --mode side-by-side"
         )
-    with catalog.session() as orm:
-        study_id = catalog.study(orm, DEMO_STUDY).id
+    study_id = CatalogStore(catalog).study_named(DEMO_STUDY).id
     click.echo(
         "open the results in the dashboard: vascsim users add NAME --role admin; vascsim serve; "
         f"then http://127.0.0.1:8000/studies/{study_id}"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from sessions.cli.base import open_catalog, print_json, user_errors
+from sessions.cli.base import open_catalog, open_store, print_json, user_errors
 from sessions.config import LRS_VARIABLES, lrs_setting
 
 
@@ -61,11 +61,10 @@ BASE = click.option(
 def configure(study, endpoint, key, home_page, activity_base, auto) -> None:
     """Remember the study's LRS (the secret is not stored: VASCSIM_LRS_SECRET at push time)."""
     from sessions.lrs import StudyLrs
-    from sessions.lrs import configure as store
+    from sessions.lrs import configure as remember
 
-    catalog, home = open_catalog()
-    with catalog.session() as orm:
-        catalog.study(orm, study)
+    store, home = open_store()
+    store.study_named(study)  # an unknown study is refused before anything is remembered
     settings = StudyLrs(
         _required(endpoint or lrs_setting("endpoint"), "endpoint", "--endpoint"),
         _required(key or lrs_setting("key"), "key", "--key"),
@@ -73,7 +72,7 @@ def configure(study, endpoint, key, home_page, activity_base, auto) -> None:
         activity_base,
         auto,
     )
-    store(home, study, settings)
+    remember(home, study, settings)
     click.echo(
         f"study {study}: statements go to {settings.endpoint} as {settings.key}"
         + ("; pushed whenever a session is scored" if auto else "; pushed by `vascsim lrs push`")
@@ -133,22 +132,13 @@ def push_after_scoring(catalog, home: Path, uids: Iterable[str]) -> None:
     """For each study of the sessions just scored that is set to push automatically: push, and say
     what happened in one line (an unreachable LRS is not an error of the scoring: its statements
     stay spooled for the next push)."""
-    from sqlalchemy import select
-
     from sessions.lrs import LrsError, configured, push_study
-    from sessions.models import Participant, Session, Study
+    from sessions.store import CatalogStore
 
     settings = configured(home)
     if not any(s.auto for s in settings.values()):
         return
-    with catalog.session() as orm:
-        studies = orm.scalars(
-            select(Study.name)
-            .join(Participant, Participant.study_id == Study.id)
-            .join(Session, Session.participant_id == Participant.id)
-            .where(Session.uid.in_(list(uids)))
-            .distinct()
-        ).all()
+    studies = CatalogStore(catalog).studies_of_sessions(list(uids))
     for study in sorted(studies):
         if study not in settings or not settings[study].auto:
             continue

@@ -7,6 +7,7 @@ import pandas as pd
 
 from sessions.cli.base import (
     open_catalog,
+    open_store,
     print_frame,
     print_json,
     user_errors,
@@ -30,10 +31,8 @@ def participants() -> None:
 @user_errors
 def participants_add(code: str, study: str, level: str, group_label: str, years, handedness: str) -> None:
     """Add participant CODE (a pseudonym; never a name) to a study."""
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        found = catalog.study(orm, study)
-        catalog.add_participant(orm, found, code, level, group_label, years, handedness)
+    store, _ = open_store()
+    store.add_participant(study, code, level, group_label, years, handedness)
     click.echo(f"participant {code} added to {study}")
 
 
@@ -44,21 +43,9 @@ def participants_add(code: str, study: str, level: str, group_label: str, years,
 def participants_list(study: str, as_json: bool) -> None:
     """List a study's participants."""
 
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        found = catalog.study(orm, study)
-        rows = [
-            {
-                "code": p.code,
-                "level": p.level,
-                "group": p.group_label,
-                "years": p.years_experience,
-                "handedness": p.handedness,
-                "synthetic": p.synthetic,
-                "sessions": len(p.sessions),
-            }
-            for p in sorted(found.participants, key=lambda p: p.code)
-        ]
+    store, _ = open_store()
+    columns = ("code", "level", "group", "years", "handedness", "synthetic", "sessions")
+    rows = [{c: getattr(p, c) for c in columns} for p in store.participants(study)]
     if as_json:
         print_json(rows)
         return

@@ -9,7 +9,7 @@ import pandas as pd
 
 from metrics.units import shown
 from sessions.cli.base import (
-    open_catalog,
+    open_store,
     print_frame,
     print_json,
     user_errors,
@@ -31,10 +31,10 @@ def sessions() -> None:
 def sessions_list(study, task, status, as_json) -> None:
     """List sessions (newest last), with the task each ran (trials count per task)."""
     from sessions.analysis import metric_versions
-    from sessions.store import CatalogStore
 
-    catalog, _ = open_catalog()
-    found = CatalogStore(catalog).sessions(study, task, status)
+    store, _ = open_store()
+    catalog = store.catalog
+    found = store.sessions(study, task, status)
     versions = metric_versions(catalog, [r.id for r in found])
     columns = ("session", "study", "participant", "task", "trial", "phase", "device", "status")
     rows = [
@@ -72,26 +72,27 @@ def sessions_list(study, task, status, as_json) -> None:
 def sessions_show(uid: str, as_json: bool) -> None:
     """Show one session: who, what, when, files with checksums, metrics."""
 
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        row = catalog.recorded_session(orm, uid)
-        data = {
-            "session": row.uid,
-            "study": row.participant.study.name,
-            "participant": row.participant.code,
-            "synthetic": row.participant.synthetic,
-            "task": row.task.name,
-            "device": row.device,
-            "clock": row.clock,
-            "trial": row.trial,
-            "phase": row.phase,
-            "status": row.status,
-            "started": row.started_at.isoformat(),
-            "ended": row.ended_at.isoformat() if row.ended_at else None,
-            "directory": row.directory,
-            "error": row.error,
-            "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in row.files],
-        }
+    store, _ = open_store()
+    catalog = store.catalog
+    facts = store.session_facts(uid)
+    row = facts.session
+    data = {
+        "session": row.uid,
+        "study": row.study,
+        "participant": row.participant,
+        "synthetic": facts.synthetic,
+        "task": row.task,
+        "device": row.device,
+        "clock": facts.clock,
+        "trial": row.trial,
+        "phase": row.phase,
+        "status": row.status,
+        "started": row.started_at.isoformat(),
+        "ended": row.ended_at.isoformat() if row.ended_at else None,
+        "directory": facts.directory,
+        "error": facts.error,
+        "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in facts.files],
+    }
     from metrics.feedback import metric_groups, session_feedback
     from sessions.review import session_against_experts, session_stitches
 
@@ -186,13 +187,11 @@ def sessions_delete(uid: str, yes: bool) -> None:
     """Delete a session's catalog rows and its stream files."""
     import shutil
 
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        row = catalog.recorded_session(orm, uid)
-        if not yes:
-            click.confirm(f"delete session {uid} and its files?", abort=True)
-        directory = row.directory
-        orm.delete(row)
+    store, _ = open_store()
+    store.session_facts(uid)  # an unknown session is refused before asking
+    if not yes:
+        click.confirm(f"delete session {uid} and its files?", abort=True)
+    directory = store.delete_session(uid)
     if directory and is_session_dir(directory):
         shutil.rmtree(directory, ignore_errors=True)
     click.echo(f"session {uid} deleted")

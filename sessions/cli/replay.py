@@ -64,8 +64,11 @@ def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json)
     """
     from metrics.replay.export import ReplaySettings, export_replay
     from metrics.replay.video import check_video_path
+    from sessions.catalog import CatalogError
     from sessions.replaying import replay_inputs
 
+    if versus and versus_group:
+        raise CatalogError("give either --vs SESSION or --vs-group GROUP, not both")
     catalog, home = open_catalog()
     settings = ReplaySettings(fps=fps, size=size, mode=mode)
     target = (

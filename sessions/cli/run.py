@@ -49,6 +49,7 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     marks the session 'failed'; after a crash, `vascsim recover` restores it.
     """
     from sessions.runner import SessionPlan, run_session
+    from sessions.store import CatalogStore
     from sessions.synthetic import pass_parameters
 
     catalog, home = open_catalog()
@@ -59,9 +60,8 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
     with stderr_console().status(f"running {participant} on {device}..."):
         uid = run_session(catalog, home, plan, parameters, duration)
-    with catalog.session() as orm:
-        trial = catalog.recorded_session(orm, uid).trial
-    values = _session_metrics(catalog, uid)
+    facts = CatalogStore(catalog).session_facts(uid)
+    trial, values = facts.session.trial, facts.metrics
     if as_json:
         print_json({"session": uid, "trial": trial, "metrics": values})
     else:
@@ -70,16 +70,3 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
             unit = REGISTRY[name].unit if name in REGISTRY else ""
             click.echo(f"  {name:28s} {shown(value, unit):>14s}")
     push_after_scoring(catalog, home, [uid])
-
-
-def _session_metrics(catalog, uid: str) -> dict:
-
-    from metrics import REGISTRY_VERSION
-
-    with catalog.session() as orm:
-        row = catalog.recorded_session(orm, uid)
-        return {
-            m.metric: m.value
-            for m in sorted(row.metrics, key=lambda m: m.id)
-            if m.registry_version == REGISTRY_VERSION
-        }

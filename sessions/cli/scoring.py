@@ -15,7 +15,6 @@ from sessions.cli.base import (
     user_errors,
 )
 from sessions.cli.lrs import push_after_scoring
-from sessions.status import SCORABLE
 
 SCHEDULER = click.option(
     "--scheduler",
@@ -37,26 +36,10 @@ WORKERS = click.option(
 
 
 def _study_sessions(catalog, study: str, only_unscored: bool = False) -> list[str]:
-    """The study's scorable sessions (simulator and bench; imported JIGSAWS trials keep their own
-    metrics); ``only_unscored``: those without results under this registry version."""
-    from sqlalchemy import select
+    """See :meth:`sessions.store.CatalogStore.scorable_sessions`."""
+    from sessions.store import CatalogStore
 
-    from metrics.registry import REGISTRY_VERSION
-    from sessions.models import MetricResult, Participant, Session, Study
-
-    with catalog.session() as orm:
-        catalog.study(orm, study)
-        query = (
-            select(Session.uid)
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Study, Participant.study_id == Study.id)
-            .where(Study.name == study, Session.status.in_(SCORABLE), Session.device != "jigsaws")
-            .order_by(Session.id)
-        )
-        if only_unscored:
-            current = select(MetricResult.session_id).where(MetricResult.registry_version == REGISTRY_VERSION)
-            query = query.where(Session.id.not_in(current))
-        return list(orm.scalars(query))
+    return CatalogStore(catalog).scorable_sessions(study, only_unscored)
 
 
 def _score_with_progress(catalog, home, targets, scheduler, workers, data_root=None) -> dict:

@@ -8,6 +8,7 @@ import pandas as pd
 from sessions.cli.base import (
     analysis_options,
     open_catalog,
+    open_store,
     print_frame,
     print_json,
     user_errors,
@@ -25,22 +26,17 @@ def studies() -> None:
 def studies_list(as_json: bool) -> None:
     """List studies with their participant and session counts."""
 
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        from sqlalchemy import select
-
-        from sessions.models import Study
-
-        rows = [
-            {
-                "study": s.name,
-                "participants": len(s.participants),
-                "sessions": sum(len(p.sessions) for p in s.participants),
-                "synthetic": any(p.synthetic for p in s.participants),
-                "description": s.description,
-            }
-            for s in orm.scalars(select(Study).order_by(Study.name))
-        ]
+    store, _ = open_store()
+    rows = [
+        {
+            "study": s.name,
+            "participants": s.participants,
+            "sessions": s.sessions,
+            "synthetic": s.synthetic,
+            "description": s.description,
+        }
+        for s in store.studies()
+    ]
     if as_json:
         print_json(rows)
         return
@@ -56,17 +52,8 @@ def studies_list(as_json: bool) -> None:
 @user_errors
 def studies_add(name: str, description: str) -> None:
     """Create a study (or course) called NAME."""
-    from sessions.catalog import CatalogError
-
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        from sqlalchemy import select
-
-        from sessions.models import Study
-
-        if orm.scalar(select(Study).where(Study.name == name)) is not None:
-            raise CatalogError(f"study {name!r} already exists")
-        catalog.study(orm, name, create=True, description=description)
+    store, _ = open_store()
+    store.create_study(name, description)
     click.echo(f"study {name} created")
 
 

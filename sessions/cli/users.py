@@ -69,10 +69,7 @@ def users_list(as_json: bool) -> None:
 @user_errors
 def users_passwd(username: str, password_stdin: bool) -> None:
     """Set a new password (signs the account out everywhere)."""
-    from sessions.accounts import set_password, user_named
-
     password = sys.stdin.readline().rstrip("\n") if password_stdin else _password(None)
-    catalog, _ = open_catalog()
-    with catalog.session() as orm:
-        set_password(orm, user_named(orm, username), password)
+    store = CatalogStore(open_catalog()[0])
+    store.change_user(store.user_named(username).id, password=password)
     click.echo(f"password of {username!r} changed")

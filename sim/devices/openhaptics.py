@@ -27,8 +27,8 @@ class OpenHapticsDevice:
         except ImportError as error:
             raise DeviceError(
                 "the OpenHaptics driver needs the pyOpenHaptics package and 3D Systems' OpenHaptics runtime "
-                f"(libHD) with the Touch device driver; not found here ({error}). Use --device scripted or "
-                "spacemouse, or install OpenHaptics from 3D Systems"
+                f"(libHD) with the Touch device driver; not found here ({error}). Use the scripted or "
+                "SpaceMouse device, or install OpenHaptics from 3D Systems"
             ) from error
         self._hd = hd
         try:
