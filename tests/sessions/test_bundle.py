@@ -1,7 +1,9 @@
 """Study bundles: export then import reproduces identical metrics; bad bundles change nothing."""
 
 import json
+import os
 import re
+import uuid
 import zipfile
 from pathlib import Path
 
@@ -24,15 +26,79 @@ def invoke(*args):
     return CliRunner().invoke(main, list(args), catch_exceptions=False)
 
 
-@pytest.fixture
-def small_study(home):
-    """A study of two participants with three scored sessions, through the real CLI."""
+def _build_small_study() -> None:
+    """A study of two participants with three scored sessions, through the real CLI (on the catalog
+    and home the environment names)."""
     invoke("studies", "add", "course")
     for code, level, skill in (("E1", "expert", "1.0"), ("T1", "trainee", "0.2")):
         assert invoke("participants", "add", code, "--study", "course", "--level", level).exit_code == 0
         for _ in range(1 if code == "E1" else 2):
             result = invoke("run", "--study", "course", "--participant", code, "--skill", skill)
             assert result.exit_code == 0, result.output
+
+
+@pytest.fixture(scope="module")
+def small_study_templates(tmp_path_factory):
+    """The small study built once per catalog kind for this module: kind -> (home, catalog URL)."""
+    built: dict[str, tuple[Path, str]] = {}
+
+    def template(kind: str, url_like: str) -> tuple[Path, str]:
+        if kind not in built:
+            home = tmp_path_factory.mktemp(f"small-study-{kind}")
+            if kind == "sqlite":
+                url = f"sqlite:///{home / 'template.sqlite'}"
+            else:
+                url = f"{url_like.rsplit('/', 1)[0]}/vascsim_tpl_{uuid.uuid4().hex[:12]}"
+                _postgres(url, f'CREATE DATABASE "{_database(url)}"')
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setenv("VASCSIM_HOME", str(home))
+                patch.setenv("VASCSIM_DATABASE_URL", url)
+                _build_small_study()
+            built[kind] = (home, url)
+        return built[kind]
+
+    yield template
+    for kind, (_, url) in built.items():
+        if kind == "postgresql":
+            _postgres(url, f'DROP DATABASE IF EXISTS "{_database(url)}" WITH (FORCE)')
+
+
+def _database(url: str) -> str:
+    return url.rsplit("/", 1)[1]
+
+
+def _postgres(url: str, statement: str) -> None:
+    import psycopg
+
+    admin_url = os.environ.get("VASCSIM_TEST_POSTGRES", "postgresql://postgres@127.0.0.1:5432/test")
+    with psycopg.connect(admin_url, autocommit=True) as admin:
+        admin.execute(statement)
+
+
+@pytest.fixture
+def small_study(home, catalog_url, small_study_templates):
+    """The small study (two participants, three scored sessions, built through the real CLI once per
+    catalog kind), copied into this test's home and catalog: a test changes only its copy."""
+    import shutil
+
+    from sqlalchemy import create_engine, text
+
+    kind = "sqlite" if catalog_url.startswith("sqlite") else "postgresql"
+    template_home, template_url = small_study_templates(kind, catalog_url)
+    shutil.copytree(template_home, home, dirs_exist_ok=True, ignore=shutil.ignore_patterns("template.sqlite"))
+    if kind == "sqlite":
+        shutil.copyfile(template_home / "template.sqlite", catalog_url.removeprefix("sqlite:///"))
+    else:  # the test's empty database replaced by a copy of the template's
+        name = _database(catalog_url)
+        _postgres(catalog_url, f'DROP DATABASE "{name}" WITH (FORCE)')
+        _postgres(catalog_url, f'CREATE DATABASE "{name}" TEMPLATE "{_database(template_url)}"')
+    engine = create_engine(catalog_url)
+    with engine.begin() as connection:
+        connection.execute(
+            text("UPDATE sessions SET directory = replace(directory, :old, :new)"),
+            {"old": str(template_home), "new": str(home)},
+        )
+    engine.dispose()
     return home
 
 
