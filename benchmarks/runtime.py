@@ -11,7 +11,8 @@ Run:  .venv/bin/python benchmarks/runtime.py [--seconds 60] [--no-render] [--siz
    with exact forces for its triangle), for first touches and exits through the far wall.
 4. The same artery in on-demand mode (columns solved when needed, prefetched by
    the graphics layer near the needle tip).
-For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms.
+For the haptic layer: rate, period p50/p99/max, periods over 2 and 3 ms, and the compute of each
+tick's force path (compiled) beside the whole step's.
 
 ``--trace`` (root): the haptic core is also traced with ftrace during each real-time run, and
 every haptic period over 3 ms is put down to what the kernel saw (``benchmarks/kernel_trace.py``):
@@ -212,6 +213,14 @@ def report(name: str, simulation: Simulation, result, stolen: list[float], trace
         f"[{name}]   haptic: rate={h.rate_hz:.1f} Hz period p50={1e3 * h.period_p50:.3f} ms "
         f"p99={1e3 * h.period_p99:.3f} ms max={1e3 * h.period_max:.3f} ms >2ms={h.periods_over_2ms} "
         f">3ms={h.periods_over_3ms} compute p99={1e6 * h.compute_p99:.0f} us",
+        flush=True,
+    )
+    path = result.telemetry["haptic force path"]
+    print(
+        f"[{name}]   haptic tick's force path (holder publish, force at the delay, safety, log; "
+        f"compiled): p50={1e6 * path.compute_p50:.1f} us p99={1e6 * path.compute_p99:.1f} us "
+        f"max={1e6 * path.compute_max:.1f} us; the whole step (device read and write, FEM snapshot, "
+        f"recording too): p50={1e6 * h.compute_p50:.0f} us p99={1e6 * h.compute_p99:.0f} us",
         flush=True,
     )
     for layer in ("fem", "graphics", "display"):

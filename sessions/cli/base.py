@@ -37,6 +37,7 @@ REMEDIES = {
     "replace-rating": "pass --replace to replace that rating",
     "choose-task": "pass --task, one of {}",
     "choose-versus": "pass --vs SESSION or --vs-group GROUP",
+    "choose-device": "pass --device {}",
 }
 """A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) as the command that applies it."""
 

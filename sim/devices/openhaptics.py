@@ -28,7 +28,8 @@ class OpenHapticsDevice:
             raise DeviceError(
                 "the OpenHaptics driver needs the pyOpenHaptics package and 3D Systems' OpenHaptics runtime "
                 f"(libHD) with the Touch device driver; not found here ({error}). Use the scripted or "
-                "SpaceMouse device, or install OpenHaptics from 3D Systems"
+                "SpaceMouse device, or install OpenHaptics from 3D Systems",
+                remedy=("choose-device", "scripted or spacemouse"),
             ) from error
         self._hd = hd
         try:

@@ -29,6 +29,7 @@ from collections.abc import Callable
 import numpy as np
 
 from sim.runtime.cpu import IdlePolling
+from sim.runtime.force_path import CompiledForcePath
 from sim.runtime.osrt import (
     PR_SET_PDEATHSIG,
     leave_last_core_to_haptics,
@@ -57,6 +58,10 @@ from sim.runtime.simulation import LAYERS, HapticLog, LayerProcessError, RunResu
 from sim.runtime.telemetry import LoopTelemetry
 
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
+FORCE_PATH = "haptic force path"
+"""The telemetry of each haptic tick's force path (holder publish, force interpolation, safety filter,
+log: one compiled call, sim/runtime/force_path.py), within the whole haptic step's; the step also
+reads the device, writes its force and records the sample."""
 LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
 """SCHED_FIFO priorities of the FEM and graphics threads (the haptic process has 50). They sleep
 most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
@@ -76,7 +81,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         SharedHolder.doubles()
         + SharedForceHistory.doubles()
         + SharedHapticLog.doubles(capacity)
-        + SharedTelemetry.doubles(capacity)
+        + 2 * SharedTelemetry.doubles(capacity)  # the whole haptic step, and its force path
         + SharedEvents.doubles()
         + ControlBlock.doubles()
         + SharedGraphics.doubles()
@@ -88,6 +93,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     shared_log = SharedHapticLog(arena, capacity)
     simulation.haptic_log = shared_log
     telemetry = SharedTelemetry(arena, capacity)
+    force_path_telemetry = SharedTelemetry(arena, capacity)
     events = SharedEvents(arena)
     control = ControlBlock(arena)
     simulation.graphics = SharedGraphics(arena)
@@ -103,7 +109,8 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         status = 0
         try:
             _stop_with_parent(parent, control)
-            _haptic_process(simulation, duration, control, telemetry, events, errors_write, pin_cpus)
+            channels = (telemetry, force_path_telemetry)
+            _haptic_process(simulation, duration, control, channels, events, errors_write, pin_cpus)
         except BaseException as error:  # outside the loop's own report (set-up): the parent reads it
             status = 1
             _report(errors_write, "haptic", error)
@@ -132,6 +139,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         simulation.events.append(RuntimeEvent("layer_failed", 0.0, "display", failed))
     if display_pid is not None:
         simulation.telemetry["display"] = _as_layer_telemetry("display", simulation, display_telemetry)
+    simulation.telemetry[FORCE_PATH] = _as_layer_telemetry(FORCE_PATH, simulation, force_path_telemetry)
     return _collect(
         simulation, shared_log, telemetry, events, control, child_error, clock.perf_counter() - started
     )
@@ -220,7 +228,8 @@ def _stop_with_parent(parent: int, control: ControlBlock) -> None:
 
 
 def _as_layer_telemetry(layer: str, simulation: Simulation, shared: SharedTelemetry) -> LoopTelemetry:
-    telemetry = LoopTelemetry(layer, simulation.settings.period(layer), max(len(shared.starts), 1))
+    period = simulation.settings.period("haptic" if layer == FORCE_PATH else layer)
+    telemetry = LoopTelemetry(layer, period, max(len(shared.starts), 1))
     for start, compute in zip(shared.starts, shared.computes, strict=True):
         telemetry.record(float(start), float(compute))
     return telemetry
@@ -230,7 +239,7 @@ def _haptic_process(
     simulation: Simulation,
     duration: float,
     control: ControlBlock,
-    telemetry: SharedTelemetry,
+    telemetries: tuple[SharedTelemetry, SharedTelemetry],
     events: SharedEvents,
     errors: int,
     pin_cpus: bool,
@@ -254,6 +263,16 @@ def _haptic_process(
         simulation.on_haptic_start()
     simulation.device.read(0.0)  # warm caches and lazy imports before the first deadline
     simulation.forces.at(0.0)
+    telemetry, force_path_telemetry = telemetries
+    settings = simulation.settings
+    simulation.force_path = CompiledForcePath(
+        simulation.holder,
+        simulation.forces,
+        simulation.haptic_log,
+        simulation.safety,
+        settings.force_delay,
+        settings.haptic_scale,
+    )
     control.mark_haptic_ready()
     start = control.wait_for_start()
     step = 0
@@ -269,6 +288,7 @@ def _haptic_process(
             began = clock.perf_counter()
             simulation.haptic_step(now)
             telemetry.record(now, clock.perf_counter() - began)
+            force_path_telemetry.record(now, simulation.force_path_seconds)
             for when, kind, _detail in simulation.safety.events[reported:]:
                 events.add(when, kind)
             reported = len(simulation.safety.events)
@@ -284,6 +304,8 @@ def _haptic_process(
         os.write(errors, f"haptic: {type(error).__name__}: {error}".encode())
         events.add(now, "layer_failed")
         control.haptic_state = ControlBlock.FAILED
+    simulation.force_path.hand_back()  # the paced stop continues from the compiled filter's state
+    simulation.force_path = None
     _paced_wind_down(simulation, now, period)
     if control.haptic_state == ControlBlock.RUNNING:
         control.haptic_state = ControlBlock.FINISHED
@@ -414,7 +436,7 @@ def _collect(
     end = float(log.time[-1]) if log.count else 0.0
     simulation.events.append(RuntimeEvent("stopped", end, "runtime", simulation.stop_reason or "completed"))
     result = simulation.run_result(end, wall)
-    result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in LAYERS}
+    result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in (*LAYERS, FORCE_PATH)}
     return result
 
 

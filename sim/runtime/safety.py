@@ -19,6 +19,22 @@ from numpy.typing import NDArray
 from sim.devices.base import DeviceLimits
 
 
+def nonfinite_event(now: float) -> tuple[float, str, str]:
+    return (now, "nonfinite_force", "non-finite force from the simulation; sent zero")
+
+
+def watchdog_event(now: float, silence: float) -> tuple[float, str, str]:
+    return (now, "watchdog", f"FEM layer silent for {1e3 * silence:.0f} ms; ramping force to zero")
+
+
+def recovered_event(now: float) -> tuple[float, str, str]:
+    return (now, "watchdog_recovered", "FEM layer resumed")
+
+
+def clamped_event(now: float, magnitude: float, limit: float) -> tuple[float, str, str]:
+    return (now, "force_clamped", f"{magnitude:.3f} N clamped to the rated {limit:.3f} N")
+
+
 @dataclass(frozen=True)
 class SafetySettings:
     """stall_timeout (s) before the watchdog acts; ramp_time (s) to bring force to zero."""
@@ -48,9 +64,7 @@ class ForceSafety:
         fx, fy, fz = target.tolist()
         if not (math.isfinite(fx) and math.isfinite(fy) and math.isfinite(fz)):
             if not self._nonfinite:
-                self.events.append(
-                    (now, "nonfinite_force", "non-finite force from the simulation; sent zero")
-                )
+                self.events.append(nonfinite_event(now))
             self._nonfinite = True
             fx = fy = fz = 0.0
         else:
@@ -63,15 +77,9 @@ class ForceSafety:
         stalled = fem_time is not None and now - fem_time > self.settings.stall_timeout
         if stalled and self.watchdog_since is None:
             self.watchdog_since = now
-            self.events.append(
-                (
-                    now,
-                    "watchdog",
-                    f"FEM layer silent for {1e3 * (now - fem_time):.0f} ms; ramping force to zero",
-                )
-            )
+            self.events.append(watchdog_event(now, now - fem_time))
         elif not stalled and self.watchdog_since is not None:
-            self.events.append((now, "watchdog_recovered", "FEM layer resumed"))
+            self.events.append(recovered_event(now))
             self.watchdog_since = None
         if self.watchdog_since is None:
             return 1.0
@@ -82,9 +90,7 @@ class ForceSafety:
         limit = self.limits.max_force
         if magnitude > limit:
             if not self._clamping:
-                self.events.append(
-                    (now, "force_clamped", f"{magnitude:.3f} N clamped to the rated {limit:.3f} N")
-                )
+                self.events.append(clamped_event(now, magnitude, limit))
             self._clamping = True
             scale = limit / magnitude
             return fx * scale, fy * scale, fz * scale
@@ -110,6 +116,30 @@ class ForceSafety:
     @property
     def last(self) -> NDArray[np.float64]:
         return np.array(self._last)
+
+    def state_cells(self) -> NDArray[np.float64]:
+        """The filter's state as the compiled force path keeps it (sim/runtime/_haptic.c): last force
+        3, last time, watchdog since (NaN: None), clamping, non-finite, and two cells for events."""
+        none = math.nan
+        return np.array(
+            [
+                *self._last,
+                none if self.last_time is None else self.last_time,
+                none if self.watchdog_since is None else self.watchdog_since,
+                float(self._clamping),
+                float(self._nonfinite),
+                0.0,
+                0.0,
+            ]
+        )
+
+    def adopt(self, cells: NDArray[np.float64]) -> None:
+        """Take back the state the compiled force path left (see :meth:`state_cells`)."""
+        x, y, z, last_time, since, clamping, nonfinite = cells[:7].tolist()
+        self._last = (x, y, z)
+        self.last_time = None if math.isnan(last_time) else last_time
+        self.watchdog_since = None if math.isnan(since) else since
+        self._clamping, self._nonfinite = bool(clamping), bool(nonfinite)
 
     def stop_sequence(self, now: float, tick: float) -> list[tuple[float, NDArray[np.float64]]]:
         """Forces (time, force) that bring the output to exactly zero within the rate limit."""

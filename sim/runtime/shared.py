@@ -67,6 +67,11 @@ class SharedHolder:
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(self.doubles())
 
+    @property
+    def cells(self) -> NDArray[np.float64]:
+        """The slot itself (the compiled force path writes it: sim/runtime/_haptic.c)."""
+        return self._slot
+
     def put(self, snapshot) -> None:
         slot = self._slot
         slot[0] += 1  # odd: writing
@@ -107,6 +112,11 @@ class SharedForceHistory:
         self._times = self._ring[:, 0]
         self._counter = arena.take(1)
         self._capacity = capacity
+
+    @property
+    def cells(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(the ring, its counter) for the compiled force path (sim/runtime/_haptic.c), a reader."""
+        return self._ring, self._counter
 
     def push(self, time: float, force: NDArray[np.float64]) -> None:
         count = int(self._counter[0])
@@ -154,6 +164,11 @@ class SharedHapticLog(HapticColumns):
     def __init__(self, arena: Arena, capacity: int) -> None:
         self._data = arena.take(capacity, 8)
         self._count = arena.take(1)
+
+    @property
+    def cells(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(the rows, their count) for the compiled force path (sim/runtime/_haptic.c), the writer."""
+        return self._data, self._count
 
     @property
     def count(self) -> int:

@@ -232,6 +232,10 @@ class Simulation:
         self.renderer = renderer
         self.on_event = on_event
         self.on_sample = on_sample  # (now, DeviceSample, force sent, latest FemSnapshot) every haptic tick
+        # the real-time haptic process's compiled force path (sim/runtime/force_path.py), and what
+        # its last tick cost (s); None: the Python channels and filter, as in process
+        self.force_path = None
+        self.force_path_seconds = 0.0
         self.on_haptic_start: Callable[[], None] | None = None  # runs in the haptic process before its loop
         self.on_graphics: Callable[[float, FemSnapshot], None] | None = (
             None  # each graphics frame (main process)
@@ -261,11 +265,16 @@ class Simulation:
             return
         pose = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
         grip = sample.pressed(0)
-        self.holder.put(HolderSnapshot(now, pose, sample.velocity, grip))
-        target = self.forces.at(now - self.settings.force_delay)
-        if self.settings.haptic_scale != 1.0:
-            target = self.settings.haptic_scale * target
-        force = self.safety.filter(now, target, self.forces.latest_time)
+        if self.force_path is not None:  # the same steps in one compiled call, the log included
+            began = wallclock.perf_counter()
+            force = self.force_path.tick(now, pose.position, pose.rotation, sample.velocity, grip)
+            self.force_path_seconds = wallclock.perf_counter() - began
+        else:
+            self.holder.put(HolderSnapshot(now, pose, sample.velocity, grip))
+            target = self.forces.at(now - self.settings.force_delay)
+            if self.settings.haptic_scale != 1.0:
+                target = self.settings.haptic_scale * target
+            force = self.safety.filter(now, target, self.forces.latest_time)
         self._flush_safety_events()
         try:
             self.device.write_force(force)
@@ -273,7 +282,8 @@ class Simulation:
             self._emit(RuntimeEvent("device_lost", now, "haptic", str(error)))
             self.stop("device_lost", now)
             return
-        self.haptic_log.append(now, sample.position, grip, force)
+        if self.force_path is None:
+            self.haptic_log.append(now, sample.position, grip, force)
         if self.on_sample is not None:
             self.on_sample(now, sample, force, self.fem.get())
 

@@ -105,10 +105,14 @@ def test_usb_table_and_scan():
 
 
 def test_openhaptics_names_what_is_missing():
+    from sessions.cli.base import remedy_in_words
     from sim.devices.openhaptics import OpenHapticsDevice
 
-    with pytest.raises(DeviceError, match=r"OpenHaptics runtime .*--device scripted"):
+    with pytest.raises(
+        DeviceError, match=r"OpenHaptics runtime .*Use the scripted or SpaceMouse device"
+    ) as refused:
         OpenHapticsDevice()
+    assert remedy_in_words(refused.value) == "; pass --device scripted or spacemouse"  # the CLI's words
 
 
 def test_quaternions_round_trip():

@@ -253,6 +253,10 @@ def test_realtime_run_shares_state_across_processes(tissue):
     times = result.haptic.time
     assert np.all(np.diff(times) > 0) and times[0] < 0.01 and times[-1] > 2.3
     assert result.telemetry["haptic"].steps > 1000 and result.telemetry["fem"].steps > 500
+    # the haptic process ran its force path compiled (sim/runtime/_haptic.c): every tick timed, inside
+    # the whole step's time, and the log it wrote is the one collected
+    force_path, step = result.telemetry["haptic force path"], result.telemetry["haptic"]
+    assert force_path.steps == step.steps and 0 < force_path.compute_p50 < step.compute_p50
     assert_forces_safe(result, LIMITS)
     assert np.all(result.haptic.force[-1] == 0)
 
