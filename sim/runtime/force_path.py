@@ -66,6 +66,11 @@ class CompiledForcePath:
             self._report(now, events)
         return self.force
 
+    def warm(self, now: float) -> None:
+        """Run the tick's reads and arithmetic without writing anything (in the wait before a
+        deadline): the next tick then finds its code and cells in the caches."""
+        self._kernel.warm(now)
+
     def _report(self, now: float, events: int) -> None:
         """The filter's new events, in :class:`ForceSafety`'s order and wording."""
         said = self.safety.events
