@@ -122,3 +122,16 @@ def test_wrong_inputs_are_refused_with_their_name():
         path.tick(0.0, np.zeros(3, dtype=np.float32), np.eye(3), np.zeros(3), False)
     with pytest.raises(TypeError, match="takes 5 arguments"):
         path._kernel.tick(0.0)
+
+
+def test_warming_reads_but_writes_nothing():
+    holder, forces, log = channels(8, 8)
+    safety = ForceSafety(LIMITS)
+    path = CompiledForcePath(holder, forces, log, safety, 0.0, 1.0)
+    forces.push(0.0, np.array([5.0, 0.0, 0.0]))  # clamped, rate-limited: the state moves every tick
+    path.tick(0.001, np.zeros(3), np.eye(3), np.zeros(3), True)
+    before = [a.copy() for a in (holder.cells, *log.cells, path.state, path.force)]
+    path.warm(0.002)
+    after = (holder.cells, *log.cells, path.state, path.force)
+    assert all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+    assert len(safety.events) == 1  # the clamp, from the tick; warming reported nothing
