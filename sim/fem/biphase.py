@@ -283,7 +283,7 @@ class BiphaseTissue:
         total = np.zeros_like(soft.displacement)
         for model, part in parts:
             grad = displacement_gradients(model.element_gradients, mesh.tets, part.displacement)
-            lam, mu = model._lame
+            lam, mu = model.lame
             stress = stress + stress_tensor(small_strain(grad), lam, mu)
             total += part.displacement
         grad_total = displacement_gradients(self.soft.element_gradients, mesh.tets, total)

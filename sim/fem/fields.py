@@ -66,7 +66,7 @@ class IndentationStress:
         # operators[p][a]: stress (E, 3, 3) of phase p for a unit tip displacement along axis a
         self.operators = []
         for model in _phases(tissue):
-            lam, mu = model._lame
+            lam, mu = model.lame
             per_axis = []
             for axis in range(3):
                 unit = np.zeros(3)
@@ -249,7 +249,7 @@ def surface_stress_operator(model: TissueModel, elements: NDArray[np.int64]):
 
     gradients = model.element_gradients[elements]  # (E, 4, 3): grad N_a per element node
     tets = model.mesh.tets[elements]
-    lam, mu = (values[elements] for values in model._lame)
+    lam, mu = (values[elements] for values in model.lame)
     base = np.arange(len(elements)) * 9
     eye = np.eye(3)
     rows, cols, vals = [], [], []
