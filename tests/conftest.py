@@ -2,6 +2,7 @@
 
 import os
 import uuid
+from pathlib import Path
 
 import numpy as np
 import psycopg
@@ -121,26 +122,31 @@ def demo_template(tmp_path_factory):
     return home, result
 
 
+def repoint_session_folders(url: str, old: Path, new: Path) -> None:
+    """Point a copied catalog's session directories from the template's home ``old`` to ``new``."""
+    from sqlalchemy import create_engine, text
+
+    engine = create_engine(url)
+    with engine.begin() as connection:
+        connection.execute(
+            text("UPDATE sessions SET directory = replace(directory, :old, :new)"),
+            {"old": str(old), "new": str(new)},
+        )
+    engine.dispose()
+
+
 @pytest.fixture(scope="session")
 def copy_demo(demo_template):
     """``copy_demo(folder)`` copies the reduced demo's home (catalog, recordings, reports, cache) into
     ``folder`` and points the catalog's session directories at the copy; returns the catalog URL."""
     import shutil
 
-    from sqlalchemy import create_engine, text
-
     template, _ = demo_template
 
     def copy(folder):
         shutil.copytree(template, folder, dirs_exist_ok=True)
         url = f"sqlite:///{folder / 'catalog.sqlite'}"
-        engine = create_engine(url)
-        with engine.begin() as connection:
-            connection.execute(
-                text("UPDATE sessions SET directory = replace(directory, :old, :new)"),
-                {"old": str(template), "new": str(folder)},
-            )
-        engine.dispose()
+        repoint_session_folders(url, template, folder)
         return url
 
     return copy

@@ -20,6 +20,7 @@ from sessions.catalog import CatalogError
 from sessions.cli import main
 from sessions.runner import study_table
 from sessions.tasks import session_tissue
+from tests.conftest import repoint_session_folders
 
 
 def invoke(*args):
@@ -81,8 +82,6 @@ def small_study(home, catalog_url, small_study_templates):
     catalog kind), copied into this test's home and catalog: a test changes only its copy."""
     import shutil
 
-    from sqlalchemy import create_engine, text
-
     kind = "sqlite" if catalog_url.startswith("sqlite") else "postgresql"
     template_home, template_url = small_study_templates(kind, catalog_url)
     shutil.copytree(template_home, home, dirs_exist_ok=True, ignore=shutil.ignore_patterns("template.sqlite"))
@@ -92,13 +91,7 @@ def small_study(home, catalog_url, small_study_templates):
         name = _database(catalog_url)
         _postgres(catalog_url, f'DROP DATABASE "{name}" WITH (FORCE)')
         _postgres(catalog_url, f'CREATE DATABASE "{name}" TEMPLATE "{_database(template_url)}"')
-    engine = create_engine(catalog_url)
-    with engine.begin() as connection:
-        connection.execute(
-            text("UPDATE sessions SET directory = replace(directory, :old, :new)"),
-            {"old": str(template_home), "new": str(home)},
-        )
-    engine.dispose()
+    repoint_session_folders(catalog_url, template_home, home)
     return home
 
 
