@@ -62,7 +62,8 @@ CONFLICT = {409: ERROR_SCHEMA}
 
 
 REMEDIES = {
-    "replace-rating": 'tick “Replace my earlier rating” (over the API: "replace": true) to replace it',
+    "replace-rating": "to replace it, tick “Replace my earlier rating” below "
+    '(over the API, send "replace": true)',
     "score": "score its sessions first (`vascsim score --study {}` where the catalog is)",
     "recover": "recover it first (`vascsim recover {}` where the catalog is)",
 }
