@@ -62,20 +62,22 @@ CONFLICT = {409: ERROR_SCHEMA}
 
 
 REMEDIES = {
-    "replace-rating": "to replace it, tick “Replace my earlier rating” below "
-    '(over the API, send "replace": true)',
+    "replace-rating": "to replace it, tick “Replace my earlier rating” below",
     "score": "score its sessions first (`vascsim score --study {}` where the catalog is)",
     "recover": "recover it first (`vascsim recover {}` where the catalog is)",
 }
-"""A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) in the dashboard's words."""
+"""A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) in a page's words."""
+API_REMEDIES = {**REMEDIES, "replace-rating": 'to replace it, send "replace": true'}
+"""The same for a caller of the JSON API."""
 
 
-def said(error: VascsimError) -> str:
-    """The error's message with its remedy in the dashboard's words (when it names one)."""
+def said(error: VascsimError, api: bool = False) -> str:
+    """The error's message with its remedy in the dashboard's words (a page's, or the API's)."""
     remedy = getattr(error, "remedy", None)
-    if remedy is None or remedy[0] not in REMEDIES:
+    words = API_REMEDIES if api else REMEDIES
+    if remedy is None or remedy[0] not in words:
         return str(error)
-    return f"{error}; {REMEDIES[remedy[0]].format(remedy[1])}"
+    return f"{error}; {words[remedy[0]].format(remedy[1])}"
 
 
 def status_of(error: VascsimError) -> int:
@@ -112,7 +114,8 @@ def install_error_handlers(app) -> None:
         return await _answer(request, error.status, error.message, headers)
 
     async def vascsim_error(request: Request, error: VascsimError) -> Response:
-        return await _answer(request, status_of(error), said(error))
+        api = request.url.path.startswith(("/api", "/ingest"))
+        return await _answer(request, status_of(error), said(error, api))
 
     async def http_error(request: Request, error: StarletteHTTPException) -> Response:
         return await _answer(request, error.status_code, str(error.detail))

@@ -95,6 +95,7 @@ def test_each_front_end_says_a_remedy_in_its_own_words():
     rated = AlreadyExists("'sup' already rated session S-1 with GRS", remedy=("replace-rating", "S-1"))
     assert remedy_in_words(rated) == "; pass --replace to replace that rating"
     assert "Replace my earlier rating" in said(rated) and "--replace" not in said(rated)
+    assert said(rated, api=True).endswith('send "replace": true')
     unscored = WrongState("study 'course' has no scored sessions", remedy=("score", "course"))
     assert remedy_in_words(unscored) == "; run `vascsim score --study course` first"
     assert said(WrongState("plain")) == "plain" and remedy_in_words(WrongState("plain")) == ""

@@ -206,7 +206,9 @@ def test_a_blinded_rater_rates_a_session_without_learning_whose_it_is(demo_site)
             fieldset.locator("input[value='2']").check()
         page.click("#submit-rating")
         page.wait_for_load_state("networkidle")
-        assert "already rated" in page.inner_text("#rating-error")
+        refused = page.inner_text("#rating-error")
+        assert "already rated" in refused and "tick “Replace my earlier rating” below" in refused
+        assert page.inner_text("#rating-form").count("Replace my earlier rating of this session") == 1
         page.check("input[name=replace]")
         for fieldset in page.locator("#rating-form fieldset").all():
             fieldset.locator("input[value='2']").check()
