@@ -58,9 +58,10 @@ from sim.runtime.simulation import LAYERS, HapticLog, LayerProcessError, RunResu
 from sim.runtime.telemetry import LoopTelemetry
 
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
-WARM_LEAD = 2e-5
-"""s before each haptic deadline at which the force path is run dry to warm the caches (in the spin
-that ends the wait, so nothing is slept away between the warming and the tick)."""
+WARM_LEAD = 5e-5
+"""s before each haptic deadline at which the tick's reads are run dry to warm the caches (in the spin
+that ends the wait, so nothing is slept away between the warming and the tick): the force path and
+the latest FEM snapshot, both read-only."""
 FORCE_PATH = "haptic force path"
 """The telemetry of each haptic tick's force path (holder publish, force interpolation, safety filter,
 log: one compiled call, sim/runtime/force_path.py), within the whole haptic step's; the step also
@@ -287,6 +288,7 @@ def _haptic_process(
             deadline = start + step * period
             sleep_until(deadline - WARM_LEAD)
             force_path.warm(deadline - start)  # in the wait: the tick finds its code and cells cached
+            simulation.fem.get()
             sleep_until(deadline)
             now = clock.perf_counter() - start
             if control.stop_requested or now > duration:
