@@ -343,7 +343,30 @@ def mesh_wall(
     )
 
 
+def local_order(points: NDArray[np.float64], tets: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
+    """The same mesh with its nodes numbered so that neighbours get near numbers (reverse
+    Cuthill-McKee on the node graph) and its elements sorted by their lowest node.
+
+    A mesher numbers the points it inserts in the order it inserted them, scattered over the wall;
+    what a contact reads (the rows of K0^-1's columns at the nodes near the needle, the elements
+    around it) then lies scattered through memory. In local order it lies in a narrow band: on a
+    96k-node wall the live-stress contact start took 3.1 ms at the median and 4.6 ms at p99, where
+    the mesher's numbering took 4.2 and 8.0 (docs/benchmarks.md)."""
+    import scipy.sparse as sparse
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    n = len(points)
+    rows, cols = np.repeat(tets, 4, axis=1).ravel(), np.tile(tets, (1, 4)).ravel()
+    graph = sparse.csr_matrix((np.ones(len(rows), dtype=np.int32), (rows, cols)), shape=(n, n))
+    order = np.asarray(reverse_cuthill_mckee(graph, symmetric_mode=True), dtype=np.int64)
+    number = np.empty(n, dtype=np.int64)
+    number[order] = np.arange(n)
+    tets = number[tets]
+    return points[order], tets[np.argsort(tets.min(axis=1), kind="stable")]
+
+
 def _labelled(wall, points, tets, layer_names, calcified, mesher: str, tolerance: float):
+    points, tets = local_order(points, tets)
     flipped = signed_volumes(points, tets) < 0
     tets[flipped] = tets[flipped][:, [0, 2, 1, 3]]
     names = list(layer_names or default_layer_names(3))
