@@ -345,7 +345,8 @@ def mesh_wall(
 
 def local_order(points: NDArray[np.float64], tets: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
     """The same mesh with its nodes numbered so that neighbours get near numbers (reverse
-    Cuthill-McKee on the node graph) and its elements sorted by their lowest node.
+    Cuthill-McKee on the node graph); the elements keep the mesher's order (sorting them by their
+    lowest node as well made loading the 119k-node wall 2.6x slower).
 
     A mesher numbers the points it inserts in the order it inserted them, scattered over the wall;
     what a contact reads (the rows of K0^-1's columns at the nodes near the needle, the elements
@@ -361,8 +362,7 @@ def local_order(points: NDArray[np.float64], tets: NDArray[np.int64]) -> tuple[N
     order = np.asarray(reverse_cuthill_mckee(graph, symmetric_mode=True), dtype=np.int64)
     number = np.empty(n, dtype=np.int64)
     number[order] = np.arange(n)
-    tets = number[tets]
-    return points[order], tets[np.argsort(tets.min(axis=1), kind="stable")]
+    return points[order], number[tets]
 
 
 def _labelled(wall, points, tets, layer_names, calcified, mesher: str, tolerance: float):
