@@ -269,7 +269,7 @@ def _haptic_process(
     simulation.forces.at(0.0)
     telemetry, force_path_telemetry = telemetries
     settings = simulation.settings
-    simulation.force_path = CompiledForcePath(
+    force_path = simulation.force_path = CompiledForcePath(
         simulation.holder,
         simulation.forces,
         simulation.haptic_log,
@@ -277,7 +277,6 @@ def _haptic_process(
         settings.force_delay,
         settings.haptic_scale,
     )
-    force_path = simulation.force_path
     control.mark_haptic_ready()
     start = control.wait_for_start()
     step = 0
@@ -312,7 +311,7 @@ def _haptic_process(
         os.write(errors, f"haptic: {type(error).__name__}: {error}".encode())
         events.add(now, "layer_failed")
         control.haptic_state = ControlBlock.FAILED
-    simulation.force_path.hand_back()  # the paced stop continues from the compiled filter's state
+    force_path.hand_back()  # the paced stop continues from the compiled filter's state
     simulation.force_path = None
     _paced_wind_down(simulation, now, period)
     if control.haptic_state == ControlBlock.RUNNING:
