@@ -26,8 +26,10 @@ a separate library: docs/tissue-model.md says what that means for redistribution
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -271,6 +273,15 @@ class CalcifiedSphere:
 MESHERS = ("auto", "tetgen", "tetwild")
 
 
+@contextlib.contextmanager
+def _in_scratch_folder(mesher: str) -> Iterator[None]:
+    """Run a mesher in a temporary working directory: TetGen writes the faces it skipped
+    (``_skipped.node``/``.face``) and fTetWild a copy of its surface (``__tracked_surface.stl``) into
+    the working directory, which must not litter a user's folder (or the repository, under the tests)."""
+    with tempfile.TemporaryDirectory(prefix=f"vascsim-{mesher}-") as scratch, contextlib.chdir(scratch):
+        yield
+
+
 def _tetgen(wall: WallSurface, max_edge: float, max_radius_edge: float, min_dihedral_deg: float):
     import tetgen
 
@@ -278,17 +289,18 @@ def _tetgen(wall: WallSurface, max_edge: float, max_radius_edge: float, min_dihe
     if wall.lumen_point is not None:  # a closed lumen is a region of its own: leave it empty
         mesher.add_hole(wall.lumen_point)
     try:
-        points, tets, *_ = mesher.tetrahedralize(
-            plc=True,
-            quality=True,
-            minratio=max_radius_edge,
-            mindihedral=min_dihedral_deg,
-            fixedvolume=True,
-            maxvolume=max_edge**3 / (6.0 * math.sqrt(2.0)),  # a regular tetrahedron of edge max_edge
-            optmaxdihedral=165.0,  # TetGen's sliver removal: flips and smoothing toward this bound
-            opt_iterations=10,
-            quiet=True,
-        )
+        with _in_scratch_folder("tetgen"):
+            points, tets, *_ = mesher.tetrahedralize(
+                plc=True,
+                quality=True,
+                minratio=max_radius_edge,
+                mindihedral=min_dihedral_deg,
+                fixedvolume=True,
+                maxvolume=max_edge**3 / (6.0 * math.sqrt(2.0)),  # a regular tetrahedron of edge max_edge
+                optmaxdihedral=165.0,  # TetGen's sliver removal: flips and smoothing toward this bound
+                opt_iterations=10,
+                quiet=True,
+            )
     except RuntimeError as error:
         raise MeshError(f"TetGen could not mesh the wall: {error}") from error
     return np.asarray(points, dtype=np.float64), np.asarray(tets, dtype=np.int64)
@@ -297,15 +309,10 @@ def _tetgen(wall: WallSurface, max_edge: float, max_radius_edge: float, min_dihe
 def _tetwild(wall: WallSurface, max_edge: float):
     """fTetWild (pytetwild): robust to self-intersecting or degenerate input; its boundary follows
     the input within 1e-3 of the bounding box's diagonal; slower than TetGen."""
-    import contextlib
-    import tempfile
-
     import pytetwild
 
     scale = 1e3  # fTetWild works in the surface's own units: millimetres keep its tolerances sensible
-    # fTetWild writes a scratch copy of the surface (__tracked_surface.stl) into the working directory:
-    # it runs in a temporary one, so a user's folder (or the repository, under the tests) stays clean
-    with tempfile.TemporaryDirectory(prefix="vascsim-tetwild-") as scratch, contextlib.chdir(scratch):
+    with _in_scratch_folder("tetwild"):
         points, tets = pytetwild.tetrahedralize(
             wall.points * scale, wall.triangles.astype(np.int32), edge_length_abs=max_edge * scale, quiet=True
         )

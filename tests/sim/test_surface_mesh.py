@@ -122,9 +122,12 @@ def test_a_bent_tube_with_a_calcified_patch_meshes_and_precomputes(tmp_path):
     assert all(model.precomputation is not None for model in tissue.models)
 
 
-def test_a_bifurcation_that_tetgen_refuses_is_meshed_by_ftetwild():
+def test_a_bifurcation_that_tetgen_refuses_is_meshed_by_ftetwild(tmp_path, monkeypatch):
     """A smooth union of three capsules (trunk 3 mm, branches 2.2 mm) cut square 10 mm out: its
-    marching-cubes surfaces carry slivers TetGen refuses; fTetWild meshes them."""
+    marching-cubes surfaces carry slivers TetGen refuses; fTetWild meshes them. Neither mesher leaves
+    a scratch file in the working directory (seen: TetGen's _skipped.node/.face, fTetWild's
+    __tracked_surface.stl, committed into the repository by a test run)."""
+    monkeypatch.chdir(tmp_path)
     grid = pv.ImageData(dimensions=(48, 21, 50), spacing=(0.6, 0.6, 0.6), origin=(-14, -6, -14))
     ends = [np.array([0.0, 0.0, -20.0]), np.array([-10.0, 0.0, 17.0]), np.array([10.0, 0.0, 17.0])]
 
@@ -154,6 +157,7 @@ def test_a_bifurcation_that_tetgen_refuses_is_meshed_by_ftetwild():
     wall = wall_surface(surface(0.0), outer=surface(1.0))
     mesh, quality = mesh_wall(wall, 1.2e-3)
     assert quality.mesher.startswith("fTetWild, as TetGen refused the surface")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
     assert quality.min_dihedral_deg > 1.0 and len(mesh.node_sets["inner"]) and len(mesh.node_sets["outer"])
     trunk_end = np.flatnonzero(mesh.points[:, 2] < mesh.points[:, 2].min() + 5e-4)
     tissue = BiphaseTissue.build(mesh, trunk_end, PRESET.biphase, contact_nodes=mesh.node_sets["outer"][:100])
