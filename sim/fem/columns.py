@@ -104,6 +104,17 @@ class ColumnCache:
             return np.hstack([known[int(n)].full for n in nodes])
         return np.hstack([known[int(n)].full[rows] for n in nodes])
 
+    def cached_whole(self, nodes: NDArray[np.int64]) -> list[NDArray[np.float64]] | None:
+        """Each node's whole (3N, 3) columns when every one is cached (marked recently used), else
+        None: what a contact's local-stress operator reads without solving."""
+        with self._lock:
+            found = [self._columns.get(int(n)) for n in nodes]
+            if any(c is None for c in found):
+                return None
+            for n in nodes:
+                self._columns.move_to_end(int(n))
+        return [c.full for c in found]
+
     def _evict(self) -> None:
         """Drop least recently used columns beyond the budget (lock held)."""
         used = sum(c.nbytes for c in self._columns.values())

@@ -21,6 +21,7 @@ from sim.errors import ModelError
 from sim.fem.assembly import displacement_gradients, small_strain, stress_tensor, von_mises_of_stress
 from sim.fem.condensation import node_dofs
 from sim.fem.model import TissueModel
+from sim.fem.stress import von_mises_rows
 from sim.fem.tissue import Tissue
 
 _CHUNK = 512  # ticks per block: keeps the (ticks x elements x 3 x 3) temporaries small
@@ -313,24 +314,9 @@ class LocalStress:
         # displacement per unit generalised force, at the local elements' nodes only: rows of the
         # load nodes' cached K0^-1 columns (prefetched in real time), else one q-column solve
         local, tets = np.unique(mesh.tets[elements], return_inverse=True)
-        dofs = (3 * local[:, None] + np.arange(3)).ravel()
-        columns = model.load_response(ids, force_map, dofs).reshape(len(local), 3, -1)
-        tets = tets.reshape(-1, 4)
-        grad = np.einsum("maiq,maj->mijq", columns[tets], model.element_gradients[elements])
-        strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
-        lam, mu = (values[elements] for values in model.lame)
-        trace = np.einsum("miiq->mq", strain)
-        stress = 2 * mu[:, None, None, None] * strain
-        for i in range(3):
-            stress[:, i, i] += lam[:, None] * trace
-        mean = np.einsum("miiq->mq", stress) / 3
-        for i in range(3):
-            stress[:, i, i] -= mean
-        # von Mises = sqrt(3/2 s:s): six independent components, off-diagonals weighted by sqrt 2
-        rows = [stress[:, 0, 0], stress[:, 1, 1], stress[:, 2, 2]]
-        rows += [np.sqrt(2.0) * stress[:, i, j] for i, j in ((0, 1), (0, 2), (1, 2))]
-        von_mises = np.sqrt(1.5) * np.stack(rows, axis=1).reshape(-1, force_map.shape[1])
-        self._operator = np.ascontiguousarray(von_mises)
+        response = model.load_response(ids, force_map, local)
+        mu = model.lame[1][elements]
+        self._operator = von_mises_rows(model.element_gradients[elements], mu, tets.reshape(-1, 4), response)
 
     def maximum(self, forces: NDArray[np.float64]) -> float:
         """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""

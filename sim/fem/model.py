@@ -25,6 +25,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import ModelError
+from sim.fem import _local_stress as compiled
 from sim.fem import cache, checks, stress
 from sim.fem.assembly import (
     SparsityPattern,
@@ -338,22 +339,27 @@ class TissueModel:
         if ids.size:
             self._nodes_columns(ids, ahead=True)
 
-    def load_response(self, nodes: ArrayLike, loads: ArrayLike, rows: ArrayLike) -> NDArray[np.float64]:
-        """(len(rows), q) displacement (m) of the dofs ``rows`` per unit of each of q generalised
-        loads, ``loads`` (3k, q) mapping them to forces (N) on the nodes' dofs.
+    def load_response(self, nodes: ArrayLike, loads: ArrayLike, at_nodes: ArrayLike) -> NDArray[np.float64]:
+        """(3L, q) displacement (m) of the dofs of ``at_nodes`` (L node ids; row 3l + i is dof i of
+        node l) per unit of each of q generalised loads, ``loads`` (3k, q) mapping them to forces (N)
+        on the k ``nodes``' dofs.
 
         From the nodes' whole cached K0^-1 columns when every one is cached (no solve: what the
-        real-time prefetcher arranges), else one q-right-hand-side solve (cheaper than solving
-        3k whole columns that nothing else will read)."""
-        ids, dofs = np.asarray(nodes, dtype=np.int64).ravel(), np.asarray(rows, dtype=np.int64).ravel()
-        loads = np.asarray(loads, dtype=np.float64).reshape(3 * len(ids), -1)
-        if all(not self.needs_solve(int(n), full=True) for n in ids):
-            return self.columns_at(ids, dofs) @ loads
-        checks.node_ids(ids, self.mesh.n_nodes, "nodes")
+        real-time prefetcher arranges; one compiled pass, :mod:`sim.fem._local_stress`), else one
+        q-right-hand-side solve (cheaper than solving 3k whole columns that nothing else will read)."""
+        ids, at = (np.asarray(v, dtype=np.int64).ravel() for v in (nodes, at_nodes))
+        checks.node_ids(ids, self.mesh.n_nodes, "nodes")  # checked; the order given is the rows' order
+        checks.node_ids(at, self.mesh.n_nodes, "at_nodes")
+        loads = np.ascontiguousarray(loads, dtype=np.float64).reshape(3 * len(ids), -1)
+        base, scale = self._inverse_of or (self, 1.0)
+        whole = base._column_cache.cached_whole(ids)
+        if whole is not None:
+            out = np.empty((3 * len(at), loads.shape[1]))
+            compiled.response(whole, loads, at, out)
+            return out / scale if scale != 1.0 else out
         rhs = np.zeros((3 * self.mesh.n_nodes, loads.shape[1]), order="F")
         np.add.at(rhs, node_dofs(ids), loads)
-        checks.ids(dofs, 3 * self.mesh.n_nodes, "rows")
-        return self._factor(rhs)[dofs]
+        return np.ascontiguousarray(self._factor(rhs)[node_dofs(at)])
 
     def node_columns(self, nodes: ArrayLike, rows: ArrayLike | None = None) -> NDArray[np.float64]:
         """K0^-1's columns at the nodes' dofs, whole (3N, 3k) or only ``rows`` (dof ids), cached ones

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.fem import _local_stress as compiled
 from sim.fem.assembly import displacement_gradients, principal_stretches, small_strain, von_mises_stress
 from sim.mesh.tetmesh import TetMesh, signed_volumes
 
@@ -61,3 +62,27 @@ def element_fields(
         "max_stretch": principal_stretches(grad_u)[:, -1],
         "volume_change": float(deformed / mesh.volume - 1.0),
     }
+
+
+def von_mises_rows(
+    shape_gradients: NDArray[np.float64],
+    mu: NDArray[np.float64],
+    local_tets: NDArray[np.int64],
+    response: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """(6E, q) rows whose product with q generalised forces f gives, per element, six components
+    whose norm is the element's von Mises stress (Pa): sqrt(3/2) (s00, s11, s22, sqrt2 s01,
+    sqrt2 s02, sqrt2 s12) of the deviatoric stress s = 2 mu dev(sym grad u) (lambda multiplies the
+    trace, which the deviator removes). ``shape_gradients`` (E, 4, 3) and ``mu`` (E,) (Pa) are the
+    elements'; ``local_tets`` (E, 4) index the rows of ``response`` (3L, q), the displacement (m)
+    of L nodes' dofs per unit generalised force. One compiled pass (:mod:`sim.fem._local_stress`)."""
+    q = response.shape[1]
+    out = np.empty((6 * len(mu), q))
+    compiled.von_mises_rows(
+        np.ascontiguousarray(response, dtype=np.float64),
+        np.ascontiguousarray(local_tets, dtype=np.int64),
+        np.ascontiguousarray(shape_gradients, dtype=np.float64),
+        np.ascontiguousarray(mu, dtype=np.float64),
+        out,
+    )
+    return out

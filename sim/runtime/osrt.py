@@ -18,6 +18,8 @@ from collections.abc import Iterator
 SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
 PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
 PR_SET_THP_DISABLE, PR_GET_THP_DISABLE = 41, 42  # prctl options: no transparent huge pages
+M_TRIM_THRESHOLD, M_MMAP_MAX = -1, -4  # mallopt options (glibc's malloc.h)
+DEFAULTS = ((M_MMAP_MAX, 65536), (M_TRIM_THRESHOLD, 128 * 1024))  # glibc's, put back after a run
 
 
 def leave_last_core_to_haptics(pin_cpus: bool) -> set[int] | None:
@@ -61,7 +63,7 @@ def try_realtime_priority(priority: int = 50) -> bool:
 @contextlib.contextmanager
 def process_prepared() -> Iterator[None]:
     """This process's settings for the length of a run, put back after; enter it before anything
-    of the run is forked, so that the forked processes inherit both.
+    of the run is forked, so that the forked processes inherit them.
 
     - The heap is collected once and frozen: a full collection walks every object of this process
       (the meshes, the scene, the libraries), 20-45 ms that would stall the FEM and graphics
@@ -73,19 +75,40 @@ def process_prepared() -> Iterator[None]:
       6.3 ms there without giving way to the woken haptic process, since this guest kernel
       preempts only at its voluntary points; all 16 guest-side periods over 3 ms of a 60 s
       artery run were such kernel threads. Huge pages already mapped stay.
+    - Memory this process frees is kept for its next allocations, never handed back to the system
+      (glibc's ``mallopt``: large blocks from the heap instead of their own mappings, no trimming),
+      as real-time processes are advised to. The prefetched K0^-1 columns come and go 2.9 MB a node
+      on a 119k-node wall; each block mapped anew and returned made the machine slow this process
+      for a while after: measured here, 560 rows read from an old array took 1.4-2.1 ms at p90
+      after 260 MB of such blocks, 0.09 ms with the memory kept, and contact starts on that wall
+      took 6-9 ms in a few of 40 instead of 2-3 ms (``benchmarks/meshing.py``). The process's
+      size then stays at its peak for the run.
     """
     libc = libc_functions()
     previous = -1 if libc is None else libc.prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0)
     if previous >= 0:  # else not Linux, or a kernel without the option: left as it is
         libc.prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)
+    keeping = _keep_freed_memory(libc, True)
     gc.collect()
     gc.freeze()
     try:
         yield
     finally:
         gc.unfreeze()
+        if keeping:
+            _keep_freed_memory(libc, False)
         if previous >= 0:
             libc.prctl(PR_SET_THP_DISABLE, previous, 0, 0, 0)
+
+
+def _keep_freed_memory(libc, keep: bool) -> bool:
+    """Tell glibc's malloc to keep freed memory (``keep``) or to go back to its defaults; False
+    where the C library has no ``mallopt`` (not glibc) or refuses."""
+    mallopt = getattr(libc, "mallopt", None)
+    if mallopt is None:
+        return False
+    values = ((M_MMAP_MAX, 0), (M_TRIM_THRESHOLD, -1)) if keep else DEFAULTS
+    return all([bool(mallopt(option, value)) for option, value in values])
 
 
 @functools.cache

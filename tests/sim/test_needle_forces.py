@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import quad
 from scipy.special import jv
 
@@ -25,6 +27,7 @@ from sim.runtime import Simulation
 
 WIRE_RADIUS = 1.25e-4
 SOFT = Material(20e3, 0.45)
+KERNEL_BOX = TissueModel(box_mesh(0.01, 12), SOFT, box_mesh(0.01, 12).node_sets["z0"])
 
 
 def normal_stiffness(tissue, point, normal=(0.0, 0.0, 1.0), radius=1e-3, near_field=True):
@@ -101,6 +104,42 @@ def test_kernel_falls_back_to_the_triangle_when_the_mesh_is_coarser_than_it():
         tissue, [0.004, 0.0041, 0.01], [0, 0, 1], 1e-3, fallback=(np.array([1, 2]), [0.3, 0.7])
     )
     assert kernel.nodes.tolist() == [1, 2] and kernel.weights.sum() == pytest.approx(1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    x=st.floats(0.0, 0.01),
+    y=st.floats(0.0, 0.01),
+    radius=st.floats(2e-4, 3e-3),
+    tilt=st.floats(-0.9, 0.9),
+)
+def test_kernel_nodes_and_weights_are_those_of_a_scan_of_every_surface_node(x, y, radius, tilt):
+    """The kernel finds its nodes through a tree; a scan of every free surface node (the rule as
+    written: within the radius, vertex normal within 60 degrees) gives the same nodes and weights."""
+    tissue = KERNEL_BOX
+    normal = np.array([tilt, 0.0, 1.0]) / np.hypot(tilt, 1.0)
+    centre = np.array([x, y, 0.01])
+    mesh = tissue.mesh
+    free = np.setdiff1d(mesh.surface_nodes, tissue.clamped_nodes)
+    distance = np.linalg.norm(mesh.points[free] - centre, axis=1)
+    normals = tissue.vertex_normals[free] / np.linalg.norm(tissue.vertex_normals[free], axis=1, keepdims=True)
+    inside = (distance < radius) & (normals @ normal >= 0.5)
+    weights = (1 - (distance[inside] / radius) ** 2) ** 2
+    corners = mesh.points[mesh.surface_triangles]
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    nodal = np.zeros(mesh.n_nodes)
+    np.add.at(nodal, mesh.surface_triangles.ravel(), np.repeat(areas / 3, 3))
+    weights = weights * nodal[free[inside]]
+    fallback = (np.array([0]), np.array([1.0]))
+    kernel = kernel_at(tissue, centre, normal, radius, fallback=fallback)
+    if not inside.any() or not (weights > 0).any():
+        assert kernel.nodes.tolist() == [0]
+        return
+    keep = weights > 0
+    np.testing.assert_array_equal(kernel.nodes, free[inside][keep])
+    np.testing.assert_allclose(kernel.weights, weights[keep] / weights[keep].sum(), rtol=1e-12)
 
 
 def test_passage_resistance_has_a_stick_band_cutting_only_forward_and_an_emergence_ramp():

@@ -1,0 +1,255 @@
+/* The local-stress operator of a contact, compiled: what a contact start pays for its live stress.
+ *
+ * When a needle touches the wall, sim.fem.fields.LocalStress builds the linear map from the
+ * contact's q generalised forces (a force kernel's three components, or plain nodal forces) to
+ * the von Mises stress of the elements within 1 mm of it. Two steps, each a loop here:
+ *
+ *   response(columns, loads, nodes, out)
+ *       The displacement (m) of the local nodes' dofs per unit generalised force:
+ *           out[3l + i, j] = sum_n sum_c K0^-1[3 nodes[l] + i, 3 n + c] loads[3 n + c, j]
+ *       from each load node's three cached whole columns of K0^-1 (one (3N, 3) C-ordered array per
+ *       load node: row 3a + i holds dof i of node a, so a node's nine values are contiguous).
+ *       In NumPy this was a fancy-index gather per load node, a stack and a product: about 1 ms for
+ *       50 load nodes and 200 local nodes, most of it allocation and Python overhead around reads
+ *       that miss the cache; here it is one pass, the output (3L x q) staying in L1.
+ *
+ *   von_mises_rows(response, tets, gradients, mu, out)
+ *       Per element m (four local node indices, the shape functions' gradients g_a (4 x 3), the
+ *       shear modulus mu) and per generalised force j: grad u = sum_a u_a (x) g_a,
+ *       eps = sym(grad u), and the deviatoric stress s = 2 mu dev(eps) (the Lame lambda multiplies
+ *       the trace, which the deviator removes, so it never enters: exact, and free of the round-off
+ *       lambda tr(eps) would add on a nearly incompressible wall). The six rows of element m are
+ *           sqrt(3/2) (s00, s11, s22, sqrt2 s01, sqrt2 s02, sqrt2 s12)
+ *       so that the von Mises stress of a load f is the norm of those six rows times f.
+ *
+ * Arrays arrive through the buffer protocol (C-contiguous float64 'd' / int64 'q' or 'l'); every
+ * size and index is checked before anything is read, and an error names the argument. The NumPy
+ * reference these must agree with is in tests/sim/test_local_stress.py.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+static int
+get_view(PyObject *object, Py_buffer *view, int writable, char kind, const char *name)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(object, view, flags) < 0) {
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous%s array", name,
+                     writable ? " writable" : "");
+        return -1;
+    }
+    const char *format = view->format ? view->format : "B";
+    if (*format == '<' || *format == '=' || *format == '@')
+        format++;
+    int ok = kind == 'd' ? (strcmp(format, "d") == 0 && view->itemsize == 8)
+                         : ((strcmp(format, "q") == 0 || strcmp(format, "l") == 0) && view->itemsize == 8);
+    if (!ok) {
+        PyErr_Format(PyExc_TypeError, "%s must be %s", name, kind == 'd' ? "float64" : "int64");
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+static Py_ssize_t
+cells(Py_buffer *view)
+{
+    return view->len / 8;
+}
+
+static PyObject *
+response(PyObject *module, PyObject *args)
+{
+    PyObject *columns, *loads_object, *nodes_object, *out_object;
+    if (!PyArg_ParseTuple(args, "OOOO", &columns, &loads_object, &nodes_object, &out_object))
+        return NULL;
+    PyObject *sequence = PySequence_Fast(columns, "columns must be a sequence of arrays");
+    if (sequence == NULL)
+        return NULL;
+    Py_ssize_t k = PySequence_Fast_GET_SIZE(sequence);
+    Py_buffer loads, nodes, out;
+    Py_buffer *views = PyMem_Calloc(k > 0 ? k : 1, sizeof(Py_buffer));
+    Py_ssize_t held = 0;
+    int have_loads = 0, have_nodes = 0, have_out = 0;
+    PyObject *result = NULL;
+    if (views == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (get_view(loads_object, &loads, 0, 'd', "loads") < 0)
+        goto done;
+    have_loads = 1;
+    if (get_view(nodes_object, &nodes, 0, 'q', "nodes") < 0)
+        goto done;
+    have_nodes = 1;
+    if (get_view(out_object, &out, 1, 'd', "out") < 0)
+        goto done;
+    have_out = 1;
+    if (k == 0 || cells(&loads) % (3 * k) != 0) {
+        PyErr_Format(PyExc_ValueError, "loads must hold 3 rows per load node (%zd nodes); got %zd values",
+                     k, cells(&loads));
+        goto done;
+    }
+    Py_ssize_t q = cells(&loads) / (3 * k), n_local = cells(&nodes), whole = -1;
+    if (q == 0 || cells(&out) != 3 * n_local * q) {
+        PyErr_Format(PyExc_ValueError, "out must hold %zd values (3 per local node x %zd loads); got %zd",
+                     3 * n_local * q, q, cells(&out));
+        goto done;
+    }
+    for (; held < k; held++) {
+        if (get_view(PySequence_Fast_GET_ITEM(sequence, held), &views[held], 0, 'd', "each column block") < 0)
+            goto done;
+        Py_ssize_t size = cells(&views[held]);
+        if (size % 9 != 0 || (whole >= 0 && size != whole)) {
+            PyErr_Format(PyExc_ValueError, "column block %zd must be (3N, 3) like the first; got %zd values",
+                         held, size);
+            held++;
+            goto done;
+        }
+        whole = size;
+    }
+    Py_ssize_t n_nodes = whole / 9;
+    const long long *ids = (const long long *)nodes.buf;
+    for (Py_ssize_t l = 0; l < n_local; l++) {
+        if (ids[l] < 0 || ids[l] >= n_nodes) {
+            PyErr_Format(PyExc_IndexError, "local node %lld is not a node of a %zd-node mesh", ids[l], n_nodes);
+            goto done;
+        }
+    }
+    double *o = (double *)out.buf;
+    const double *w_all = (const double *)loads.buf;
+    Py_BEGIN_ALLOW_THREADS /* the buffers are held: a prefetching thread may run meanwhile */
+    memset(o, 0, (size_t)out.len);
+    for (Py_ssize_t n = 0; n < k; n++) {
+        const double *column = (const double *)views[n].buf;
+        const double *w = w_all + 3 * n * q; /* this node's three rows of the load map */
+        int used = 0;
+        for (Py_ssize_t c = 0; c < 3 * q; c++)
+            used |= w[c] != 0.0;
+        if (!used)
+            continue;
+        for (Py_ssize_t l = 0; l < n_local; l++) {
+            const double *row = column + 9 * ids[l];
+            double *target = o + 3 * l * q;
+            for (int i = 0; i < 3; i++) {
+                double a = row[3 * i], b = row[3 * i + 1], c = row[3 * i + 2];
+                for (Py_ssize_t j = 0; j < q; j++)
+                    target[i * q + j] += a * w[j] + b * w[q + j] + c * w[2 * q + j];
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    for (Py_ssize_t i = 0; i < held; i++)
+        PyBuffer_Release(&views[i]);
+    PyMem_Free(views);
+    if (have_loads)
+        PyBuffer_Release(&loads);
+    if (have_nodes)
+        PyBuffer_Release(&nodes);
+    if (have_out)
+        PyBuffer_Release(&out);
+    Py_DECREF(sequence);
+    return result;
+}
+
+static PyObject *
+von_mises_rows(PyObject *module, PyObject *args)
+{
+    PyObject *objects[5];
+    if (!PyArg_ParseTuple(args, "OOOOO", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4]))
+        return NULL;
+    static const char *names[] = {"response", "tets", "gradients", "mu", "out"};
+    static const char kinds[] = {'d', 'q', 'd', 'd', 'd'};
+    Py_buffer views[5];
+    int held = 0;
+    PyObject *result = NULL;
+    for (; held < 5; held++)
+        if (get_view(objects[held], &views[held], held == 4, kinds[held], names[held]) < 0)
+            goto done;
+    Py_ssize_t n_elements = cells(&views[3]);
+    if (cells(&views[1]) != 4 * n_elements || cells(&views[2]) != 12 * n_elements) {
+        PyErr_Format(PyExc_ValueError, "tets (E, 4) and gradients (E, 4, 3) must match mu's %zd elements",
+                     n_elements);
+        goto done;
+    }
+    if (n_elements == 0 || cells(&views[4]) % (6 * n_elements) != 0 || cells(&views[4]) == 0) {
+        PyErr_Format(PyExc_ValueError, "out must hold 6 rows per element (%zd elements); got %zd values",
+                     n_elements, cells(&views[4]));
+        goto done;
+    }
+    Py_ssize_t q = cells(&views[4]) / (6 * n_elements);
+    if (cells(&views[0]) % (3 * q) != 0) {
+        PyErr_Format(PyExc_ValueError, "response must be (3L, %zd); got %zd values", q, cells(&views[0]));
+        goto done;
+    }
+    Py_ssize_t n_local = cells(&views[0]) / (3 * q);
+    const long long *tets = (const long long *)views[1].buf;
+    for (Py_ssize_t i = 0; i < 4 * n_elements; i++) {
+        if (tets[i] < 0 || tets[i] >= n_local) {
+            PyErr_Format(PyExc_IndexError, "tets name local node %lld of %zd", tets[i], n_local);
+            goto done;
+        }
+    }
+    const double *u = (const double *)views[0].buf, *gradients = (const double *)views[2].buf;
+    const double *mu = (const double *)views[3].buf;
+    double *o = (double *)views[4].buf;
+    const double root2 = sqrt(2.0), root_three_halves = sqrt(1.5);
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t m = 0; m < n_elements; m++) {
+        const long long *tet = tets + 4 * m;
+        const double *g = gradients + 12 * m;
+        double two_mu = 2.0 * mu[m];
+        double *rows = o + 6 * m * q;
+        for (Py_ssize_t j = 0; j < q; j++) {
+            double grad[3][3] = {{0.0}};
+            for (int a = 0; a < 4; a++) {
+                const double *node = u + 3 * tet[a] * q + j; /* dof i of node a at row 3 tet[a] + i */
+                for (int i = 0; i < 3; i++)
+                    for (int k = 0; k < 3; k++)
+                        grad[i][k] += node[i * q] * g[3 * a + k];
+            }
+            double trace = (grad[0][0] + grad[1][1] + grad[2][2]) / 3.0;
+            double s00 = two_mu * (grad[0][0] - trace), s11 = two_mu * (grad[1][1] - trace);
+            double s22 = two_mu * (grad[2][2] - trace);
+            double s01 = mu[m] * (grad[0][1] + grad[1][0]), s02 = mu[m] * (grad[0][2] + grad[2][0]);
+            double s12 = mu[m] * (grad[1][2] + grad[2][1]);
+            rows[0 * q + j] = root_three_halves * s00;
+            rows[1 * q + j] = root_three_halves * s11;
+            rows[2 * q + j] = root_three_halves * s22;
+            rows[3 * q + j] = root_three_halves * root2 * s01;
+            rows[4 * q + j] = root_three_halves * root2 * s02;
+            rows[5 * q + j] = root_three_halves * root2 * s12;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    for (int i = 0; i < held; i++)
+        PyBuffer_Release(&views[i]);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"response", response, METH_VARARGS,
+     "response(columns, loads, nodes, out): the local nodes' displacement per unit generalised force, "
+     "from the load nodes' cached K0^-1 columns, written into out (3L, q)."},
+    {"von_mises_rows", von_mises_rows, METH_VARARGS,
+     "von_mises_rows(response, tets, gradients, mu, out): the six weighted deviatoric stress rows per "
+     "element and generalised force, written into out (6E, q)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef local_stress_module = {
+    PyModuleDef_HEAD_INIT, "sim.fem._local_stress", "The local-stress operator of a contact, compiled.", -1,
+    methods,
+};
+
+PyMODINIT_FUNC
+PyInit__local_stress(void)
+{
+    return PyModule_Create(&local_stress_module);
+}
