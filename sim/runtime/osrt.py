@@ -77,7 +77,7 @@ def process_prepared() -> Iterator[None]:
       artery run were such kernel threads. Huge pages already mapped stay.
     - Memory this process frees is kept for its next allocations, never handed back to the system
       (glibc's ``mallopt``: large blocks from the heap instead of their own mappings, no trimming),
-      as real-time processes are advised to. The prefetched K0^-1 columns come and go 2.9 MB a node
+      as real-time processes are advised to. The prefetched K0^-1 columns come and go 8.6 MB a node
       on a 119k-node wall; each block mapped anew and returned made the machine slow this process
       for a while after: measured here, 560 rows read from an old array took 1.4-2.1 ms at p90
       after 260 MB of such blocks, 0.09 ms with the memory kept, and contact starts on that wall
