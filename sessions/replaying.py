@@ -90,3 +90,18 @@ def replay_inputs(
             expert_dirs += [r.directory for r in rows]
     tissue = tissue_for(task, cache_dir(home))
     return open_session(directory), tissue, [open_session(d) for d in expert_dirs]
+
+
+def replay_against_experts(catalog: Catalog, home: Path, uid: str) -> Path:
+    """Render session ``uid``'s replay against its study's experts on the same task (the most typical
+    one ghosted in; the trainee alone when there is none) to ``home/replays/UID-vs.mp4``."""
+    from metrics.replay.export import ReplaySettings, export_replay
+    from sessions.review import experts_on_task
+
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        study, task = row.participant.study.name, row.task.name
+    group = "expert" if experts_on_task(catalog, study, task) else None
+    recorded, tissue, experts = replay_inputs(catalog, home, uid, versus_group=group)
+    target = home / "replays" / f"{uid}-vs.mp4"
+    return export_replay(recorded, tissue, target, experts, ReplaySettings()).path

@@ -7,6 +7,9 @@ is :func:`metrics.band.against_band` (re-exported here).
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import pandas as pd
 from sqlalchemy import select
 
@@ -18,7 +21,15 @@ from sessions.status import SCORABLE
 
 EXPERT_GROUP = "expert"
 
-__all__ = ["EXPERT_GROUP", "against_band", "expert_band", "session_against_experts", "session_stitches"]
+__all__ = [
+    "EXPERT_GROUP",
+    "SessionReview",
+    "against_band",
+    "expert_band",
+    "review_session",
+    "session_against_experts",
+    "session_stitches",
+]
 
 
 def expert_band(catalog: Catalog, study_id: int, task_id: int) -> dict[str, dict]:
@@ -67,3 +78,100 @@ def session_stitches(catalog: Catalog, uid: str) -> list[dict]:
     for stitch, quantity, value in results:
         stitches.setdefault(stitch, {"stitch": stitch})[quantity] = value
     return list(stitches.values())
+
+
+@dataclass(frozen=True)
+class SessionReview:
+    """How one session went, as a trainee is told at the station, by ``vascsim run`` and ``sessions show``.
+
+    verdict: "pass", "not yet" (below the study's standard on at least one benchmark) or "no standard"
+    (the study has none for this task yet: ``standard`` says why); benchmarks: one dict per
+    benchmarked metric (metric, value, mark, band, passed, line in display units and direction words);
+    work_on and strengths: :func:`metrics.feedback.session_feedback`'s items.
+    """
+
+    uid: str
+    task: str
+    trial: int
+    verdict: str
+    standard: str
+    benchmarks: list[dict]
+    work_on: list[dict]
+    strengths: list[dict]
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def review_session(catalog: Catalog, uid: str) -> SessionReview:
+    """The session against its study's standard on its task (the study's declared analysis, with this
+    session's task) and against the experts' band: one function, so the station's feedback screen,
+    ``vascsim run`` and ``vascsim sessions show`` say the same thing."""
+    from metrics.feedback import session_feedback
+
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        study, task, trial = row.participant.study.name, row.task.name, row.trial
+    rows = session_against_experts(catalog, uid)
+    verdict, standard, benchmarks = _against_standard(catalog, study, task, uid, rows)
+    feedback = session_feedback(rows)
+    return SessionReview(
+        uid, task, trial, verdict, standard, benchmarks, feedback["work_on"], feedback["strengths"]
+    )
+
+
+def _against_standard(
+    catalog: Catalog, study: str, task: str, uid: str, rows: list[dict]
+) -> tuple[str, str, list[dict]]:
+    from metrics.streams import MetricsError
+    from metrics.units import shown
+    from sessions.analysis import analyse_catalog_study
+
+    try:
+        analysis, _ = analyse_catalog_study(catalog, study, {"task": task})
+    except MetricsError as error:
+        return "no standard", f"no standard for {task} in this study yet: {error}", []
+    sessions = analysis.sessions
+    found = sessions.index[sessions["session_id"] == uid]
+    if not len(found) or analysis.benchmarks.empty:
+        return "no standard", f"no standard for {task} in this study yet (no benchmarks)", []
+    index = found[0]
+    by_metric = {r["metric"]: r for r in rows}
+    benchmarks = []
+    for bench in analysis.benchmarks.itertuples():
+        if bench.benchmark != bench.benchmark:  # NaN: no expert values
+            continue
+        column = f"pass_{bench.metric}"
+        value = by_metric.get(bench.metric, {}).get("value")
+        passed = analysis.proficiency.at[index, column] if column in analysis.proficiency else None
+        passed = None if passed is None or pd.isna(passed) else bool(passed)
+        unit = by_metric.get(bench.metric, {}).get("unit", "")
+        reading = "met" if passed else ("not measured" if passed is None else f"needs {bench.pass_if}")
+        benchmarks.append(
+            {
+                "metric": bench.metric,
+                "value": value,
+                "mark": float(bench.benchmark),
+                "better": bench.better,
+                "pass_if": bench.pass_if,
+                "passed": passed,
+                "line": f"{bench.metric} {shown(value, unit)}: {reading} ({bench.better} is better)",
+            }
+        )
+    passed = bool(analysis.proficiency.at[index, "passed"])
+    experts = int(analysis.benchmarks["experts"].max())
+    standard = (
+        f"the study's benchmarks on {task}: {len(benchmarks)} metric(s), rule "
+        f"{analysis.settings.benchmark_rule}, from {experts} expert(s)"
+    )
+    return ("pass" if passed else "not yet"), standard, benchmarks
+
+
+def experts_on_task(catalog: Catalog, study: str, task: str) -> bool:
+    """Whether any expert of ``study`` has a scored session of ``task`` (a standard needs them)."""
+    from sessions.models import Task
+
+    with catalog.session() as orm:
+        study_id = catalog.study(orm, study).id
+        task_id = orm.scalar(select(Task.id).where(Task.name == task))
+    return task_id is not None and bool(expert_band(catalog, study_id, task_id))

@@ -30,6 +30,7 @@ from sessions.models import (
     StitchResult,
     StreamFile,
 )
+from sessions.running.live import LiveView
 from sessions.status import SCORABLE, SessionStatus
 from sessions.store import CatalogStore
 from sessions.synthetic import bite_parameters, in_restricted_access
@@ -103,15 +104,23 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
             session=uid,
         )
         return device, float(recorded["time"].iloc[-1])
+    if spec == "mouse":
+        from sessions.running.scene import start_pose
+        from sim.devices.mouse import MouseDevice
+
+        return MouseDevice(start_pose(task)), None
     if spec == "spacemouse":
+        from sessions.running.scene import start_pose
         from sim.devices.spacemouse import SpaceMouse
 
-        return SpaceMouse(), None
+        return SpaceMouse(start=start_pose(task)), None
     if spec == "openhaptics":
         from sim.devices.openhaptics import OpenHapticsDevice
 
         return OpenHapticsDevice(), None
-    raise CatalogError(f"unknown device {spec!r}; use scripted, spacemouse, openhaptics or replay:SESSION")
+    raise CatalogError(
+        f"unknown device {spec!r}; use scripted, mouse, spacemouse, openhaptics or replay:SESSION"
+    )
 
 
 def run_session(
@@ -121,12 +130,17 @@ def run_session(
     parameters: SuturingPassParameters | Callable[[int], SuturingPassParameters] | None = None,
     duration: float | None = None,
     score: bool = True,
+    view: LiveView | None = None,
 ) -> str:
     """Run, record and catalogue one session; returns its uid.
 
     The row is added first (with the next trial number when ``plan.trial`` is None);
     ``parameters`` may be a function of that trial number (a scripted pass seeded by it).
-    If the device cannot be opened, nothing was recorded and the row is removed again."""
+    If the device cannot be opened, nothing was recorded and the row is removed again.
+    A live device with no ``duration`` runs until the task is done, the trainee stops it, or
+    :data:`sessions.running.scene.LIVE_TIME_FACTOR` times the task's budget. ``view``: a real-time
+    session's window on the station's display (:class:`LiveView`); stopping it early (Escape,
+    Ctrl-C) ends the session complete, scored up to where it stopped."""
     spec = task_spec(plan.task)
     uid = new_uid()
     directory = home / "sessions" / uid
@@ -155,14 +169,26 @@ def run_session(
     try:
         device, natural = open_device(plan.device, plan, catalog, parameters)
         duration = duration if duration is not None else natural
-        if duration is None:
-            raise CatalogError(f"device {plan.device!r} runs until stopped; give the session a duration")
+        if duration is None:  # a live device: until done or stopped, within a bound the arena needs
+            from sessions.running.scene import LIVE_TIME_FACTOR
+
+            duration = LIVE_TIME_FACTOR * spec.time_budget_s
+        window = None
+        if view is not None and plan.clock == "realtime":
+            window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid))
     except BaseException:
         with catalog.session() as orm:
             orm.delete(catalog.recorded_session(orm, uid))
         raise
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
-    simulation = RuntimeRecorder(writer).attach(task_simulation(plan.task, device, cache_dir(home)))
+    simulation = RuntimeRecorder(writer).attach(
+        task_simulation(plan.task, device, cache_dir(home), renderer=window)
+    )
+    if window is not None:
+        from sessions.running.scene import stop_when_done
+
+        window.simulation = simulation
+        stop_when_done(simulation, spec.stitch_count)
     try:
         if plan.clock == "simulated":
             simulation.run_simulated(duration)
@@ -177,6 +203,13 @@ def run_session(
     if score:
         score_session(catalog, uid, home)
     return uid
+
+
+def study_and_task_ids(catalog: Catalog, uid: str) -> tuple[int, int]:
+    """The study and task a session belongs to (catalog ids)."""
+    with catalog.session() as orm:
+        row = catalog.recorded_session(orm, uid)
+        return row.participant.study_id, row.task_id
 
 
 def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str = "") -> None:

@@ -86,6 +86,7 @@ class TissueRenderer:
         scalar_bar: bool = True,
         force_scale: float = FORCE_ARROW_M_PER_N,
         zoom: float = 1.0,
+        title: str = "vascsim",
     ) -> None:
         # the render window's class is VTK's choice (VTK_DEFAULT_OPENGL_WINDOW, which the application
         # sets without a display: sessions.config.prepare_rendering); VTK 9.7 falls back to EGL itself
@@ -102,7 +103,7 @@ class TissueRenderer:
         self.zoom = zoom
         # one headlight (a light at the camera, as VTK's own default): under software rasterisation
         # every light is paid per pixel, and PyVista's five-light kit doubled a full frame's cost
-        self.plotter = pv.Plotter(off_screen=offscreen, window_size=size, lighting="none")
+        self.plotter = pv.Plotter(off_screen=offscreen, window_size=size, lighting="none", title=title)
         self.plotter.add_light(pv.Light(light_type="headlight"))
         if not anti_aliasing:  # 4x MSAA costs ~3x the frame time under software rendering
             self.plotter.disable_anti_aliasing()
@@ -220,6 +221,11 @@ class TissueRenderer:
 
     def render(self, frame: RenderFrame) -> NDArray[np.uint8]:
         """Draw a frame and return its pixels."""
+        self.update(frame)
+        return self.read_pixels()
+
+    def update(self, frame: RenderFrame) -> None:
+        """Put a frame into the scene without drawing it (a window draws it with its own render call)."""
         self.surface.points[:] = frame.points
         self.surface.cell_data["von Mises (kPa)"][:] = frame.triangle_stress / 1e3
         self.surface.Modified()
@@ -243,7 +249,6 @@ class TissueRenderer:
             self.plotter.reset_camera()
             self.plotter.renderer.GetActiveCamera().Zoom(self.zoom)
             self._camera_set = True
-        return self.read_pixels()
 
     def read_pixels(self) -> NDArray[np.uint8]:
         """Render and read the frame straight from the render window: (H, W, 3) uint8, top row first."""

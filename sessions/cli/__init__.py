@@ -22,6 +22,7 @@ from sessions.cli import (
     replay,
     run,
     scoring,
+    station,
     studies,
     tasks,
     tissue,
@@ -34,6 +35,7 @@ __all__ = ["main", "open_catalog", "user_errors"]
 for command in (
     demo.demo,
     run.run,
+    station.station,
     recorded.sessions,
     scoring.score,
     scoring.report,

@@ -20,7 +20,8 @@ def devices(as_json: bool) -> None:
     Looks for 3Dconnexion SpaceMice through hidapi and for known haptic and input
     devices (3D Systems Touch/Phantom, Novint Falcon, Force Dimension, 3Dconnexion)
     on the USB bus through pyusb; reports whether the OpenHaptics driver can be
-    used; the scripted and replay devices are always available.
+    used; the keyboard and mouse (the station window's needle holder) where a display
+    exists; the scripted and replay devices are always available.
     """
     from sim.devices.discovery import list_devices
 

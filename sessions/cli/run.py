@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import click
 
-from metrics.registry import REGISTRY
-from metrics.units import shown
 from sessions.cli.base import (
     open_catalog,
     print_json,
@@ -13,6 +11,7 @@ from sessions.cli.base import (
     user_errors,
 )
 from sessions.cli.lrs import push_after_scoring
+from sessions.cli.station import LIVE_DEVICES, view_options
 
 
 @click.command()
@@ -23,7 +22,8 @@ from sessions.cli.lrs import push_after_scoring
     "--device",
     default="scripted",
     show_default=True,
-    help="scripted, spacemouse, openhaptics, or replay:SESSION to play a recorded session back.",
+    help="scripted, mouse (keyboard and mouse in the live window), spacemouse, openhaptics, or "
+    "replay:SESSION to play a recorded session back.",
 )
 @click.option(
     "--skill",
@@ -34,39 +34,66 @@ from sessions.cli.lrs import push_after_scoring
 )
 @click.option("--phase", type=click.Choice(["practice", "retention"]), default="practice", show_default=True)
 @click.option(
-    "--duration", type=click.FloatRange(0.1, 7200), default=None, help="Seconds (needed for live devices)."
+    "--duration",
+    type=click.FloatRange(0.1, 7200),
+    default=None,
+    help="Seconds [default: a scripted pass's own length; a live device until the task is done, "
+    "Esc or Ctrl-C, at most twice the task's time budget].",
 )
 @click.option(
     "--realtime", is_flag=True, help="Real-time clock (a person at the device); default simulated time."
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the session's metrics as JSON.")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the session's verdict, feedback and metrics as JSON."
+)
+@view_options
 @user_errors
-def run(study, participant, task, device, skill, phase, duration, realtime, as_json) -> None:
+def run(study, participant, task, device, skill, phase, duration, realtime, as_json, view) -> None:
     """Run one session: device + simulator + recorder + catalog entry, then scoring.
 
-    The catalog row is written as 'running' first and becomes 'complete' only when
-    the streams are closed and checksummed; Ctrl-C or an error keeps the data and
-    marks the session 'failed'; after a crash, `vascsim recover` restores it.
+    A real-time session opens the live 3-D view in a window where a display exists (--view). The
+    catalog row is written as 'running' first and becomes 'complete' only when the streams are
+    closed and checksummed; stopping early (Esc in the window, Ctrl-C here) keeps a complete session,
+    scored up to where it stopped; an error keeps the data and marks the session 'failed'; after a
+    crash, `vascsim recover` restores it. Ends with the verdict against the study's standard and the
+    three things to work on first (--json: everything).
     """
+    from sessions.review import review_session
     from sessions.runner import SessionPlan, run_session
     from sessions.store import CatalogStore
     from sessions.synthetic import pass_parameters
 
     catalog, home = open_catalog()
-    clock = "realtime" if realtime or device in ("spacemouse", "openhaptics") else "simulated"
-    if duration is None and device in ("spacemouse", "openhaptics"):
-        raise click.UsageError(f"--duration is needed with device {device!r} (it runs until stopped)")
+    clock = "realtime" if realtime or device in LIVE_DEVICES else "simulated"
     plan = SessionPlan(study, participant, task, None, phase, device, clock)  # next trial, allocated
     parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
     with stderr_console().status(f"running {participant} on {device}..."):
-        uid = run_session(catalog, home, plan, parameters, duration)
+        uid = run_session(
+            catalog, home, plan, parameters, duration, view=view if clock == "realtime" else None
+        )
     facts = CatalogStore(catalog).session_facts(uid)
-    trial, values = facts.session.trial, facts.metrics
+    review = review_session(catalog, uid)
     if as_json:
-        print_json({"session": uid, "trial": trial, "metrics": values})
+        print_json(
+            {"session": uid, "trial": facts.session.trial, **review.as_dict(), "metrics": facts.metrics}
+        )
     else:
-        click.echo(f"session {uid} ({participant}, trial {trial}) complete and scored")
-        for name, value in values.items():
-            unit = REGISTRY[name].unit if name in REGISTRY else ""
-            click.echo(f"  {name:28s} {shown(value, unit):>14s}")
+        for line in review_lines(review, participant):
+            click.echo(line)
     push_after_scoring(catalog, home, [uid])
+
+
+def review_lines(review, participant: str) -> list[str]:
+    """The terminal's closing lines: the session, its verdict, and the three things to work on first."""
+    verdicts = {"pass": "PASS (at the study's standard)", "not yet": "NOT YET at the study's standard"}
+    lines = [
+        f"session {review.uid} ({participant}, trial {review.trial}) complete and scored",
+        f"verdict: {verdicts.get(review.verdict, 'no standard yet')}; {review.standard}",
+    ]
+    lines += [f"  {bench['line']}" for bench in review.benchmarks]
+    lines.append("work on:" if review.work_on else "work on: nothing worse than the experts' middle half")
+    for k, item in enumerate(review.work_on[:3], 1):
+        text = f"{k}. {item['kind']}: {item['line']}"
+        lines.append(click.wrap_text(text, 78, initial_indent="  ", subsequent_indent="     "))
+    lines.append(f"all metrics: vascsim sessions show {review.uid}")
+    return lines

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import importlib.util
+import os
+import sys
 from dataclasses import asdict, dataclass
 
 from sim.devices.base import DeviceError
@@ -59,6 +61,21 @@ def list_devices() -> list[DeviceReport]:
             else "not installed (needs pyOpenHaptics and 3D Systems' OpenHaptics)",
         )
     )
+    reports.append(
+        DeviceReport(
+            "keyboard and mouse (needle holder; forces shown, not felt)",
+            "mouse",
+            "the station's window",
+            "ready" if display_available() else "needs a display (the station's window)",
+        )
+    )
     reports.append(DeviceReport("scripted trajectory", "scripted", "none (built in)", "ready"))
     reports.append(DeviceReport("recorded session", "replay", "none (built in)", "ready"))
     return reports
+
+
+def display_available() -> bool:
+    """Whether a window can open here (X11 or Wayland; Windows and macOS always can)."""
+    return sys.platform in ("win32", "darwin") or bool(
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    )

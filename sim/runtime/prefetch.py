@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import collections
 import os
+import signal
 import threading
 
 import numpy as np
@@ -121,6 +122,10 @@ def _serve(model: TissueModel, pipe) -> None:
     """The worker's loop: node ids in, columns out (row-major (3k, 3N) float64); empty request = stop."""
     from threadpoolctl import threadpool_limits
 
+    # Ctrl-C in the terminal reaches the whole process group: the run stops itself and then this
+    # worker (an empty request), so the worker leaves the signal to its parent instead of dying with
+    # a KeyboardInterrupt traceback of its own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.nice(WORKER_NICENESS)
     cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
     if len(cores) > 1:  # off the last core, which the real-time haptic process takes

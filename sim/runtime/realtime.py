@@ -112,6 +112,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         os.close(errors_read)
         status = 0
         try:
+            _leave_interrupts_to_parent()
             _stop_with_parent(parent, control)
             channels = (telemetry, force_path_telemetry)
             _haptic_process(simulation, duration, control, channels, events, errors_write, pin_cpus)
@@ -125,8 +126,9 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     # the haptic core idles by polling, not halting, between ticks (sim.runtime.cpu)
     polling = IdlePolling() if previous_affinity else contextlib.nullcontext()
     try:
-        with polling:
+        with polling, _interrupts_stop(control):
             _wait_until_ready(pid, control, errors_read)
+            _wait_for_display(display_pid, control)
             # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
             control.start = clock.perf_counter() + START_DELAY
             _run_other_layers(simulation, duration, control)
@@ -140,10 +142,12 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     child_error = read_all(errors_read)
     failed = read_all(display_errors)
     if failed:  # the session went on without its view; the failure is recorded, with its message
-        simulation.events.append(RuntimeEvent("layer_failed", 0.0, "display", failed))
+        simulation._emit(RuntimeEvent("layer_failed", 0.0, "display", failed))  # recorded too
     if display_pid is not None:
         simulation.telemetry["display"] = _as_layer_telemetry("display", simulation, display_telemetry)
     simulation.telemetry[FORCE_PATH] = _as_layer_telemetry(FORCE_PATH, simulation, force_path_telemetry)
+    if control.stop_reason not in ("", "stopped"):  # the trainee, Ctrl-C or the task asked for the stop
+        simulation.stop(control.stop_reason, 0.0)
     return _collect(
         simulation, shared_log, telemetry, events, control, child_error, clock.perf_counter() - started
     )
@@ -161,6 +165,41 @@ def _wait_until_ready(pid: int, control: ControlBlock, errors: int, timeout: flo
         if clock.monotonic() > deadline:
             raise LayerProcessError(f"haptic: the haptic process was not ready after {timeout:.0f} s")
         clock.sleep(0.001)
+
+
+@contextlib.contextmanager
+def _interrupts_stop(control: ControlBlock):
+    """For the length of the run, Ctrl-C (SIGINT) asks every layer to stop, as the trainee's own stop
+    does, instead of raising in whatever the main thread was doing: the session ends complete, with
+    no traceback. Only the main thread can handle signals; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: control.request_stop("interrupted"))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _leave_interrupts_to_parent() -> None:
+    """In a forked child: Ctrl-C reaches the terminal's whole process group; the parent turns it into
+    a stop every layer sees, so the child ignores it rather than dying with a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _wait_for_display(pid: int | None, control: ControlBlock, timeout: float = 30.0) -> None:
+    """Block until the display process has opened its view (a window takes a second or so), so the
+    first frames are on time; a display that died setting up is left (its error is read after the
+    run, and the session goes on without a view)."""
+    if pid is None:
+        return
+    deadline = clock.monotonic() + timeout
+    while not control.display_ready and clock.monotonic() < deadline and not control.stop_requested:
+        finished, _ = os.waitpid(pid, os.WNOHANG)
+        if finished:
+            return
+        clock.sleep(0.005)
 
 
 def _report(fd: int, layer: str, error: BaseException) -> None:
@@ -189,9 +228,18 @@ def _start_display_process(
     os.close(errors_read)
     status = 0
     try:
+        _leave_interrupts_to_parent()
         _stop_with_parent(parent, control)
         from threadpoolctl import threadpool_limits
 
+        renderer = simulation.renderer
+        prepare = getattr(renderer, "prepare", None)
+        if prepare is not None:  # a window opens here, in the process that draws into it
+            prepare(
+                lambda reason="stopped_by_trainee": control.request_stop(reason),
+                lambda: clock.perf_counter() - control.start if control.start else 0.0,
+            )
+        control.mark_display_ready()
         os.nice(WORKER_NICENESS)
         threadpool_limits(1)
         if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
@@ -211,6 +259,9 @@ def _start_display_process(
             simulation.display_step(now)
             telemetry.record(now, clock.perf_counter() - began)
             k = max(k + 1, int((clock.perf_counter() - start) / period))
+        finish = getattr(renderer, "finish", None)
+        if finish is not None:  # a window closes, and writes what it measured
+            finish()
     except BaseException as error:
         status = 1
         _report(errors_write, "display", error)

@@ -244,16 +244,20 @@ class SharedEvents:
 
 
 class ControlBlock:
-    """[stop requested, haptic state, start time, haptic ready]: states 0 running, 1 finished, 2 device
-    lost, 3 failed. The start time (perf_counter seconds, shared by all processes) is 0 until the
-    parent sets it, which it does only once the haptic process is ready."""
+    """[stop requested, haptic state, start time, haptic ready, display ready]: states 0 running,
+    1 finished, 2 device lost, 3 failed. The start time (perf_counter seconds, shared by all processes)
+    is 0 until the parent sets it, which it does only once the haptic process is ready. The stop word
+    holds why the stop was asked for (an index into :data:`STOP_REASONS`, 0: not asked)."""
 
     RUNNING, FINISHED, DEVICE_LOST, FAILED = 0.0, 1.0, 2.0, 3.0
+    STOP_REASONS = ("", "stopped", "stopped_by_trainee", "interrupted", "task_done")
+    """Why a stop was asked for: the run's end (``stopped``), the trainee (Escape, the device's
+    button), Ctrl-C in the terminal (``interrupted``), every stitch of the task placed (``task_done``)."""
 
     @staticmethod
     def doubles() -> int:
-        """Its size in the arena: four control words."""
-        return 4
+        """Its size in the arena: five control words."""
+        return 5
 
     def __init__(self, arena: Arena) -> None:
         self._data = arena.take(self.doubles())
@@ -262,8 +266,15 @@ class ControlBlock:
     def stop_requested(self) -> bool:
         return self._data[0] != 0.0
 
-    def request_stop(self) -> None:
-        self._data[0] = 1.0
+    def request_stop(self, reason: str = "stopped") -> None:
+        """Ask every layer to stop; the first reason asked for is kept."""
+        if self._data[0] == 0.0:
+            self._data[0] = float(self.STOP_REASONS.index(reason))
+
+    @property
+    def stop_reason(self) -> str:
+        """Why the stop was asked for ("" when it was not)."""
+        return self.STOP_REASONS[int(self._data[0])]
 
     @property
     def haptic_state(self) -> float:
@@ -288,6 +299,13 @@ class ControlBlock:
     def mark_haptic_ready(self) -> None:
         self._data[3] = 1.0
 
+    @property
+    def display_ready(self) -> bool:
+        return self._data[4] != 0.0
+
+    def mark_display_ready(self) -> None:
+        self._data[4] = 1.0
+
     def wait_for_start(self, poll: float = 0.0005) -> float:
         """The shared start time, once set (0.0 if a stop was requested first)."""
         while self._data[2] == 0.0 and not self.stop_requested:
@@ -296,17 +314,20 @@ class ControlBlock:
 
 
 class SharedGraphics:
-    """The latest graphics snapshot for the display process: needle, state, contact (seqlock).
+    """The latest graphics snapshot for the display process: the needle, the FEM step's nodal loads on
+    the tissue and the holder sample's time (seqlock).
 
-    Layout: [seq, time, n_vertices, vertices (64 x 3), n_contact, nodes (16), intended (16 x 3)].
+    Layout: [seq, time, n_vertices, vertices (64 x 3), n_loaded, nodes (192), forces (192 x 3),
+    soft share, holder time].
     """
 
     MAX_VERTICES, MAX_CONTACT = 64, 192  # a needle through a wall: two force kernels of up to ~90 nodes
 
     @classmethod
     def doubles(cls) -> int:
-        """Its size in the arena: a header, the needle's vertices, the drive's nodes and displacements."""
-        return 3 + 3 * cls.MAX_VERTICES + 1 + cls.MAX_CONTACT * 4
+        """Its size in the arena: a header, the needle's vertices, the loaded nodes and their forces,
+        the soft share and the holder sample's time."""
+        return 3 + 3 * cls.MAX_VERTICES + 1 + cls.MAX_CONTACT * 4 + 2
 
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(self.doubles())
@@ -314,23 +335,24 @@ class SharedGraphics:
     def put(self, snapshot) -> None:
         slot = self._slot
         vertices = snapshot.needle_vertices[: self.MAX_VERTICES]
-        contact = snapshot.contact
+        loads = snapshot.loads
         slot[0] += 1
         slot[1] = snapshot.time
         slot[2] = len(vertices)
         base = 3
         slot[base : base + 3 * len(vertices)] = vertices.ravel()
         base += 3 * self.MAX_VERTICES
-        count = 0 if contact is None else min(len(contact[0]), self.MAX_CONTACT)
+        count = 0 if loads is None else min(len(loads[0]), self.MAX_CONTACT)
         slot[base] = count
         if count:
-            slot[base + 1 : base + 1 + count] = contact[0][:count]
+            slot[base + 1 : base + 1 + count] = loads[0][:count]
             start = base + 1 + self.MAX_CONTACT
-            slot[start : start + 3 * count] = contact[1][:count].ravel()
+            slot[start : start + 3 * count] = loads[1][:count].ravel()
+        slot[-2] = math.nan if loads is None else loads[2]
+        slot[-1] = snapshot.holder_time
         slot[0] += 1
 
     def get(self):
-
         copy = _consistent_copy(self._slot)
         if copy is None:
             return None
@@ -338,12 +360,12 @@ class SharedGraphics:
         vertices = copy[3 : 3 + 3 * n].reshape(n, 3)
         base = 3 + 3 * self.MAX_VERTICES
         count = int(copy[base])
-        contact = None
+        loads = None
         if count:
             nodes = copy[base + 1 : base + 1 + count].astype(np.int64)
             start = base + 1 + self.MAX_CONTACT
-            contact = (nodes, copy[start : start + 3 * count].reshape(count, 3))
-        return GraphicsSnapshot(float(copy[1]), vertices, "", None, contact)
+            loads = (nodes, copy[start : start + 3 * count].reshape(count, 3), float(copy[-2]))
+        return GraphicsSnapshot(float(copy[1]), vertices, "", None, None, float(copy[-1]), loads)
 
 
 class SharedFem:

@@ -328,6 +328,7 @@ class Simulation:
                 interaction.soft_share,
                 interaction.local_stress,
                 interaction.stretch,
+                holder.time,
             )
         )
 
@@ -341,7 +342,12 @@ class Simulation:
         hits = self.interaction.collision.query(fem.needle_vertices)
         self.global_queue.append((now, fem.needle_vertices, hits, posted))
         self.global_posted.set()
-        self.graphics.put(GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact))
+        loads = None
+        if fem.state != "free" and len(fem.contact_nodes):
+            loads = (fem.contact_nodes, fem.reaction_forces, fem.soft_share)
+        self.graphics.put(
+            GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact, fem.holder_time, loads)
+        )
         if self.on_graphics is not None:
             self.on_graphics(now, fem)
 
@@ -373,6 +379,8 @@ class Simulation:
         frame, self._previous_frame = self._previous_frame, self.graphics.get()
         if frame is not None and self.renderer is not None:
             self.renderer(frame)  # one video frame late, as in the paper
+        elif self.renderer is not None and hasattr(self.renderer, "idle"):
+            self.renderer.idle()  # a window still answers its keys and mouse before the first frame
 
     # -- events and stopping -----------------------------------------------------------------
     def _emit(self, event: NeedleEvent | RuntimeEvent) -> None:

@@ -38,6 +38,7 @@ class FemSnapshot(NamedTuple):
     soft_share: float = math.nan  # the biphase split of the drive (nan: the drive's own strain sets it)
     local_stress: float = math.nan  # Pa, largest von Mises stress within 1 mm of the contact
     stretch: float = math.nan  # the stretch statistic 1 + |d| / h
+    holder_time: float = math.nan  # s, the device sample the step's needle follows
 
 
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
@@ -49,6 +50,10 @@ class GraphicsSnapshot(NamedTuple):
     state: str
     hits: object
     contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # driven nodes, intended (m)
+    holder_time: float = math.nan  # s, the device sample whose needle the frame shows (motion to photon)
+    loads: tuple[NDArray[np.int64], NDArray[np.float64], float] | None = None
+    """The FEM step's nodal loads on the tissue: node ids, forces (k, 3) N, and the biphase soft share
+    (nan: one phase); the display shows their displacement field with one solve."""
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,141 @@
+"""`vascsim station`: a course station (instructions, live trials, feedback); the view options it
+shares with `vascsim run`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import wraps
+from typing import Any
+
+import click
+
+from sessions.cli.base import open_catalog, user_errors
+
+LIVE_DEVICES = ("mouse", "spacemouse", "openhaptics")
+"""Devices a person moves: their sessions run on the real-time clock."""
+
+
+def _size(_ctx, _param, value: str) -> tuple[int, int]:
+    try:
+        width, height = (int(part) for part in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels, e.g. 960x540") from None
+    return width, height
+
+
+def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``--view``, ``--stereo``, ``--size`` and ``--handedness``, turned into one ``view`` argument (a
+    :class:`sessions.running.live.LiveView`, or None for no window)."""
+
+    @click.option(
+        "--view",
+        type=click.Choice(["window", "none"]),
+        default=None,
+        help="Show the live 3-D view in a window on this display, or not [default: window where a "
+        "display exists, else none].",
+    )
+    @click.option(
+        "--stereo",
+        type=click.Choice(["anaglyph", "split", "crystal-eyes"]),
+        default=None,
+        help="Stereo for 3-D displays: red-cyan glasses, side-by-side halves, or shutter glasses "
+        "(quad-buffered, where the graphics driver offers it).",
+    )
+    @click.option(
+        "--size",
+        default="960x540",
+        show_default=True,
+        callback=_size,
+        help="The window's size in pixels, WIDTHxHEIGHT.",
+    )
+    @click.option(
+        "--handedness",
+        type=click.Choice(["right", "left"]),
+        default="right",
+        show_default=True,
+        help="Which hand holds the needle holder: left swaps the wrist-turn keys of the keyboard "
+        "and mouse (train both hands, as the paper asks).",
+    )
+    @wraps(command)
+    def wrapper(*args: Any, view: str | None, stereo, size, handedness, **kwargs: Any) -> Any:
+        from sessions.running.live import LiveView, default_view
+        from sessions.running.window import ViewSettings
+        from sim.devices.discovery import display_available
+        from sim.devices.mouse import MouseMapping
+
+        chosen = view or default_view()
+        if chosen == "window" and not display_available():
+            raise click.UsageError("--view window needs a display (DISPLAY or WAYLAND_DISPLAY is not set)")
+        live = None
+        if chosen == "window":
+            live = LiveView(ViewSettings(size=size, stereo=stereo), MouseMapping(handedness=handedness))
+        return command(*args, view=live, **kwargs)
+
+    return wrapper
+
+
+@click.command()
+@click.option("--study", required=True, help="Study (course) the trials belong to.")
+@click.option("--participant", required=True, help="The trainee's participant code.")
+@click.option(
+    "--task", default="interrupted-stitch", show_default=True, help="Task to practise (`vascsim tasks`)."
+)
+@click.option(
+    "--device",
+    type=click.Choice([*LIVE_DEVICES, "scripted"]),
+    default="mouse",
+    show_default=True,
+    help="The needle holder: keyboard and mouse, a SpaceMouse (rate control), a 3D Systems Touch "
+    "(OpenHaptics), or a scripted hand (a demonstration).",
+)
+@click.option(
+    "--trials",
+    type=click.IntRange(1, 100),
+    default=None,
+    help="Stop after this many trials [default: until Q].",
+)
+@click.option(
+    "--skill", type=click.FloatRange(0, 1), default=0.9, show_default=True, help="Scripted hand's skill."
+)
+@view_options
+@user_errors
+def station(study, participant, task, device, trials, skill, view) -> None:
+    """Run a course station: instructions, a trial with the live view, feedback, the next trial.
+
+    The instruction screen says what the task asks, what the marks mean, the time budget and the
+    controls; SPACE starts the trial after a 3-second countdown. The trial ends when every stitch is
+    pulled through, when the trainee presses Esc (the trial is kept, complete and scored up to
+    there), on Ctrl-C in this terminal (the same), or at twice the task's time budget. The feedback
+    screen gives the verdict against the study's standard, each benchmark, what to work on and
+    strengths; N starts the next trial, R renders a replay against the experts, Q quits. Trials
+    count on as `vascsim run` counts them.
+    """
+    from sessions.replaying import replay_against_experts
+    from sessions.runner import SessionPlan, run_session
+    from sessions.running.station import StationPlan, run_station
+    from sessions.synthetic import pass_parameters
+    from sessions.tasks import task_spec
+
+    if view is None:
+        raise click.UsageError("the station needs its window: run it on a display (--view window)")
+    task_spec(task)  # an unknown task is refused before any window opens
+    catalog, home = open_catalog()
+    clock = "realtime"
+    parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
+
+    def run_trial() -> str:
+        plan = SessionPlan(study, participant, task, None, "practice", device, clock)
+        return run_session(catalog, home, plan, parameters, None, view=view)
+
+    uids = run_station(
+        catalog,
+        home,
+        StationPlan(study, participant, task, device),
+        view,
+        run_trial,
+        replay=lambda uid: str(replay_against_experts(catalog, home, uid)),
+        trials=trials,
+    )
+    click.echo(
+        f"station closed: {len(uids)} trial(s) recorded and scored" + (f": {', '.join(uids)}" if uids else "")
+    )

@@ -1,0 +1,54 @@
+"""A real-time session's view on the station's display: which kind (``--view``), and the window built
+for one session's task, device and study."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sessions.running.window import LiveWindow, ViewSettings
+from sim.devices.discovery import display_available
+from sim.devices.mouse import MouseMapping
+
+VIEWS = ("window", "none")
+"""``--view`` choices: a window on this station's display, or none (the dashboard's live page still
+shows the session's plots)."""
+
+
+def default_view() -> str:
+    """``window`` where a display exists, else ``none``."""
+    return "window" if display_available() else "none"
+
+
+@dataclass(frozen=True)
+class LiveView:
+    """How a real-time session is shown: the window's settings, the keyboard-and-mouse mapping, and
+    (for the motion-to-photon benchmark) a file for each frame's latency."""
+
+    settings: ViewSettings = field(default_factory=ViewSettings)
+    mapping: MouseMapping = field(default_factory=MouseMapping)
+    latency_log: Path | None = None
+
+    def window(self, spec, device, catalog, home: Path, ids: tuple[int, int]) -> LiveWindow:
+        """The window for one session of task ``spec`` with ``device``, in study and task ``ids``."""
+        from sessions.config import cache_dir
+        from sessions.review import expert_band
+        from sessions.running.hud import HudLimits
+        from sessions.running.scene import scene_facts
+        from sessions.tasks import task_preset, tissue_for
+        from sim.devices.mouse import MouseDevice, MouseHand
+
+        band = expert_band(catalog, *ids).get("peak_force")
+        limits = HudLimits(
+            time_budget_s=spec.time_budget_s,
+            stitches=spec.stitch_count,
+            expert_force_n=None if band is None else (band["expert_q1"], band["expert_q3"]),
+            device_max_n=device.limits.max_force,
+            damage_stress_pa=task_preset(spec.name).forces.damage_stress,
+        )
+        tissue = tissue_for(spec.name, cache_dir(home))
+        facts = scene_facts(spec, tissue.mesh, limits)
+        hand = channel = None
+        if isinstance(device, MouseDevice):
+            hand, channel = MouseHand(device.start, self.mapping), device.channel
+        return LiveWindow(tissue, facts, self.settings, hand, channel, self.latency_log)

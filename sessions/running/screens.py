@@ -1,0 +1,112 @@
+"""The station's screens between trials: instructions, the countdown, and the feedback.
+
+Each screen is a window of its own in the session's process (titled ``vascsim: ...``), closed before a
+trial starts: the trial's live view opens in the display process the run forks, and nothing of this
+process's window system is carried into it. Text is drawn with VTK, the toolkit the live view uses.
+"""
+
+from __future__ import annotations
+
+import textwrap
+import time as clock
+from dataclasses import dataclass
+
+from sessions.running.window import ViewSettings
+
+WRAP = 86
+"""Characters a line of body text is wrapped at (fits 960 px at the body's size)."""
+
+
+@dataclass(frozen=True)
+class Line:
+    """One line of a screen: its text and its style (``title``, ``heading``, ``good``, ``bad`` or
+    ``body``)."""
+
+    text: str
+    style: str = "body"
+
+
+STYLES = {
+    "title": (26, True, (0.1, 0.1, 0.1)),
+    "heading": (17, True, (0.15, 0.15, 0.15)),
+    "good": (20, True, (0.05, 0.5, 0.15)),
+    "bad": (20, True, (0.75, 0.1, 0.05)),
+    "body": (15, False, (0.15, 0.15, 0.15)),
+    "good-small": (15, True, (0.05, 0.5, 0.15)),
+    "bad-small": (15, True, (0.75, 0.1, 0.05)),
+    "keys": (16, True, (0.1, 0.25, 0.6)),
+}
+
+
+def wrapped(text: str, style: str = "body", indent: str = "") -> list[Line]:
+    """``text`` wrapped to :data:`WRAP` characters, each line a :class:`Line`."""
+    lines = textwrap.wrap(text, WRAP, initial_indent=indent, subsequent_indent=indent + "  ")
+    return [Line(line, style) for line in lines or [""]]
+
+
+class Screen:
+    """A window of text lines and the keys that leave it (see the module docstring)."""
+
+    def __init__(self, settings: ViewSettings, name: str) -> None:
+        import pyvista as pv
+        from vtkmodules.vtkInteractionStyle import vtkInteractorStyleUser
+
+        self.settings = settings
+        self.plotter = pv.Plotter(window_size=settings.size, title=f"{settings.title}: {name}")
+        self.plotter.set_background("white")
+        self.plotter.show(auto_close=False, interactive_update=True)
+        self.plotter.set_background("white")
+        interactor = self.plotter.iren.interactor
+        interactor.RemoveAllObservers()
+        interactor.SetInteractorStyle(vtkInteractorStyleUser())
+        interactor.AddObserver("KeyPressEvent", self._key, 10.0)
+        interactor.AddObserver("ExitEvent", lambda *_: self._pressed.append("closed"), 10.0)
+        self._interactor = interactor
+        self._pressed: list[str] = []
+        self._actors: list = []
+
+    def show(self, lines: list[Line]) -> None:
+        """Replace what the screen says with ``lines``, top to bottom."""
+        from vtkmodules.vtkRenderingCore import vtkTextActor
+
+        renderer = self.plotter.renderer
+        for actor in self._actors:
+            renderer.RemoveViewProp(actor)
+        self._actors = []
+        y = self.settings.size[1] - 44
+        for line in lines:
+            size, bold, colour = STYLES[line.style]
+            actor = vtkTextActor()
+            actor.SetInput(line.text)
+            prop = actor.GetTextProperty()
+            prop.SetFontSize(size)
+            prop.SetBold(bold)
+            prop.SetColor(*colour)
+            actor.SetDisplayPosition(28, y)
+            renderer.AddViewProp(actor)
+            self._actors.append(actor)
+            y -= int(size * 1.55) + (6 if line.style in ("title", "heading") else 0)
+        self.plotter.render()
+
+    def wait_for(self, keys: dict[str, str], timeout: float | None = None) -> str:
+        """Block until one of ``keys`` (key name -> choice) is pressed, the window is closed
+        (``"quit"``) or ``timeout`` seconds pass (``"timeout"``); returns the choice."""
+        self._pressed.clear()
+        deadline = None if timeout is None else clock.monotonic() + timeout
+        while True:
+            self._interactor.ProcessEvents()
+            for key in self._pressed:
+                if key == "closed":
+                    return "quit"
+                if key in keys:
+                    return keys[key]
+            self._pressed.clear()
+            if deadline is not None and clock.monotonic() > deadline:
+                return "timeout"
+            clock.sleep(0.02)
+
+    def _key(self, interactor, _event) -> None:
+        self._pressed.append(interactor.GetKeySym())
+
+    def close(self) -> None:
+        self.plotter.close()

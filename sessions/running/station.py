@@ -1,0 +1,181 @@
+"""A course station: instructions, a trial with the live view, feedback, and the next trial.
+
+``vascsim station`` runs :func:`run_station`: the instruction screen (what the task asks, the marks,
+the time budget, the controls, how to start), the space bar and a short countdown, the trial (a
+real-time session with its window, :func:`sessions.runner.run_session`), then the feedback screen
+(:func:`sessions.review.review_session`: the verdict against the study's standard, each benchmark,
+what to work on, strengths) and the choice of the next trial, a replay of this one against the
+experts, or quitting. Trials count on as ``vascsim run`` counts them. The screens' words are built
+by pure functions (:func:`instruction_lines`, :func:`feedback_lines`), tested without a display.
+"""
+
+from __future__ import annotations
+
+import time as clock
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from sessions.catalog import Catalog
+from sessions.review import SessionReview, review_session
+from sessions.running.live import LiveView
+from sessions.running.screens import Line, Screen, wrapped
+from sessions.tasks import TaskSpec, task_spec
+
+COUNTDOWN_S = 3
+START_KEYS = {"space": "start", "q": "quit", "Q": "quit", "Escape": "quit"}
+FEEDBACK_KEYS = {"n": "next", "space": "next", "r": "replay", "q": "quit", "Q": "quit", "Escape": "quit"}
+
+DEVICE_CONTROLS = {
+    "mouse": [
+        "Drag with the left mouse button: the needle holder follows the cursor across the view.",
+        "Mouse wheel: forward (away from you) moves the needle towards the wall, back lifts it.",
+        "Hold D or the right arrow: turn your wrist so the needle follows its own curve through the "
+        "wall; A or the left arrow turns it back (swapped for a left hand).",
+        "G: open or close the jaws (release the needle, and grasp it again at its tip to pull it "
+        "through). Forces are shown on the gauge, not felt.",
+    ],
+    "spacemouse": [
+        "The SpaceMouse is a rate control: push or tilt the cap and the needle holder moves at a speed "
+        "set by how far you push (no force is felt). Its first button closes and opens the jaws.",
+    ],
+    "openhaptics": [
+        "The Touch's stylus is the needle holder: you feel the wall. Its first button closes and opens "
+        "the jaws.",
+    ],
+    "scripted": ["A scripted hand places the stitch (a demonstration: no hand of yours is needed)."],
+}
+
+
+@dataclass(frozen=True)
+class StationPlan:
+    """Who practises what with which device: study, participant code, task, device."""
+
+    study: str
+    participant: str
+    task: str
+    device: str
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 60}:{seconds % 60:02d}"
+
+
+def instruction_lines(spec: TaskSpec, device: str, participant: str, standard_note: str = "") -> list[Line]:
+    """What the instruction screen says for ``spec`` with ``device``."""
+    stitches = spec.stitch_count
+    lines = [Line(f"{spec.name}: next trial for {participant}", "title")]
+    lines += wrapped(spec.description)
+    lines.append(Line("The marks", "heading"))
+    lines += wrapped(
+        "White dots mark where each bite should go in (outer wall) and come out (inner wall); the dark "
+        "red line is the wound's edge. Blue and orange dots show where your bites went in and came out; "
+        "the grey line under the needle is its shadow on the wall (how high it is above it)."
+    )
+    lines.append(
+        Line(
+            f"Time budget {_clock(spec.time_budget_s)} for {stitches} stitch{'es' if stitches > 1 else ''}",
+            "heading",
+        )
+    )
+    lines.append(Line("Controls", "heading"))
+    for text in DEVICE_CONTROLS.get(device.split(":")[0], []):
+        lines += wrapped(text)
+    if standard_note:
+        lines += wrapped(standard_note)
+    lines.append(Line(""))
+    lines.append(
+        Line(
+            "SPACE: start (3-second countdown)    Esc in the trial: stop (kept and scored)    Q: quit", "keys"
+        )
+    )
+    return lines
+
+
+def feedback_lines(review: SessionReview) -> list[Line]:
+    """What the feedback screen says about ``review``."""
+    if review.verdict == "pass":
+        lines = [Line(f"Trial {review.trial}: PASS, at the study's standard", "good")]
+    elif review.verdict == "not yet":
+        lines = [Line(f"Trial {review.trial}: not yet at the study's standard", "bad")]
+    else:
+        lines = [
+            Line(f"Trial {review.trial}: recorded and scored (no standard to judge against yet)", "title")
+        ]
+    lines += wrapped(review.standard[:1].upper() + review.standard[1:] + ".")
+    if review.benchmarks:
+        lines.append(Line("Against the standard", "heading"))
+        for bench in review.benchmarks:
+            style = "body" if bench["passed"] is None else ("good" if bench["passed"] else "bad")
+            for line in wrapped(bench["line"], indent="  "):
+                lines.append(Line(line.text, style if style == "body" else style + "-small"))
+    lines.append(Line("What to work on", "heading"))
+    for item in review.work_on or [{"kind": "", "line": "Nothing worse than the experts' middle half."}]:
+        lines += wrapped((f"{item['kind']}: " if item["kind"] else "") + item["line"], indent="  ")
+    if review.strengths:
+        lines.append(Line("What you did well", "heading"))
+        for item in review.strengths:
+            lines += wrapped(item["line"], indent="  ")
+    lines.append(Line(""))
+    lines.append(Line("N or SPACE: next trial    R: replay against the experts    Q: quit", "keys"))
+    return lines
+
+
+def run_station(
+    catalog: Catalog,
+    home: Path,
+    plan: StationPlan,
+    view: LiveView,
+    run_trial: Callable[[], str],
+    replay: Callable[[str], str] | None = None,
+    trials: int | None = None,
+) -> list[str]:
+    """The station's loop (see the module docstring); ``run_trial()`` runs one session and returns its
+    uid, ``replay(uid)`` renders it against the experts and returns where; ``trials`` bounds the loop.
+    Returns the uids of the trials run."""
+    from sessions.review import experts_on_task
+
+    spec = task_spec(plan.task)
+    uids: list[str] = []
+    screen: Screen | None = Screen(view.settings, "instructions")
+    try:
+        while trials is None or len(uids) < trials:
+            note = (
+                ""
+                if experts_on_task(catalog, plan.study, plan.task)
+                else "No expert has recorded this task in this study yet: your trials are scored, not judged."
+            )
+            screen.show(instruction_lines(spec, plan.device, plan.participant, note))
+            if screen.wait_for(START_KEYS) != "start":
+                break
+            _countdown(screen)
+            screen.close()
+            screen = None
+            uid = run_trial()
+            uids.append(uid)
+            review = review_session(catalog, uid)
+            screen = Screen(view.settings, "feedback")
+            screen.show(feedback_lines(review))
+            choice = screen.wait_for(FEEDBACK_KEYS)
+            while choice == "replay" and replay is not None:
+                screen.show([Line("Rendering the replay against the experts...", "heading")])
+                where = replay(uid)
+                screen.show([*feedback_lines(review), *wrapped(f"Replay written to {where}")])
+                choice = screen.wait_for(FEEDBACK_KEYS)
+            if choice != "next":
+                break
+            screen.close()
+            screen = Screen(view.settings, "instructions")
+    finally:
+        if screen is not None:
+            screen.close()
+    return uids
+
+
+def _countdown(screen: Screen) -> None:
+    for left in range(COUNTDOWN_S, 0, -1):
+        screen.show(
+            [Line(f"Starting in {left}", "title"), Line("Esc stops the trial; it is kept and scored.")]
+        )
+        clock.sleep(1.0)
