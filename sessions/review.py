@@ -146,7 +146,7 @@ def _against_standard(
         passed = analysis.proficiency.at[index, column] if column in analysis.proficiency else None
         passed = None if passed is None or pd.isna(passed) else bool(passed)
         unit = by_metric.get(bench.metric, {}).get("unit", "")
-        reading = "met" if passed else ("not measured" if passed is None else f"needs {bench.pass_if}")
+        reading = {True: "met", False: "not met", None: "not measured"}[passed]
         benchmarks.append(
             {
                 "metric": bench.metric,
@@ -155,7 +155,8 @@ def _against_standard(
                 "better": bench.better,
                 "pass_if": bench.pass_if,
                 "passed": passed,
-                "line": f"{bench.metric} {shown(value, unit)}: {reading} ({bench.better} is better)",
+                "line": f"{bench.metric} {shown(value, unit)}: {reading}, the standard is "
+                f"{bench.pass_if} ({bench.better} is better)",
             }
         )
     passed = bool(analysis.proficiency.at[index, "passed"])

@@ -336,3 +336,13 @@ def compare_images(
         raise RenderError(f"cannot read images for comparison: {a.geterror()} {b.geterror()}")
     result = oiio.ImageBufAlgo.compare(a, b, fail_threshold, warn_threshold)
     return int(result.nfail), float(result.meanerror), float(result.maxerror)
+
+
+def read_image(path: str | Path) -> NDArray[np.uint8]:
+    """An image file's pixels through OpenImageIO: (H, W, C) uint8."""
+    import OpenImageIO as oiio
+
+    buffer = oiio.ImageBuf(str(path))
+    if buffer.has_error:
+        raise RenderError(f"cannot read {path}: {buffer.geterror()}")
+    return buffer.get_pixels(oiio.UINT8)

@@ -93,11 +93,22 @@ class HudTracker:
             clock=f"{_clock(now)} of {_clock(limits.time_budget_s)}",
             over_time=now > limits.time_budget_s,
             stitch="all stitches placed" if done else f"stitch {stitch} of {limits.stitches}",
-            force=f"force {magnitude:.2f} N",
+            force=f"force {magnitude:.2f} N" + self._force_context(),
             force_fraction=min(magnitude / limits.gauge_full_n, 1.0),
             state=STATE_WORDS.get(self._state, self._state),
             warning=self._warning if now <= self._warning_until else "",
         )
+
+
+    def _force_context(self) -> str:
+        """What the gauge's marks are: the experts' middle half (green) and the device's limit (red)."""
+        limits, parts = self.limits, []
+        if limits.expert_force_n is not None:
+            low, high = limits.expert_force_n
+            parts.append(f"experts {low:.2f}-{high:.2f}")
+        if limits.device_max_n > 0:
+            parts.append(f"device max {limits.device_max_n:.2f}")
+        return f" ({'; '.join(parts)} N)" if parts else ""
 
 
 def _clock(seconds: float) -> str:

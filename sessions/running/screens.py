@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 from sessions.running.window import ViewSettings
 
-WRAP = 86
-"""Characters a line of body text is wrapped at (fits 960 px at the body's size)."""
+WRAP = 118
+"""Characters a line of body text is wrapped at (fits 960 px at the body's size, 15 px)."""
 
 
 @dataclass(frozen=True)
@@ -66,27 +66,36 @@ class Screen:
         self._actors: list = []
 
     def show(self, lines: list[Line]) -> None:
-        """Replace what the screen says with ``lines``, top to bottom."""
-        from vtkmodules.vtkRenderingCore import vtkTextActor
-
+        """Replace what the screen says with ``lines``, top to bottom (``keys`` lines at the bottom)."""
         renderer = self.plotter.renderer
         for actor in self._actors:
             renderer.RemoveViewProp(actor)
         self._actors = []
         y = self.settings.size[1] - 44
-        for line in lines:
-            size, bold, colour = STYLES[line.style]
-            actor = vtkTextActor()
-            actor.SetInput(line.text)
-            prop = actor.GetTextProperty()
-            prop.SetFontSize(size)
-            prop.SetBold(bold)
-            prop.SetColor(*colour)
-            actor.SetDisplayPosition(28, y)
-            renderer.AddViewProp(actor)
-            self._actors.append(actor)
+        flowing = [line for line in lines if line.style != "keys"]
+        for line in [line for line in lines if line.style == "keys"]:  # pinned to the bottom
+            self._place(line, 16)
+        for line in flowing:
+            size = STYLES[line.style][0]
+            if line.style == "heading":
+                y -= 8
+            self._place(line, y)
             y -= int(size * 1.55) + (6 if line.style in ("title", "heading") else 0)
         self.plotter.render()
+
+    def _place(self, line: Line, y: int) -> None:
+        from vtkmodules.vtkRenderingCore import vtkTextActor
+
+        size, bold, colour = STYLES[line.style]
+        actor = vtkTextActor()
+        actor.SetInput(line.text)
+        prop = actor.GetTextProperty()
+        prop.SetFontSize(size)
+        prop.SetBold(bold)
+        prop.SetColor(*colour)
+        actor.SetDisplayPosition(28, y)
+        self.plotter.renderer.AddViewProp(actor)
+        self._actors.append(actor)
 
     def wait_for(self, keys: dict[str, str], timeout: float | None = None) -> str:
         """Block until one of ``keys`` (key name -> choice) is pressed, the window is closed

@@ -83,7 +83,7 @@ def instruction_lines(spec: TaskSpec, device: str, participant: str, standard_no
     for text in DEVICE_CONTROLS.get(device.split(":")[0], []):
         lines += wrapped(text)
     if standard_note:
-        lines += wrapped(standard_note)
+        lines += wrapped(standard_note, "bad-small")
     lines.append(Line(""))
     lines.append(
         Line(

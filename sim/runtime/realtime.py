@@ -492,7 +492,8 @@ def _collect(
         simulation.stop("haptic_failed", 0.0)
     simulation.haptic_log = log
     end = float(log.time[-1]) if log.count else 0.0
-    simulation.events.append(RuntimeEvent("stopped", end, "runtime", simulation.stop_reason or "completed"))
+    # recorded too: why the session ended (completed, stopped_by_trainee, interrupted, task_done, ...)
+    simulation._emit(RuntimeEvent("stopped", end, "runtime", simulation.stop_reason or "completed"))
     result = simulation.run_result(end, wall)
     result.telemetry = {layer: simulation.telemetry[layer].summary() for layer in (*LAYERS, FORCE_PATH)}
     return result

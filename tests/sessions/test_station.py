@@ -1,0 +1,352 @@
+"""The station as a trainee uses it: a real window under Xvfb, driven by xdotool through its event loop.
+
+Each test starts the real command (`vascsim station` or `vascsim run`) on a virtual display, waits for
+its windows by title, presses keys and drags the mouse as a person would, and reads the catalog and
+the recording afterwards. Screenshots of every screen are saved in the test's folder (the ones in
+docs/station.md came from here).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from recorder import open_session
+from sessions.catalog import Catalog
+from sessions.running.scene import START_HEIGHT_M, access_direction, start_pose, task_camera
+from sessions.store import CatalogStore
+from sessions.tasks import task_spec
+from sim.devices.mouse import MouseMapping, needle_circle
+from sim.needle import Needle, rotation_about
+
+TASK = "interrupted-stitch"
+VASCSIM = str(Path(sys.executable).with_name("vascsim"))
+WINDOW = (960, 540)
+STATION = [
+    VASCSIM,
+    "station",
+    "--study",
+    "Course",
+    "--participant",
+    "P1",
+    "--device",
+    "mouse",
+    "--trials",
+    "1",
+]
+
+
+@pytest.fixture(scope="module")
+def display():
+    """A virtual 1366x768 display for the module (Xvfb picks a free display number itself)."""
+    read, write = os.pipe()
+    server = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1366x768x24", "-nolisten", "tcp"],
+        pass_fds=(write,),
+        stderr=subprocess.DEVNULL,
+    )
+    os.close(write)
+    number = b""
+    while not number.endswith(b"\n"):
+        chunk = os.read(read, 16)
+        if not chunk:
+            raise RuntimeError("Xvfb did not start")
+        number += chunk
+    os.close(read)
+    yield f":{int(number)}"
+    server.terminate()
+    server.wait(10)
+
+
+@pytest.fixture(scope="module")
+def course(tmp_path_factory):
+    """A course with two experts and a trainee who each placed one scripted stitch (simulated time),
+    so a trainee's trial at the station is judged against a standard; and P1, who has not started."""
+    from sessions.config import database_url
+    from sessions.runner import SessionPlan, run_session
+    from sessions.synthetic import pass_parameters
+
+    home = tmp_path_factory.mktemp("station-home")
+    catalog = Catalog(database_url(home))
+    store = CatalogStore(catalog)
+    store.create_study("Course")
+    for code, group, skill in (("E1", "expert", 0.95), ("E2", "expert", 0.9), ("T1", "trainee", 0.3)):
+        store.add_participant("Course", code, group, group)
+        plan = SessionPlan("Course", code, TASK, None)
+        run_session(catalog, home, plan, lambda trial, s=skill: pass_parameters(s, seed=trial))
+    store.add_participant("Course", "P1", "trainee", "trainee")
+    catalog.close()
+    return home
+
+
+@pytest.fixture
+def station_home(course, tmp_path):
+    """A copy of the course for one test (a test's trials never reach another's)."""
+    home = tmp_path / "home"
+    shutil.copytree(course, home)
+    from tests.conftest import repoint_session_folders
+
+    repoint_session_folders(f"sqlite:///{home / 'catalog.sqlite'}", course, home)
+    return home
+
+
+def environment(display: str, home: Path) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "VTK_DEFAULT_OPENGL_WINDOW"}  # on screen, not EGL
+    env.update(DISPLAY=display, VASCSIM_HOME=str(home))
+    env.pop("VASCSIM_DATABASE_URL", None)
+    return env
+
+
+class Person:
+    """A trainee at the station: xdotool on ``display``, screenshots into ``folder``."""
+
+    def __init__(self, display: str, folder: Path) -> None:
+        self.env = dict(os.environ, DISPLAY=display)
+        self.folder = folder
+
+    def xdo(self, *args) -> str:
+        done = subprocess.run(["xdotool", *map(str, args)], env=self.env, capture_output=True, text=True)
+        return done.stdout.strip()
+
+    def window(self, title: str, timeout: float = 120.0, process: subprocess.Popen | None = None) -> str:
+        """The id of the first window whose title contains ``title``, once it is shown."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = self.xdo("search", "--onlyvisible", "--name", title)
+            if found:
+                return found.split()[0]
+            if process is not None and process.poll() is not None:
+                raise AssertionError(f"the program ended before a {title!r} window: {process.stderr.read()}")
+            time.sleep(0.2)
+        raise AssertionError(f"no window titled {title!r} after {timeout:.0f} s")
+
+    def gone(self, window: str, timeout: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if window not in self.xdo("search", "--onlyvisible", "--name", "vascsim").split():
+                return
+            time.sleep(0.2)
+        raise AssertionError(f"window {window} still open after {timeout:.0f} s")
+
+    def screenshot(self, name: str) -> np.ndarray:
+        """The screen as a PNG in the test's folder, and its pixels (the window's part)."""
+        path = self.folder / f"{name}.png"
+        subprocess.run(["import", "-window", "root", str(path)], env=self.env, check=True)
+        from sim.render import read_image
+
+        return read_image(path)[: WINDOW[1], : WINDOW[0]]
+
+    def key(self, window: str, key: str) -> None:
+        self.xdo("key", "--window", window, key)
+
+    def hold(self, window: str, key: str, seconds: float) -> None:
+        self.xdo("keydown", "--window", window, key)
+        time.sleep(seconds)
+        self.xdo("keyup", "--window", window, key)
+
+
+class HandGeometry:
+    """Where the needle holder is and how a mouse moves it: the station's own camera and mapping
+    (sessions.running.scene, sim.devices.mouse), so the test's moves land where it means them to."""
+
+    def __init__(self) -> None:
+        spec = task_spec(TASK)
+        self.spec = spec
+        position, focal, up = (np.array(v) for v in task_camera(spec))
+        self.camera = position
+        self.into = (focal - position) / np.linalg.norm(focal - position)
+        self.right = np.cross(self.into, up) / np.linalg.norm(np.cross(self.into, up))
+        self.up = np.cross(self.right, self.into)
+        self.start = start_pose(spec)
+        self.step = MouseMapping().wheel_step_m
+
+    def per_pixel(self, holder: np.ndarray) -> float:
+        depth = float(np.dot(holder - self.camera, self.into))
+        return 2 * depth * math.tan(math.radians(15.0)) / WINDOW[1]  # VTK's 30 deg view angle
+
+    def move(self, person: Person, window: str, holder: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """Move the holder by ``delta`` (m): wheel notches along the view, then a drag across it."""
+        notches = int(round(float(np.dot(delta, self.into)) / self.step))
+        for _ in range(abs(notches)):
+            person.xdo("click", "--window", window, 4 if notches > 0 else 5)
+            time.sleep(0.01)
+        holder = holder + notches * self.step * self.into
+        across = delta - np.dot(delta, self.into) * self.into
+        scale = self.per_pixel(holder)
+        dx, dy = np.dot(across, self.right) / scale, np.dot(across, self.up) / scale
+        x0, y0 = 300, 300
+        person.xdo("mousemove", "--window", window, x0, y0)
+        time.sleep(0.1)
+        person.xdo("mousedown", 1)
+        for k in range(1, 11):
+            person.xdo("mousemove", "--window", window, round(x0 + dx * k / 10), round(y0 - dy * k / 10))
+            time.sleep(0.03)
+        person.xdo("mouseup", 1)
+        time.sleep(0.1)
+        return holder + across
+
+
+def events_of(home: Path, uid: str) -> list[str]:
+    return open_session(home / "sessions" / uid).events_frame()["kind"].tolist()
+
+
+def stop_reason(home: Path, uid: str) -> str:
+    """Why the recorded session ended (its ``stopped`` event)."""
+    events = open_session(home / "sessions" / uid).events_frame()
+    return events.loc[events["kind"] == "stopped", "detail"].iloc[-1]
+
+
+def session_row(home: Path, uid: str):
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    try:
+        facts = CatalogStore(catalog).session_facts(uid)
+        return facts.session.status, facts.metrics
+    finally:
+        catalog.close()
+
+
+def only_uid(home: Path) -> str:
+    sessions = sorted(p.name for p in (home / "sessions").iterdir())
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    try:
+        mine = [r.uid for r in CatalogStore(catalog).sessions("Course") if r.participant == "P1"]
+    finally:
+        catalog.close()
+    assert len(mine) == 1 and mine[0] in sessions
+    return mine[0]
+
+
+@pytest.mark.slow
+def test_a_trainee_places_a_whole_stitch_with_keyboard_and_mouse(display, station_home, tmp_path):
+    """Instructions, space, a countdown, the live view; approach with the wheel and a drag, turn the
+    wrist with D until the needle is through, release with G, drag the jaws to the tip, grasp, turn
+    on to pull it through: the task is done, the feedback screen gives the verdict, Q quits."""
+    person, hand = Person(display, tmp_path), HandGeometry()
+    station = subprocess.Popen(
+        STATION,
+        env=environment(display, station_home),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        instructions = person.window("vascsim: instructions", process=station)
+        time.sleep(0.5)
+        person.screenshot("1-instructions")
+        person.key(instructions, "space")
+        live = person.window(f"vascsim: {TASK}", process=station)
+        time.sleep(1.0)
+        before = person.screenshot("2-live-start")
+        approach = access_direction(hand.spec)
+        holder = hand.move(person, live, hand.start.position, -(START_HEIGHT_M + 2e-4) * approach)
+        time.sleep(0.5)
+        person.screenshot("3-live-touching")
+        turn_seconds = 2.0
+        person.hold(live, "d", turn_seconds)  # the wrist turns the needle through the wall
+        time.sleep(0.4)
+        through = person.screenshot("4-live-through")
+        person.key(live, "g")  # open the jaws: the needle stays in the wall
+        time.sleep(0.3)
+        # the jaws go to the needle's tip, where the turn took it
+        vertices = Needle.curved().world_vertices(hand.start)
+        centre, axis = needle_circle(vertices)
+        shift = holder - hand.start.position
+        turned = rotation_about(axis, turn_seconds * math.radians(MouseMapping().turn_rate_deg_s))
+        tip = centre + shift + turned @ (vertices[0] - centre)
+        jaws = centre + shift + turned @ (hand.start.position - centre)
+        hand.move(person, live, jaws, tip - jaws)
+        person.key(live, "g")  # grasp the tip
+        time.sleep(0.3)
+        person.hold(live, "d", 3.0)  # and pull the needle through along its curve
+        feedback = person.window("vascsim: feedback", process=station)
+        time.sleep(0.5)
+        person.screenshot("5-feedback")
+        person.key(feedback, "q")
+        out, err = station.communicate(timeout=60)
+    finally:
+        if station.poll() is None:
+            station.kill()
+    assert station.returncode == 0, err
+    assert "Traceback" not in err
+    assert "1 trial(s) recorded and scored" in out
+    uid = only_uid(station_home)
+    status, metrics = session_row(station_home, uid)
+    assert status == "complete" and metrics["task_time"] > 1.0
+    kinds = events_of(station_home, uid)
+    for kind in ("contact_start", "pierce", "release", "regrab", "pull_through"):
+        assert kind in kinds, kinds
+    assert np.abs(through.astype(int) - before.astype(int)).max() > 50  # the scene moved on screen
+
+
+@pytest.mark.slow
+def test_escape_mid_session_keeps_a_complete_scored_session(display, station_home, tmp_path):
+    person = Person(display, tmp_path)
+    station = subprocess.Popen(
+        STATION,
+        env=environment(display, station_home),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        person.key(person.window("vascsim: instructions", process=station), "space")
+        live = person.window(f"vascsim: {TASK}", process=station)
+        time.sleep(2.0)
+        person.key(live, "Escape")
+        feedback = person.window("vascsim: feedback", process=station)
+        time.sleep(0.5)
+        shown = person.screenshot("feedback-after-escape")
+        person.key(feedback, "q")
+        out, err = station.communicate(timeout=60)
+    finally:
+        if station.poll() is None:
+            station.kill()
+    assert station.returncode == 0 and "Traceback" not in err, err
+    uid = only_uid(station_home)
+    status, metrics = session_row(station_home, uid)
+    assert status == "complete" and 1.0 < metrics["task_time"] < 30.0
+    assert stop_reason(station_home, uid) == "stopped_by_trainee"
+    assert shown.std() > 10  # the feedback screen has something on it
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_the_terminal_ends_the_run_complete_with_no_traceback(display, station_home):
+    """`vascsim run --device mouse` with no --duration (a live device runs until stopped) opens the
+    window; Ctrl-C (SIGINT to the terminal's process group) ends it complete and scored, and the
+    terminal's last lines are the verdict and what to work on."""
+    person = Person(display, station_home)
+    run = subprocess.Popen(
+        [VASCSIM, "run", "--study", "Course", "--participant", "P1", "--task", TASK, "--device", "mouse"],
+        env=environment(display, station_home),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a terminal's foreground job
+    )
+    try:
+        person.window(f"vascsim: {TASK}", process=run)
+        time.sleep(2.0)
+        os.killpg(run.pid, signal.SIGINT)
+        out, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    assert run.returncode == 0, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    uid = only_uid(station_home)
+    status, _ = session_row(station_home, uid)
+    assert status == "complete"
+    lines = out.strip().splitlines()
+    assert lines[0].startswith(f"session {uid} (P1, trial 1) complete and scored")
+    assert lines[1].startswith("verdict: ")
+    assert any(line.startswith("work on") for line in lines) and lines[-1].startswith("all metrics:")
+    assert stop_reason(station_home, uid) == "interrupted"
