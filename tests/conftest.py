@@ -161,3 +161,27 @@ def demo_catalog(tmp_path_factory, copy_demo):
     catalog = Catalog(copy_demo(home))
     yield catalog, home
     catalog.close()
+
+
+@pytest.fixture(scope="session")
+def display():
+    """A virtual 1366x768 X display for window tests (Xvfb picks a free display number itself)."""
+    import subprocess
+
+    read, write = os.pipe()
+    server = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1366x768x24", "-nolisten", "tcp"],
+        pass_fds=(write,),
+        stderr=subprocess.DEVNULL,
+    )
+    os.close(write)
+    number = b""
+    while not number.endswith(b"\n"):
+        chunk = os.read(read, 16)
+        if not chunk:
+            raise RuntimeError("Xvfb did not start")
+        number += chunk
+    os.close(read)
+    yield f":{int(number)}"
+    server.terminate()
+    server.wait(10)

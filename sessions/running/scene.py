@@ -15,8 +15,8 @@ from sessions.tasks import TaskSpec
 from sim.devices.suturing import SuturingPass, SuturingPassParameters
 from sim.needle import Needle, Pose
 
-CAMERA_DISTANCE_M = 0.019
-"""The camera's distance from the stitch: about 10 mm of wall fills the height of the view."""
+CAMERA_DISTANCE_M = 0.024
+"""The camera's distance from what it looks at: about 13 mm of the scene fills the height of the view."""
 CAMERA_TILT = 0.8
 """The camera looks along the access direction tilted this much (tan of the angle, about 39 deg)
 along the wound, so the needle's curve, which lies in the plane of the normal and the bite, is seen
@@ -35,10 +35,11 @@ def access_direction(spec: TaskSpec) -> NDArray[np.float64]:
 
 
 def task_camera(spec: TaskSpec) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-    """(position, focal point, view up) looking down the task's access direction at its marks."""
+    """(position, focal point, view up) looking down the task's access direction at its marks and the
+    loaded needle above the first (the focal point is between the wall and where the needle starts)."""
     marks = spec.placement["entry_targets"] if spec.placement else [spec.entry]
-    focal = np.mean(np.asarray(marks, dtype=np.float64), axis=0)
     approach = access_direction(spec)
+    focal = np.mean(np.asarray(marks, dtype=np.float64), axis=0) + 0.5 * START_HEIGHT_M * approach
     along = np.cross(
         np.asarray(spec.normal, dtype=np.float64), np.asarray(spec.bite_direction, dtype=np.float64)
     )

@@ -169,6 +169,7 @@ class LiveWindow:
             self._place_shadow(frame.needle)
         self._show_bites()
         self._show_hud(now, force)
+        renderer.plotter.renderer.ResetCameraClippingRange()  # the needle moves: never clip it
         renderer.plotter.render_window.Render()  # draws and swaps
         self.frames += 1
         if snapshot is not None and self.latency_log is not None:
@@ -196,8 +197,8 @@ class LiveWindow:
         self._texts = {}
         for name, x, y, size, bold in (
             ("stitch", 12, height - 30, 18, True),
-            ("clock", int(0.36 * width), height - 30, 18, True),
-            ("force", int(0.58 * width), height - 30, 16, False),
+            ("clock", int(0.24 * width), height - 30, 18, True),
+            ("force", int(0.42 * width), height - 30, 15, False),
             ("state", 12, height - 56, 14, False),
             ("warning", 12, 14, 16, True),
         ):
@@ -211,7 +212,7 @@ class LiveWindow:
             self._texts[name] = actor
         self._texts["warning"].GetTextProperty().SetColor(0.75, 0.05, 0.05)
         self._gauge = _ForceGauge(
-            plotter.renderer, (int(0.58 * width), height - 44), int(0.22 * width), self.facts.limits
+            plotter.renderer, (int(0.42 * width), height - 44), int(0.36 * width), self.facts.limits
         )
 
     def _place_shadow(self, needle: NDArray[np.float64]) -> None:

@@ -46,28 +46,6 @@ STATION = [
 
 
 @pytest.fixture(scope="module")
-def display():
-    """A virtual 1366x768 display for the module (Xvfb picks a free display number itself)."""
-    read, write = os.pipe()
-    server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1366x768x24", "-nolisten", "tcp"],
-        pass_fds=(write,),
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write)
-    number = b""
-    while not number.endswith(b"\n"):
-        chunk = os.read(read, 16)
-        if not chunk:
-            raise RuntimeError("Xvfb did not start")
-        number += chunk
-    os.close(read)
-    yield f":{int(number)}"
-    server.terminate()
-    server.wait(10)
-
-
-@pytest.fixture(scope="module")
 def course(tmp_path_factory):
     """A course with two experts and a trainee who each placed one scripted stitch (simulated time),
     so a trainee's trial at the station is judged against a standard; and P1, who has not started."""
@@ -350,3 +328,74 @@ def test_ctrl_c_in_the_terminal_ends_the_run_complete_with_no_traceback(display,
     assert lines[1].startswith("verdict: ")
     assert any(line.startswith("work on") for line in lines) and lines[-1].startswith("all metrics:")
     assert stop_reason(station_home, uid) == "interrupted"
+
+
+class RecordedReports:
+    """A SpaceMouse's HID handle that plays report bytes (report id first, the documented formats) at
+    their times from its first read: what the live decoder reads from a real device."""
+
+    def __init__(self, reports: list[tuple[float, bytes]]) -> None:
+        self.reports, self.first = list(reports), None
+
+    def read(self, size: int) -> list[int]:
+        now = time.perf_counter()
+        self.first = self.first if self.first is not None else now
+        if self.reports and now - self.first >= self.reports[0][0]:
+            return list(self.reports.pop(0)[1][:size])
+        return []
+
+    def close(self) -> None:
+        """Nothing to close."""
+
+
+@pytest.mark.slow
+def test_spacemouse_reports_drive_the_needle_in_the_window(display, course, tmp_path, monkeypatch):
+    """Report bytes of a SpaceMouse (jaws closed, then the cap pushed along z for a second, then let go)
+    go through the live decoder in the haptic process; the needle moves on screen and in the log."""
+    import struct
+
+    from sessions.config import cache_dir
+    from sessions.running.live import LiveView
+    from sessions.tasks import task_simulation
+    from sim.devices.spacemouse import FULL_SCALE, SpaceMouse
+
+    monkeypatch.setenv("DISPLAY", display)
+    monkeypatch.delenv("VTK_DEFAULT_OPENGL_WINDOW", raising=False)
+    push = 100  # of +-350: 100 / 350 x 20 mm/s = 5.7 mm/s
+    reports = [
+        (0.0, bytes([3]) + (1).to_bytes(4, "little")),  # button 1 down: the jaws hold the needle
+        (1.5, bytes([1]) + struct.pack("<6h", 0, 0, push, 0, 0, 0)),  # 13-byte report: push along z
+        (2.5, bytes([1]) + struct.pack("<6h", 0, 0, 0, 0, 0, 0)),  # let go
+    ]
+    spec = task_spec(TASK)
+    device = SpaceMouse(source=RecordedReports(reports), start=start_pose(spec))
+    catalog = Catalog(f"sqlite:///{course / 'catalog.sqlite'}")
+    try:
+        window = LiveView().window(spec, device, catalog, course, (1, 1))
+    finally:
+        catalog.close()
+    simulation = task_simulation(TASK, device, cache_dir(course), renderer=window)
+    window.simulation = simulation
+    person = Person(display, tmp_path)
+    shots: dict[str, np.ndarray] = {}
+
+    def watch() -> None:
+        person.window(f"vascsim: {TASK}")
+        time.sleep(0.6)
+        shots["before"] = person.screenshot("spacemouse-before")
+        time.sleep(2.2)
+        shots["after"] = person.screenshot("spacemouse-after")
+
+    import threading
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    result = simulation.run_realtime(3.6)  # the reports' clock starts at the haptic set-up's first read
+    watcher.join(30)
+    log = result.haptic
+    moved = log.position[-1] - log.position[0]
+    expected = push / FULL_SCALE * 0.02 * 1.0  # m: one second at that speed
+    assert moved[2] == pytest.approx(expected, rel=0.1) and abs(moved[0]) < 1e-6 and abs(moved[1]) < 1e-6
+    changed = np.abs(shots["after"].astype(int) - shots["before"].astype(int))[80:].max(axis=2) > 60
+    assert changed.sum() > 300  # the needle (and its shadow) moved on screen, below the strip
+    assert "display" not in {e.layer for e in result.events if e.kind == "layer_failed"}

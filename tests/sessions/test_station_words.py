@@ -1,0 +1,97 @@
+"""What the station says, checked without a display: the heads-up strip, the instruction and feedback
+screens' words, the terminal's closing lines, the live scene's camera and start pose."""
+
+import numpy as np
+import pytest
+
+from sessions.cli.run import review_lines
+from sessions.review import SessionReview
+from sessions.running.hud import HudLimits, HudTracker
+from sessions.running.scene import START_HEIGHT_M, access_direction, start_pose, task_camera
+from sessions.running.station import feedback_lines, instruction_lines
+from sessions.tasks import task_spec
+from sim.needle import Needle
+
+LIMITS = HudLimits(60.0, 3, (0.8, 1.0), 0.88, 8e5)
+
+
+def test_the_strip_counts_stitches_marks_bites_and_says_what_is_unsafe():
+    hud = HudTracker(LIMITS)
+    tip = np.array([0.001, 0.002, 0.003])
+    steps = [
+        (0.1, "free", 0.0, 0.0),
+        (0.2, "contact", 0.5, 1e5),
+        (0.3, "pierced", 0.9, 9e5),  # over the damage stress
+        (0.4, "exited", 0.3, 1e5),
+        (0.5, "free", 0.0, 0.0),  # pulled through: one stitch done
+    ]
+    for now, state, force, stress in steps:
+        hud.update(now, state, np.array([0.0, 0.0, force]), tip, stress)
+    assert hud.completed == 1 and len(hud.entries) == 1 and len(hud.exits) == 1
+    reading = hud.reading(0.5, np.zeros(3))
+    assert reading.stitch == "stitch 2 of 3"
+    assert reading.clock == "0:00 of 1:00" and not reading.over_time
+    assert reading.warning.startswith("wall over-stressed near the needle")
+    assert reading.force == "force 0.00 N (experts 0.80-1.00; device max 0.88 N)"
+    assert hud.reading(2.6, np.zeros(3)).warning == ""  # a warning shows for two seconds
+    late = hud.reading(75.0, np.array([0.0, 3.0, 4.0]))
+    assert late.over_time and late.clock == "1:15 of 1:00" and late.force_fraction == 1.0
+    hud.update(76.0, "contact", np.array([0.9, 0.0, 0.0]), tip, 0.0)
+    assert "device's limit (0.88 N)" in hud.reading(76.0, np.zeros(3)).warning
+
+
+def test_the_instruction_screen_says_the_task_marks_budget_controls_and_how_to_start():
+    spec = task_spec("arteriotomy-closure")
+    words = [line.text for line in instruction_lines(spec, "mouse", "T07", "no experts yet")]
+    text = " ".join(words)
+    assert words[0] == "arteriotomy-closure: next trial for T07"
+    assert "Time budget 3:00 for 3 stitches" in words
+    assert "Drag with the left mouse button" in text and "G: open or close the jaws" in text
+    assert "no experts yet" in text and "SPACE: start" in words[-1]
+    spacemouse = " ".join(line.text for line in instruction_lines(spec, "spacemouse", "T07"))
+    assert "rate control" in spacemouse
+
+
+def review(verdict: str) -> SessionReview:
+    return SessionReview(
+        "S-1",
+        "interrupted-stitch",
+        4,
+        verdict,
+        "the study's benchmarks on interrupted-stitch: 1 metric(s), rule mean, from 5 expert(s)",
+        [{"metric": "entry_to_target", "passed": False, "line": "entry_to_target 0.6 mm: not met"}],
+        [{"metric": "peak_force", "kind": "safety", "line": f"Ease off. ({n})"} for n in range(4)],
+        [],
+    )
+
+
+def test_the_feedback_screen_leads_with_the_verdict_then_the_standard_then_what_to_work_on():
+    lines = feedback_lines(review("not yet"))
+    assert (lines[0].text, lines[0].style) == ("Trial 4: not yet at the study's standard", "bad")
+    texts = [line.text for line in lines]
+    assert texts.index("Against the standard") < texts.index("What to work on")
+    assert any("entry_to_target 0.6 mm: not met" in t for t in texts)
+    assert feedback_lines(review("pass"))[0].style == "good"
+    assert "no standard" in feedback_lines(review("no standard"))[0].text
+
+
+def test_the_terminal_ends_with_the_verdict_and_three_things_to_work_on():
+    lines = review_lines(review("not yet"), "T07")
+    assert lines[0] == "session S-1 (T07, trial 4) complete and scored"
+    assert lines[1].startswith("verdict: NOT YET at the study's standard; the study's benchmarks")
+    numbered = [line for line in lines if line.lstrip()[:2] in ("1.", "2.", "3.", "4.")]
+    assert len(numbered) == 3  # three, not four
+    assert lines[-1] == "all metrics: vascsim sessions show S-1"
+
+
+@pytest.mark.parametrize("task", ["interrupted-stitch", "restricted-access", "wall-stitch"])
+def test_the_needle_starts_square_above_the_first_mark_and_the_camera_looks_down_the_access(task):
+    spec = task_spec(task)
+    pose = start_pose(spec)
+    tip = Needle.curved().world_vertices(pose)[0]
+    approach = access_direction(spec)
+    np.testing.assert_allclose(tip, np.asarray(spec.entry) + START_HEIGHT_M * approach, atol=1e-12)
+    position, focal, up = (np.array(v) for v in task_camera(spec))
+    looking = (position - focal) / np.linalg.norm(position - focal)
+    assert np.dot(looking, approach) > 0.7  # from the side the hand comes from, within 45 deg
+    assert abs(np.dot(up, looking)) < 1e-12
