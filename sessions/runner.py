@@ -38,6 +38,7 @@ from sessions.tasks import region_presets, session_tissue, task_preset, task_sim
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
 from sim.needle import Needle
+from sim.runtime import RuntimeSettings
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,11 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
         "haptic_scale": 1.0,  # the device is sent the tissue's force, clamped to its rating
         "placement": task_spec(plan.task).placement,  # the wound edge and targets bites are scored against
     }
+
+
+LIVE_SETTINGS = RuntimeSettings(display_delay_frames=0, display_on_haptic_core=True)
+"""A person's live view draws the newest graphics frame, with the haptic core's idle time to draw it in
+(sim.runtime.RuntimeSettings)."""
 
 
 def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: SuturingPassParameters | None):
@@ -181,9 +187,9 @@ def run_session(
             orm.delete(catalog.recorded_session(orm, uid))
         raise
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
-    simulation = RuntimeRecorder(writer).attach(
-        task_simulation(plan.task, device, cache_dir(home), renderer=window)
-    )
+    options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
+    simulated = task_simulation(plan.task, device, cache_dir(home), **options)
+    simulation = RuntimeRecorder(writer).attach(simulated)
     if window is not None:
         from sessions.running.scene import stop_when_done
 

@@ -110,6 +110,10 @@ def demo(small: bool, as_json: bool) -> None:
         "open the results in the dashboard: vascsim users add NAME --role admin; vascsim serve; "
         f"then http://127.0.0.1:8000/studies/{study_id}"
     )
+    click.echo(
+        f"try a stitch yourself (on a display; keyboard and mouse): vascsim participants add ME --study "
+        f"{DEMO_STUDY} --level trainee; vascsim station --study {DEMO_STUDY} --participant ME --device mouse"
+    )
 
 
 def rerun_lines(result) -> list[str]:

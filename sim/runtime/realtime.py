@@ -66,6 +66,9 @@ FORCE_PATH = "haptic force path"
 """The telemetry of each haptic tick's force path (holder publish, force interpolation, safety filter,
 log: one compiled call, sim/runtime/force_path.py), within the whole haptic step's; the step also
 reads the device, writes its force and records the sample."""
+DISPLAY_PHASE = 0.004
+"""s after each graphics deadline at which a display that draws the newest graphics frame steps
+(the graphics step, global collision detection, takes 1-2 ms)."""
 LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
 """SCHED_FIFO priorities of the FEM and graphics threads (the haptic process has 50). They sleep
 most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
@@ -242,13 +245,16 @@ def _start_display_process(
         control.mark_display_ready()
         os.nice(WORKER_NICENESS)
         threadpool_limits(1)
-        if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
+        spare = not simulation.settings.display_on_haptic_core
+        if spare and hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
             os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:-1]))  # off the haptic core
         gc.freeze()
         period = simulation.settings.period("display")
         start, k = control.wait_for_start(), 0
+        # drawing the newest graphics frame: just after the graphics layer posts it
+        phase = DISPLAY_PHASE if simulation.settings.display_delay_frames == 0 else 0.0
         while not control.stop_requested and control.haptic_state == ControlBlock.RUNNING:
-            deadline = start + k * period
+            deadline = start + k * period + phase
             wait = deadline - clock.perf_counter()
             if wait > 0:
                 clock.sleep(min(wait, period))

@@ -80,6 +80,17 @@ class RuntimeSettings:
     haptic_scale: float = 1.0
     """Factor on the tissue's force before the device's clamp and rate limit, for a device that cannot
     render the tissue's force (a session header records it); the recorded reaction force is unscaled."""
+    display_on_haptic_core: bool = False
+    """Let the display process (and a software renderer's raster threads) also use the haptic core's idle
+    time; the haptic process, real-time scheduled, preempts them. An on-screen window under Mesa's
+    llvmpipe needs it: confined to the one spare core, which the FEM and graphics threads and the
+    column worker share, a 960x540 frame took 27 ms to draw (18 ms with that core to itself, 10 ms
+    with both) and the window ran at 25 frames/s; with it, 29-30 frames/s and the haptic loop's p99
+    period unchanged (1.00 ms; docs/benchmarks.md, session 19)."""
+    display_delay_frames: int = 1
+    """1: the display renders the previous graphics frame (one video frame of delay, the paper's
+    design); 0: the newest one, drawn a few ms after the graphics layer posts it (a person's live view:
+    the FEM state it shows is still at most one frame old, and motion reaches the screen 33 ms sooner)."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.haptic_scale <= 1.0:
@@ -100,6 +111,10 @@ class RuntimeSettings:
                 raise RuntimeSettingsError(f"{name} must be 0-0.1 m; got {getattr(self, name)}")
         if not 0.0 <= self.force_delay <= 0.2:
             raise RuntimeSettingsError(f"force_delay must be 0-0.2 s; got {self.force_delay}")
+        if self.display_delay_frames not in (0, 1):
+            raise RuntimeSettingsError(
+                f"display_delay_frames must be 0 or 1; got {self.display_delay_frames}"
+            )
 
     def period(self, layer: str) -> float:
         return 1.0 / getattr(self, f"{layer}_rate")
@@ -377,6 +392,8 @@ class Simulation:
 
     def display_step(self, now: float) -> None:
         frame, self._previous_frame = self._previous_frame, self.graphics.get()
+        if self.settings.display_delay_frames == 0:
+            frame = self._previous_frame
         if frame is not None and self.renderer is not None:
             self.renderer(frame)  # one video frame late, as in the paper
         elif self.renderer is not None and hasattr(self.renderer, "idle"):

@@ -160,15 +160,17 @@ def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
     result = CliRunner().invoke(main, ["demo", "--small"])
     assert result.exit_code == 0, result.output
     lines = result.stdout.strip().splitlines()
-    report = Path(lines[-3].rsplit("full report: ", 1)[1])
+    report = Path(lines[-4].rsplit("full report: ", 1)[1])
     assert report.is_file() and report.name == "report.html"
     # the curriculum's final task (issue 22): analysed on its own, with its own report
-    assert lines[-4].startswith("final task arteriotomy-closure (each participant once, after practice)")
-    assert Path(lines[-4].rsplit("report: ", 1)[1]).is_file()
-    assert lines[-2].startswith("replay a trainee against the experts: vascsim replay S-")
-    uid = lines[-2].split("vascsim replay ", 1)[1].split()[0]
-    assert lines[-1].startswith("open the results in the dashboard: vascsim users add NAME --role admin")
-    assert lines[-1].endswith("http://127.0.0.1:8000/studies/1")  # the demo study of a fresh catalog
+    assert lines[-5].startswith("final task arteriotomy-closure (each participant once, after practice)")
+    assert Path(lines[-5].rsplit("report: ", 1)[1]).is_file()
+    assert lines[-3].startswith("replay a trainee against the experts: vascsim replay S-")
+    uid = lines[-3].split("vascsim replay ", 1)[1].split()[0]
+    assert lines[-2].startswith("open the results in the dashboard: vascsim users add NAME --role admin")
+    assert lines[-2].endswith("http://127.0.0.1:8000/studies/1")  # the demo study of a fresh catalog
+    # and how to try a stitch yourself (issue 42)
+    assert lines[-1].endswith("vascsim station --study synthetic-demo --participant ME --device mouse")
     shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
     assert shown["status"] == "complete"
     listed = invoke("sessions", "list", "--study", "synthetic-demo").stdout  # a curriculum: the task shown

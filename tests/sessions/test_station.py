@@ -392,8 +392,10 @@ def test_spacemouse_reports_drive_the_needle_in_the_window(display, course, tmp_
     watcher.start()
     result = simulation.run_realtime(3.6)  # the reports' clock starts at the haptic set-up's first read
     watcher.join(30)
+    failures = [e.detail for e in result.events if e.kind == "layer_failed"]
+    assert "after" in shots, f"no window: {failures}"
     log = result.haptic
-    moved = log.position[-1] - log.position[0]
+    moved = log.position[-1] - start_pose(spec).position  # the integration starts there, before t = 0
     expected = push / FULL_SCALE * 0.02 * 1.0  # m: one second at that speed
     assert moved[2] == pytest.approx(expected, rel=0.1) and abs(moved[0]) < 1e-6 and abs(moved[1]) < 1e-6
     changed = np.abs(shots["after"].astype(int) - shots["before"].astype(int))[80:].max(axis=2) > 60
