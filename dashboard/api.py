@@ -379,6 +379,26 @@ def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingRespon
 
 
 @router.get(
+    "/live/sessions/{uid}/view.jpg",
+    response_class=FileResponse,
+    summary="The 3-D view a recording session's station shows, as its window drew it last (JPEG)",
+    responses=CONFLICT,
+)
+def live_session_view(request: Request, uid: str, viewer: Watcher) -> FileResponse:
+    from sessions.running.live import live_view_path
+
+    store = _state(request).store
+    facts = store.session_facts(uid, viewer)
+    if facts.session.status != SessionStatus.RUNNING:
+        raise DashboardError(409, f"session {uid!r} is {facts.session.status}, not recording")
+    home = _state(request).settings.home
+    path = inside(home, live_view_path(home, uid))
+    if not path.is_file():
+        raise not_found(f"3-D view of session {uid} (its station shows no window, or has not drawn yet)")
+    return FileResponse(path, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+
+
+@router.get(
     "/live/stations/{station}/{session_id}",
     response_class=StreamingResponse,
     summary="Server-sent events of a remote station's session",

@@ -168,7 +168,8 @@ def live_page(request: Request, viewer: Watcher) -> Response:
 @router.get("/live/sessions/{uid}", response_class=HTMLResponse)
 def live_session_page(request: Request, uid: str, viewer: Watcher) -> Response:
     source = f"/api/live/sessions/{quote(uid)}"
-    return render(request, "live_view.html", viewer, {"source": source}, title=f"session {uid}")
+    data = {"source": source, "scene": f"{source}/view.jpg"}
+    return render(request, "live_view.html", viewer, data, title=f"session {uid}")
 
 
 @router.get("/live/stations/{station}/{session_id}", response_class=HTMLResponse)

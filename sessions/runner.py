@@ -181,7 +181,7 @@ def run_session(
             duration = LIVE_TIME_FACTOR * spec.time_budget_s
         window = None
         if view is not None and plan.clock == "realtime":
-            window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid))
+            window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid), uid)
     except BaseException:
         with catalog.session() as orm:
             orm.delete(catalog.recorded_session(orm, uid))

@@ -249,10 +249,37 @@ function drawLive() {
     item.textContent = event.time.toFixed(2) + " s: " + event.kind;
     list.appendChild(item);
   });
+  let ended = false;
   source.addEventListener("end", (message) => {
     status.textContent = "ended: " + JSON.parse(message.data).reason;
+    ended = true;
     source.close();
   });
+  watchScene(() => ended);
+}
+
+// the station's 3-D view: the newest frame its window published, fetched again as each one arrives
+// (one request at a time, about 10 frames/s; a slow viewer gets fewer frames, the recording nothing less)
+function watchScene(ended) {
+  const image = document.getElementById("live-scene");
+  if (!image || !pageData.scene) {
+    if (image) { image.hidden = true; document.getElementById("live-scene-note").textContent = "this station does not send its 3-D view"; }
+    return;
+  }
+  const note = document.getElementById("live-scene-note");
+  let frames = 0;
+  const next = () => { if (!ended()) image.src = pageData.scene + "?frame=" + Date.now(); };
+  image.addEventListener("load", () => {
+    frames += 1;
+    image.dataset.frames = frames;
+    note.textContent = "the trainee's 3-D view, as their station's window draws it (" + frames + " frames)";
+    setTimeout(next, 100);
+  });
+  image.addEventListener("error", () => {
+    note.textContent = ended() ? "the session has ended" : "no 3-D view from this station yet (no window, or not drawn yet)";
+    setTimeout(next, 1000);
+  });
+  next();
 }
 
 // -- a replay rendered on request, with its progress ------------------------------------

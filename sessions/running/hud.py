@@ -99,7 +99,6 @@ class HudTracker:
             warning=self._warning if now <= self._warning_until else "",
         )
 
-
     def _force_context(self) -> str:
         """What the gauge's marks are: the experts' middle half (green) and the device's limit (red)."""
         limits, parts = self.limits, []

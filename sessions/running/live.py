@@ -15,6 +15,12 @@ VIEWS = ("window", "none")
 shows the session's plots)."""
 
 
+def live_view_path(home: Path, uid: str) -> Path:
+    """Where a recording session's window publishes its view for the dashboard (a JPEG replaced in
+    place; removed when the session ends): outside the session's folder, so it is never catalogued."""
+    return home / "live" / f"{uid}.jpg"
+
+
 def default_view() -> str:
     """``window`` where a display exists, else ``none``."""
     return "window" if display_available() else "none"
@@ -29,8 +35,9 @@ class LiveView:
     mapping: MouseMapping = field(default_factory=MouseMapping)
     latency_log: Path | None = None
 
-    def window(self, spec, device, catalog, home: Path, ids: tuple[int, int]) -> LiveWindow:
-        """The window for one session of task ``spec`` with ``device``, in study and task ``ids``."""
+    def window(self, spec, device, catalog, home: Path, ids: tuple[int, int], uid: str = "") -> LiveWindow:
+        """The window for session ``uid`` of task ``spec`` with ``device``, in study and task ``ids``;
+        it publishes its view for the dashboard (:func:`live_view_path`) when ``uid`` is given."""
         from sessions.config import cache_dir
         from sessions.review import expert_band
         from sessions.running.hud import HudLimits
@@ -51,4 +58,5 @@ class LiveView:
         hand = channel = None
         if isinstance(device, MouseDevice):
             hand, channel = MouseHand(device.start, self.mapping), device.channel
-        return LiveWindow(tissue, facts, self.settings, hand, channel, self.latency_log)
+        published = live_view_path(home, uid) if uid else None
+        return LiveWindow(tissue, facts, self.settings, hand, channel, self.latency_log, published)

@@ -13,6 +13,7 @@ task's target marks and each bite's entry and exit as it happens, and the heads-
 
 from __future__ import annotations
 
+import os
 import time as clock
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,6 +27,8 @@ from sim.devices.mouse import GRIP_KEYS, MouseHand, PoseChannel
 from sim.errors import VascsimError
 from sim.runtime.display import DisplayScene
 
+LIVE_VIEW_EVERY = 3
+"""The window publishes every this many frames for the dashboard's live page (10 frames/s at 30)."""
 STEREO_MODES = ("anaglyph", "split", "crystal-eyes")
 """VTK's stereo modes offered by ``--stereo``: red-cyan glasses, left and right halves of the window
 (side-by-side 3-D displays), and quad-buffered shutter glasses where the driver offers it."""
@@ -87,6 +90,7 @@ class LiveWindow:
         hand: MouseHand | None = None,
         channel: PoseChannel | None = None,
         latency_log: Path | None = None,
+        published: Path | None = None,
     ) -> None:
         self.scene = DisplayScene(tissue, None)  # factorises here, before the run forks
         self.facts = facts
@@ -95,6 +99,8 @@ class LiveWindow:
         self.simulation = None  # set by the runner: the display process reads the FEM snapshot from it
         self.tracker = HudTracker(facts.limits)
         self.latency_log = latency_log
+        self.published = published  # a JPEG of the view, every LIVE_VIEW_EVERY frames, for the dashboard
+        self._pixels = None
         self._latencies: list[tuple[float, float]] = []
         self._request_stop: Callable[..., None] = lambda *_: None
         self._renderer = None
@@ -149,8 +155,31 @@ class LiveWindow:
         self._input()
         self._draw(snapshot)
 
+    def _publish(self) -> None:
+        """The frame just drawn as a JPEG at :attr:`published`, replaced in place (a reader never
+        sees half a file); what the dashboard's live page shows. Read back from the window's front
+        buffer (no second render) and encoded by OpenCV: about 4 ms at 960x540."""
+        import cv2
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+        from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
+
+        window = self._renderer.plotter.render_window
+        if self._pixels is None:
+            self._pixels = vtkUnsignedCharArray()
+            self.published.parent.mkdir(parents=True, exist_ok=True)
+        width, height = window.GetSize()
+        window.GetPixelData(0, 0, width - 1, height - 1, 1, self._pixels, 0)
+        image = vtk_to_numpy(self._pixels).reshape(height, width, 3)[::-1, :, ::-1]  # top row first, BGR
+        ok, data = cv2.imencode(".jpg", np.ascontiguousarray(image), [cv2.IMWRITE_JPEG_QUALITY, 75])
+        if ok:
+            partial = self.published.with_suffix(".part")
+            partial.write_bytes(data.tobytes())
+            os.replace(partial, self.published)
+
     def finish(self) -> None:
-        """Close the window; write the latency log when asked for."""
+        """Close the window (and take its published view away); write the latency log when asked for."""
+        if self.published is not None:
+            self.published.unlink(missing_ok=True)
         if self.latency_log is not None and self._latencies:
             np.save(self.latency_log, np.array(self._latencies))
         if self._renderer is not None:
@@ -176,6 +205,8 @@ class LiveWindow:
         self._show_hud(now, force)
         renderer.plotter.render_window.Render()  # draws and swaps
         self.frames += 1
+        if self.published is not None and self.frames % LIVE_VIEW_EVERY == 0:
+            self._publish()
         if snapshot is not None and self.latency_log is not None:
             self._latencies.append((snapshot.holder_time, self._session_time()))
 

@@ -1,0 +1,100 @@
+"""A supervisor watches a station's 3-D view live in the dashboard (Playwright + Debian Chromium).
+
+A real-time session runs with its window on an Xvfb display (`vascsim run --realtime --view window`),
+the dashboard runs under uvicorn over the same catalog, and the supervisor's browser shows the live
+page: the scene's image updates while the session runs (two frames differ), beside the plots.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dashboard.app import create_app
+from dashboard.settings import DashboardSettings
+from sessions.accounts import create_user
+from sessions.catalog import Catalog
+from sessions.config import database_url
+from sessions.store import CatalogStore
+from tests.dashboard.conftest import PASSWORD, running_server
+from tests.e2e.browser import chromium
+
+VASCSIM = str(Path(sys.executable).with_name("vascsim"))
+SNAPSHOT = """() => {
+  const image = document.getElementById("live-scene");
+  if (!image.naturalWidth) return [0, 0];
+  const canvas = document.createElement("canvas");
+  canvas.width = image.naturalWidth;
+  canvas.height = image.naturalHeight;
+  const context = canvas.getContext("2d");
+  context.drawImage(image, 0, 0);
+  const pixels = context.getImageData(0, 0, canvas.width, canvas.height).data;
+  let sum = 0;
+  for (let i = 0; i < pixels.length; i += 3) sum = (sum * 31 + pixels[i]) >>> 0;
+  return [Number(image.dataset.frames || 0), sum];
+}"""
+
+
+def frames_after(page, count: int, timeout: float) -> list[int]:
+    """(frames shown, a checksum of the one on screen) once the page has shown ``count`` frames (polled
+    from here: the page's content security policy allows no evaluated strings)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        shown = page.evaluate(SNAPSHOT)
+        if shown[0] >= count:
+            return shown
+        time.sleep(0.05)
+    raise AssertionError(f"the live page showed {shown[0]} frames of the scene, not {count}")
+
+
+@pytest.mark.slow
+def test_a_supervisor_sees_the_station_scene_update_while_the_session_runs(display, tmp_path):
+    home = tmp_path / "home"
+    catalog = Catalog(database_url(home))
+    store = CatalogStore(catalog)
+    store.create_study("Course")
+    store.add_participant("Course", "P1", "trainee", "trainee")
+    with catalog.session() as orm:
+        create_user(orm, "supervisor", PASSWORD, "supervisor")
+    app = create_app(DashboardSettings(home=home, database_url=catalog.url), catalog)
+    skip = ("VTK_DEFAULT_OPENGL_WINDOW", "VASCSIM_DATABASE_URL")  # the window on screen; this catalog
+    env = {k: v for k, v in os.environ.items() if k not in skip}
+    env.update(DISPLAY=display, VASCSIM_HOME=str(home))
+    run = subprocess.Popen(
+        [VASCSIM, "run", "--study", "Course", "--participant", "P1", "--task", "interrupted-stitch",
+         "--device", "scripted", "--skill", "0.3", "--realtime", "--view", "window"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        uid = None
+        deadline = time.monotonic() + 120
+        while uid is None and time.monotonic() < deadline and run.poll() is None:
+            running = store.sessions("Course", status="running")
+            uid = running[0].uid if running else None
+            time.sleep(0.1)
+        assert uid is not None, run.stderr.read() if run.poll() is not None else "no running session"
+        with running_server(app) as base, chromium() as browser:
+            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page.goto(f"{base}/login")
+            page.fill("input[name=username]", "supervisor")
+            page.fill("input[name=password]", PASSWORD)
+            page.click("#sign-in")
+            page.wait_for_load_state("networkidle")
+            page.goto(f"{base}/live/sessions/{uid}")
+            first = frames_after(page, 3, 90.0)
+            page.screenshot(path=str(tmp_path / "live-page.png"))
+            second = frames_after(page, first[0] + 4, 30.0)
+            assert second[0] > first[0] and second[1] != first[1]  # new frames, and they differ
+            assert page.locator("#live-plots .js-plotly-plot").count() == 3  # beside the plots
+        out, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+        catalog.close()
+    assert run.returncode == 0, err
+    assert not (home / "live" / f"{uid}.jpg").exists()  # the published view goes with the session
