@@ -380,11 +380,11 @@ def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingRespon
 
 @router.get(
     "/live/sessions/{uid}/view.jpg",
-    response_class=FileResponse,
+    response_class=Response,
     summary="The 3-D view a recording session's station shows, as its window drew it last (JPEG)",
     responses=CONFLICT,
 )
-def live_session_view(request: Request, uid: str, viewer: Watcher) -> FileResponse:
+def live_session_view(request: Request, uid: str, viewer: Watcher) -> Response:
     from sessions.running.live import live_view_path
 
     store = _state(request).store
@@ -393,9 +393,12 @@ def live_session_view(request: Request, uid: str, viewer: Watcher) -> FileRespon
         raise DashboardError(409, f"session {uid!r} is {facts.session.status}, not recording")
     home = _state(request).settings.home
     path = inside(home, live_view_path(home, uid))
-    if not path.is_file():
-        raise not_found(f"3-D view of session {uid} (its station shows no window, or has not drawn yet)")
-    return FileResponse(path, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+    try:  # read whole: the window replaces the file many times a second (a streamed file could change size)
+        frame = path.read_bytes()
+    except FileNotFoundError:
+        missing = f"3-D view of session {uid} (its station shows no window, or has not drawn yet)"
+        raise not_found(missing) from None
+    return Response(frame, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
 
 @router.get(

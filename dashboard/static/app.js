@@ -268,12 +268,13 @@ function watchScene(ended) {
   }
   const note = document.getElementById("live-scene-note");
   let frames = 0;
-  const next = () => { if (!ended()) image.src = pageData.scene + "?frame=" + Date.now(); };
+  let asked = 0;
+  const next = () => { if (!ended()) { asked = Date.now(); image.src = pageData.scene + "?frame=" + asked; } };
   image.addEventListener("load", () => {
     frames += 1;
     image.dataset.frames = frames;
     note.textContent = "the trainee's 3-D view, as their station's window draws it (" + frames + " frames)";
-    setTimeout(next, 100);
+    setTimeout(next, Math.max(0, 66 - (Date.now() - asked)));  // no faster than the station publishes
   });
   image.addEventListener("error", () => {
     note.textContent = ended() ? "the session has ended" : "no 3-D view from this station yet (no window, or not drawn yet)";

@@ -27,8 +27,8 @@ from sim.devices.mouse import GRIP_KEYS, MouseHand, PoseChannel
 from sim.errors import VascsimError
 from sim.runtime.display import DisplayScene
 
-LIVE_VIEW_EVERY = 3
-"""The window publishes every this many frames for the dashboard's live page (10 frames/s at 30)."""
+LIVE_VIEW_EVERY = 2
+"""The window publishes every this many frames for the dashboard's live page (15 frames/s at 30)."""
 STEREO_MODES = ("anaglyph", "split", "crystal-eyes")
 """VTK's stereo modes offered by ``--stereo``: red-cyan glasses, left and right halves of the window
 (side-by-side 3-D displays), and quad-buffered shutter glasses where the driver offers it."""
