@@ -29,18 +29,9 @@ TASK = "arteriotomy-closure"
 
 
 def start_display() -> subprocess.Popen:
-    read, write = os.pipe()
-    server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1366x768x24", "-nolisten", "tcp"],
-        pass_fds=(write,),
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write)
-    number = b""
-    while not number.endswith(b"\n"):
-        number += os.read(read, 16)
-    os.close(read)
-    os.environ["DISPLAY"] = f":{int(number)}"
+    from tests.xvfb import start_virtual_display
+
+    server, os.environ["DISPLAY"] = start_virtual_display()
     return server
 
 

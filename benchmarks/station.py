@@ -30,6 +30,7 @@ import numpy as np
 
 # this folder holds a metrics.py of its own: the package, not it
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # tests.xvfb
 
 TASK = "interrupted-stitch"
 
@@ -38,18 +39,9 @@ def start_display() -> subprocess.Popen | None:
     """An Xvfb when there is no display; None when there is one."""
     if os.environ.get("DISPLAY"):
         return None
-    read, write = os.pipe()
-    server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"],
-        pass_fds=(write,),
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write)
-    number = b""
-    while not number.endswith(b"\n"):
-        number += os.read(read, 16)
-    os.close(read)
-    os.environ["DISPLAY"] = f":{int(number)}"
+    from tests.xvfb import start_virtual_display
+
+    server, os.environ["DISPLAY"] = start_virtual_display("1920x1080")
     return server
 
 

@@ -370,12 +370,17 @@ def _event_stream(request: Request, directory: Path, still_running) -> Streaming
     responses=CONFLICT,
 )
 def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingResponse:
-    store = _state(request).store
-    facts = store.session_facts(uid, viewer)
+    facts = _recording(request, uid, viewer)
+    directory = inside(_state(request).settings.home, Path(facts.directory))
+    return _event_stream(request, directory, lambda: _state(request).store.is_running(uid))
+
+
+def _recording(request: Request, uid: str, viewer: Viewer):
+    """The facts of session ``uid`` as ``viewer`` may see them, refused (409) unless it is recording."""
+    facts = _state(request).store.session_facts(uid, viewer)
     if facts.session.status != SessionStatus.RUNNING:
         raise DashboardError(409, f"session {uid!r} is {facts.session.status}, not recording")
-    directory = inside(_state(request).settings.home, Path(facts.directory))
-    return _event_stream(request, directory, lambda: store.is_running(uid))
+    return facts
 
 
 @router.get(
@@ -387,10 +392,7 @@ def live_session(request: Request, uid: str, viewer: Watcher) -> StreamingRespon
 def live_session_view(request: Request, uid: str, viewer: Watcher) -> Response:
     from sessions.running.live import live_view_path
 
-    store = _state(request).store
-    facts = store.session_facts(uid, viewer)
-    if facts.session.status != SessionStatus.RUNNING:
-        raise DashboardError(409, f"session {uid!r} is {facts.session.status}, not recording")
+    _recording(request, uid, viewer)
     home = _state(request).settings.home
     path = inside(home, live_view_path(home, uid))
     try:  # read whole: the window replaces the file many times a second (a streamed file could change size)

@@ -166,22 +166,9 @@ def demo_catalog(tmp_path_factory, copy_demo):
 @pytest.fixture(scope="session")
 def display():
     """A virtual 1366x768 X display for window tests (Xvfb picks a free display number itself)."""
-    import subprocess
+    from tests.xvfb import start_virtual_display
 
-    read, write = os.pipe()
-    server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write), "-screen", "0", "1366x768x24", "-nolisten", "tcp"],
-        pass_fds=(write,),
-        stderr=subprocess.DEVNULL,
-    )
-    os.close(write)
-    number = b""
-    while not number.endswith(b"\n"):
-        chunk = os.read(read, 16)
-        if not chunk:
-            raise RuntimeError("Xvfb did not start")
-        number += chunk
-    os.close(read)
-    yield f":{int(number)}"
+    server, name = start_virtual_display()
+    yield name
     server.terminate()
     server.wait(10)

@@ -195,3 +195,12 @@ def existing_path(path: str, what: str, folder: bool = False) -> Path:
     if not folder and not found.is_file():
         raise MissingInput(f"{what} {path!r} is not a file that exists; check the path")
     return found
+
+
+def parse_size(_ctx, _param, value: str) -> tuple[int, int]:
+    """A click callback: "WIDTHxHEIGHT" in pixels to (width, height), or a one-line usage error."""
+    try:
+        width, height = (int(part) for part in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels, e.g. 1280x720") from None
+    return width, height

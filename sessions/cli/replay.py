@@ -8,18 +8,11 @@ import click
 
 from sessions.cli.base import (
     open_catalog,
+    parse_size,
     print_json,
     progress_bar,
     user_errors,
 )
-
-
-def _video_size(_ctx, _param, value: str) -> tuple[int, int]:
-    try:
-        width, height = (int(part) for part in value.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT, e.g. 1280x720") from None
-    return width, height
 
 
 @click.command()
@@ -46,7 +39,7 @@ def _video_size(_ctx, _param, value: str) -> tuple[int, int]:
 )  # fmt: skip
 @click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True, help="Frames per second.")
 @click.option(
-    "--size", default="1280x720", show_default=True, callback=_video_size, help="WIDTHxHEIGHT, even."
+    "--size", default="1280x720", show_default=True, callback=parse_size, help="WIDTHxHEIGHT, even."
 )
 @click.option(
     "--stills", type=click.Path(file_okay=False), default=None,

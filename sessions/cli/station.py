@@ -9,18 +9,10 @@ from typing import Any
 
 import click
 
-from sessions.cli.base import open_catalog, user_errors
+from sessions.cli.base import open_catalog, parse_size, user_errors
 
 LIVE_DEVICES = ("mouse", "spacemouse", "openhaptics")
 """Devices a person moves: their sessions run on the real-time clock."""
-
-
-def _size(_ctx, _param, value: str) -> tuple[int, int]:
-    try:
-        width, height = (int(part) for part in value.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels, e.g. 960x540") from None
-    return width, height
 
 
 def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -45,7 +37,7 @@ def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
         "--size",
         default="960x540",
         show_default=True,
-        callback=_size,
+        callback=parse_size,
         help="The window's size in pixels, WIDTHxHEIGHT.",
     )
     @click.option(
