@@ -19,6 +19,7 @@ from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
 from sessions import accounts, ratings
+from sessions.running.live import live_view_path
 from sessions.status import SessionStatus
 from sessions.store import STAFF, UserRecord
 
@@ -390,8 +391,6 @@ def _recording(request: Request, uid: str, viewer: Viewer):
     responses=CONFLICT,
 )
 def live_session_view(request: Request, uid: str, viewer: Watcher) -> Response:
-    from sessions.running.live import live_view_path
-
     _recording(request, uid, viewer)
     home = _state(request).settings.home
     path = inside(home, live_view_path(home, uid))
