@@ -123,13 +123,16 @@ def review_session(catalog: Catalog, uid: str) -> SessionReview:
 def _against_standard(
     catalog: Catalog, study: str, task: str, uid: str, rows: list[dict]
 ) -> tuple[str, str, list[dict]]:
-    from metrics.streams import MetricsError
     from metrics.units import shown
     from sessions.analysis import analyse_catalog_study
+    from sim.errors import VascsimError
 
+    if not experts_on_task(catalog, study, task):
+        why = f"no standard for {task} yet: no expert of this study has a scored session of it"
+        return "no standard", why, []
     try:
         analysis, _ = analyse_catalog_study(catalog, study, {"task": task})
-    except MetricsError as error:
+    except VascsimError as error:  # the study's analysis cannot be run (yet): no verdict, and why
         return "no standard", f"no standard for {task} in this study yet: {error}", []
     sessions = analysis.sessions
     found = sessions.index[sessions["session_id"] == uid]

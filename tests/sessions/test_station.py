@@ -401,3 +401,50 @@ def test_spacemouse_reports_drive_the_needle_in_the_window(display, course, tmp_
     changed = np.abs(shots["after"].astype(int) - shots["before"].astype(int))[80:].max(axis=2) > 60
     assert changed.sum() > 300  # the needle (and its shadow) moved on screen, below the strip
     assert "display" not in {e.layer for e in result.events if e.kind == "layer_failed"}
+
+
+STEREO_SCRIPT = """
+import json, sys, time
+import numpy as np
+from sessions.running.hud import HudLimits
+from sessions.running.scene import scene_facts
+from sessions.running.window import LiveWindow, ViewSettings
+from sessions.tasks import task_spec, tissue_for
+
+tissue = tissue_for("interrupted-stitch")
+facts = scene_facts(task_spec("interrupted-stitch"), tissue.mesh, HudLimits(60, 1))
+drawn = {}
+for mode in (None, sys.argv[1]):
+    window = LiveWindow(tissue, facts, ViewSettings(stereo=mode))
+    window.prepare(lambda *_: None, time.perf_counter)
+    window.idle()
+    drawn[mode] = window._renderer.read_pixels().astype(int)
+    window.finish()
+mono, both = drawn[None], drawn[sys.argv[1]]
+print(json.dumps({
+    "largest_change": int(np.abs(both - mono).max()),
+    "green_blue_mono": float(np.abs(mono[..., 1] - mono[..., 2]).mean()),
+    "green_blue_stereo": float(np.abs(both[..., 1] - both[..., 2]).mean()),
+}))
+"""
+
+
+@pytest.mark.parametrize("stereo", ["anaglyph", "split"])
+def test_a_stereo_mode_draws_two_eyes(display, course, stereo):
+    """--stereo: anaglyph draws the two eyes in red and cyan, split side by side; both differ from the
+    mono view (drawn by a process of its own, whose X connection ends with it)."""
+    import json
+
+    from sessions.running.window import ViewSettings, WindowError
+
+    env = environment(display, course)
+    done = subprocess.run(
+        [sys.executable, "-c", STEREO_SCRIPT, stereo], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    assert seen["largest_change"] > 100
+    if stereo == "anaglyph":  # each eye in its own colour: green and blue no longer track each other
+        assert seen["green_blue_stereo"] != seen["green_blue_mono"]
+    with pytest.raises(WindowError, match="stereo must be one of anaglyph, split, crystal-eyes; got 'vr'"):
+        ViewSettings(stereo="vr")
