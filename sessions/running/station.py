@@ -37,11 +37,12 @@ DEVICE_CONTROLS = {
     ],
     "spacemouse": [
         "The SpaceMouse is a rate control: push or tilt the cap and the needle holder moves at a speed "
-        "set by how far you push (no force is felt). Its first button closes and opens the jaws.",
+        "set by how far you push (no force is felt). Its first button closes and opens the jaws; its "
+        "second stops the trial.",
     ],
     "openhaptics": [
         "The Touch's stylus is the needle holder: you feel the wall. Its first button closes and opens "
-        "the jaws.",
+        "the jaws; its second stops the trial.",
     ],
     "scripted": ["A scripted hand places the stitch (a demonstration: no hand of yours is needed)."],
 }

@@ -18,6 +18,12 @@ from numpy.typing import NDArray
 from sim.errors import VascsimError
 from sim.needle import Pose
 
+GRIP_BUTTON = 0
+"""A device's first button closes and opens the needle holder's jaws."""
+STOP_BUTTON = 1
+"""A device's second button (the Touch's second stylus button, the SpaceMouse's right button) asks to
+stop the session, as Esc in the station's window does; devices with one button never press it."""
+
 Trajectory = Callable[[float], tuple[Pose, bool]]
 """A scripted hand: time (s) -> the holder's pose and whether its grip is closed."""
 

@@ -360,6 +360,8 @@ def _haptic_process(
                 events.add(now, "device_lost")
                 control.haptic_state = ControlBlock.DEVICE_LOST
                 return
+            if simulation.stop_reason == "stopped_by_trainee":  # the device's stop button
+                control.request_stop("stopped_by_trainee")
             step += 1
             late = clock.perf_counter() - (start + step * period)
             if late > period:  # skip deadlines already missed instead of bursting

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.devices.base import Device, DeviceLostError
+from sim.devices.base import GRIP_BUTTON, STOP_BUTTON, Device, DeviceLostError
 from sim.errors import VascsimError
 from sim.fem import Tissue
 from sim.fem.kernel import warm_kernel_geometry
@@ -279,7 +279,9 @@ class Simulation:
             self.stop("device_lost", now)
             return
         pose = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
-        grip = sample.pressed(0)
+        grip = sample.pressed(GRIP_BUTTON)
+        if sample.buttons >> STOP_BUTTON & 1:  # the trainee's stop, on the device itself
+            self.stop("stopped_by_trainee", now)
         if self.force_path is not None:  # the same steps in one compiled call, the log included
             began = wallclock.perf_counter()
             force = self.force_path.tick(now, pose.position, pose.rotation, sample.velocity, grip)

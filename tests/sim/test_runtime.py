@@ -1,6 +1,7 @@
 """The layered runtime in simulated time, with faults injected into real components."""
 
 import ctypes
+import dataclasses
 import gc
 import math
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 
 from sim.devices import DeviceLostError, ScriptedDevice, SuturingPass
-from sim.devices.base import DeviceLimits
+from sim.devices.base import STOP_BUTTON, DeviceLimits
 from sim.errors import ModelError
 from sim.needle import Needle, Pose
 from sim.needle_forces import NeedleForces
@@ -152,6 +153,30 @@ class UnpluggedAt:
 
     def close(self):
         self.device.close()
+
+
+class StopPressedAt(UnpluggedAt):
+    """Wraps a real device; from ``when`` on, its second button (the stop button) is held."""
+
+    def read(self, time):
+        sample = self.device.read(time)
+        if time < self.when:
+            return sample
+        return dataclasses.replace(sample, buttons=sample.buttons | 1 << STOP_BUTTON)
+
+
+@pytest.mark.parametrize("clock", ["simulated", "realtime"])
+def test_the_devices_stop_button_ends_the_session_as_the_trainees_stop(tissue, clock):
+    simulation, suturing, _ = make(tissue, device_wrapper=lambda d: StopPressedAt(d, 1.0))
+    if clock == "simulated":
+        result = simulation.run_simulated(suturing.duration)
+    else:
+        result = simulation.run_realtime(suturing.duration)
+    assert result.stop_reason == "stopped_by_trainee"
+    assert 1.0 <= result.haptic.time[-1] < 1.3  # the press ends it within a few ticks
+    stopped = [e for e in result.events if e.kind == "stopped"]
+    assert stopped and stopped[-1].detail == "stopped_by_trainee"
+    assert_forces_safe(result, LIMITS)
 
 
 def test_device_unplugged_mid_session_ends_with_data(tissue):
