@@ -86,11 +86,15 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
 def review_lines(review, participant: str) -> list[str]:
     """The terminal's closing lines: the session, its verdict, and the three things to work on first."""
     verdicts = {"pass": "PASS (at the study's standard)", "not yet": "NOT YET at the study's standard"}
+    verdict = f"verdict: {verdicts.get(review.verdict, 'no standard yet')}; {review.standard}"
     lines = [
         f"session {review.uid} ({participant}, trial {review.trial}) complete and scored",
-        f"verdict: {verdicts.get(review.verdict, 'no standard yet')}; {review.standard}",
+        click.wrap_text(verdict, 78, subsequent_indent="  "),
     ]
-    lines += [f"  {bench['line']}" for bench in review.benchmarks]
+    lines += [
+        click.wrap_text(b["line"], 78, initial_indent="  ", subsequent_indent="    ")
+        for b in review.benchmarks
+    ]
     lines.append("work on:" if review.work_on else "work on: nothing worse than the experts' middle half")
     for k, item in enumerate(review.work_on[:3], 1):
         text = f"{k}. {item['kind']}: {item['line']}"
