@@ -8,6 +8,7 @@ page: the scene's image updates while the session runs (two frames differ), besi
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -54,6 +55,9 @@ def frames_after(page, count: int, timeout: float) -> list[int]:
 
 @pytest.mark.slow
 def test_a_supervisor_sees_the_station_scene_update_while_the_session_runs(display, tmp_path):
+    """The supervisor signs in first; then a trainee's session starts (keyboard and mouse: it runs
+    until stopped, so the test's own pace never decides whether it is still running); the live page
+    shows its scene updating; Ctrl-C to the station ends the session, complete."""
     home = tmp_path / "home"
     catalog = Catalog(database_url(home))
     store = CatalogStore(catalog)
@@ -65,19 +69,8 @@ def test_a_supervisor_sees_the_station_scene_update_while_the_session_runs(displ
     skip = ("VTK_DEFAULT_OPENGL_WINDOW", "VASCSIM_DATABASE_URL")  # the window on screen; this catalog
     env = {k: v for k, v in os.environ.items() if k not in skip}
     env.update(DISPLAY=display, VASCSIM_HOME=str(home))
-    run = subprocess.Popen(
-        [VASCSIM, "run", "--study", "Course", "--participant", "P1", "--task", "interrupted-stitch",
-         "--device", "scripted", "--skill", "0.3", "--realtime", "--view", "window"],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    run = None
     try:
-        uid = None
-        deadline = time.monotonic() + 120
-        while uid is None and time.monotonic() < deadline and run.poll() is None:
-            running = store.sessions("Course", status="running")
-            uid = running[0].uid if running else None
-            time.sleep(0.1)
-        assert uid is not None, run.stderr.read() if run.poll() is not None else "no running session"
         with running_server(app) as base, chromium() as browser:
             page = browser.new_page(viewport={"width": 1366, "height": 768})
             page.goto(f"{base}/login")
@@ -85,16 +78,31 @@ def test_a_supervisor_sees_the_station_scene_update_while_the_session_runs(displ
             page.fill("input[name=password]", PASSWORD)
             page.click("#sign-in")
             page.wait_for_load_state("networkidle")
+            run = subprocess.Popen(
+                [VASCSIM, "run", "--study", "Course", "--participant", "P1", "--task", "interrupted-stitch",
+                 "--device", "mouse", "--view", "window"],
+                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+            )  # fmt: skip
+            uid = None
+            deadline = time.monotonic() + 120
+            while uid is None and time.monotonic() < deadline and run.poll() is None:
+                running = store.sessions("Course", status="running")
+                uid = running[0].uid if running else None
+                time.sleep(0.1)
+            assert uid is not None, run.communicate()[1] if run.poll() is not None else "no running session"
             page.goto(f"{base}/live/sessions/{uid}")
             first = frames_after(page, 3, 90.0)
             page.screenshot(path=str(tmp_path / "live-page.png"))
+            time.sleep(1.2)  # the strip's clock moves on: the next frames differ
             second = frames_after(page, first[0] + 4, 30.0)
             assert second[0] > first[0] and second[1] != first[1]  # new frames, and they differ
             assert page.locator("#live-plots .js-plotly-plot").count() == 3  # beside the plots
+        os.killpg(run.pid, signal.SIGINT)  # the station's Ctrl-C
         out, err = run.communicate(timeout=120)
     finally:
-        if run.poll() is None:
-            run.kill()
+        if run is not None and run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+            run.communicate()
         catalog.close()
     assert run.returncode == 0, err
     assert not (home / "live" / f"{uid}.jpg").exists()  # the published view goes with the session

@@ -253,6 +253,7 @@ def test_a_trainee_places_a_whole_stitch_with_keyboard_and_mouse(display, statio
     finally:
         if station.poll() is None:
             station.kill()
+            station.communicate()
     assert station.returncode == 0, err
     assert "Traceback" not in err
     assert "1 trial(s) recorded and scored" in out
@@ -288,6 +289,7 @@ def test_escape_mid_session_keeps_a_complete_scored_session(display, station_hom
     finally:
         if station.poll() is None:
             station.kill()
+            station.communicate()
     assert station.returncode == 0 and "Traceback" not in err, err
     uid = only_uid(station_home)
     status, metrics = session_row(station_home, uid)
@@ -318,6 +320,7 @@ def test_ctrl_c_in_the_terminal_ends_the_run_complete_with_no_traceback(display,
     finally:
         if run.poll() is None:
             os.killpg(run.pid, signal.SIGKILL)
+            run.communicate()
     assert run.returncode == 0, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     uid = only_uid(station_home)
