@@ -71,6 +71,8 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
     }
 
 
+MAPPED_DEVICES = ("spacemouse", "openhaptics")
+"""Devices whose own frame is mapped onto the task's scene (sessions.running.scene.mapped_onto_task)."""
 LIVE_SETTINGS = RuntimeSettings(display_delay_frames=0, display_on_haptic_core=True)
 """A person's live view draws the newest graphics frame, with the haptic core's idle time to draw it in
 (sim.runtime.RuntimeSettings)."""
@@ -116,10 +118,9 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
 
         return MouseDevice(start_pose(task)), None
     if spec == "spacemouse":
-        from sessions.running.scene import start_pose
         from sim.devices.spacemouse import SpaceMouse
 
-        return SpaceMouse(start=start_pose(task)), None
+        return SpaceMouse(), None  # mapped onto the task's scene by run_session
     if spec == "openhaptics":
         from sim.devices.openhaptics import OpenHapticsDevice
 
@@ -174,6 +175,11 @@ def run_session(
         parameters = parameters(row.trial)
     try:
         device, natural = open_device(plan.device, plan, catalog, parameters)
+        if plan.device in MAPPED_DEVICES:  # the hand's workspace onto the task's scene, as shown
+            from sessions.running.scene import mapped_onto_task
+
+            left = view is not None and view.mapping.handedness == "left"
+            device = mapped_onto_task(device, spec, left_handed=left)
         duration = duration if duration is not None else natural
         if duration is None:  # a live device: until done or stopped, within a bound the arena needs
             from sessions.running.scene import LIVE_TIME_FACTOR

@@ -94,3 +94,12 @@ def stop_when_done(simulation, stitches: int) -> None:
                 simulation.stop("task_done", event.time)
 
     simulation.on_event = on_event
+
+
+def mapped_onto_task(device, spec: TaskSpec, left_handed: bool = False):
+    """A position or rate device (Touch, SpaceMouse) seen through the task's view: its pose at the first
+    reading is the task's starting pose, its axes the screen's, 1:1, mirrored for a left hand
+    (:class:`sim.devices.workspace.WorkspaceMapping`)."""
+    from sim.devices.workspace import WorkspaceMapping, view_axes
+
+    return WorkspaceMapping(device, start_pose(spec), view_axes(*task_camera(spec)), mirror=left_handed)
