@@ -82,11 +82,12 @@ def session_stitches(catalog: Catalog, uid: str) -> list[dict]:
 
 @dataclass(frozen=True)
 class SessionReview:
-    """How one session went, as a trainee is told at the station, by ``vascsim run`` and ``sessions show``.
+    """How one session went, as a trainee is told on the station's feedback screen and by ``vascsim run``.
 
     verdict: "pass", "not yet" (below the study's standard on at least one benchmark) or "no standard"
     (the study has none for this task yet: ``standard`` says why); benchmarks: one dict per
-    benchmarked metric (metric, value, mark, band, passed, line in display units and direction words);
+    benchmarked metric (metric, value, mark, direction, pass condition, passed, and a line in display
+    units and direction words);
     work_on and strengths: :func:`metrics.feedback.session_feedback`'s items.
     """
 
@@ -105,8 +106,8 @@ class SessionReview:
 
 def review_session(catalog: Catalog, uid: str) -> SessionReview:
     """The session against its study's standard on its task (the study's declared analysis, with this
-    session's task) and against the experts' band: one function, so the station's feedback screen,
-    ``vascsim run`` and ``vascsim sessions show`` say the same thing."""
+    session's task) and against the experts' band: one function, so the station's feedback screen and
+    ``vascsim run`` say the same thing (what to work on is the same function as ``sessions show``'s)."""
     from metrics.feedback import session_feedback
 
     with catalog.session() as orm:
@@ -127,7 +128,7 @@ def _against_standard(
     from sessions.analysis import analyse_catalog_study
     from sim.errors import VascsimError
 
-    if not experts_on_task(catalog, study, task):
+    if all(row["expert_q1"] is None for row in rows):  # the band is the experts' on this task
         why = f"no standard for {task} yet: no expert of this study has a scored session of it"
         return "no standard", why, []
     try:

@@ -105,6 +105,7 @@ class LiveWindow:
         self._request_stop: Callable[..., None] = lambda *_: None
         self._renderer = None
         self._held: set[str] = set()
+        self._sent: tuple = (None, None)  # the hand's pose and grip last published
         self._dragging: tuple[int, int] | None = None
         self._needle = np.zeros((2, 3))
         self._session_time: Callable[[], float] = clock.perf_counter
@@ -337,7 +338,10 @@ class LiveWindow:
             return
         for key in self._held:
             hand.turn(dt, hand.mapping.turn_direction(key), self._needle)
-        self.channel.put(now, hand.pose, hand.grip)
+        if hand.pose is not self._sent[0] or hand.grip != self._sent[1]:
+            # only what changed (each move makes a new pose): the haptic side eases only when it must
+            self.channel.put(now, hand.pose, hand.grip)
+            self._sent = (hand.pose, hand.grip)
 
     def _key_down(self, interactor, _event) -> None:
         key = interactor.GetKeySym()

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.devices.base import INPUT_ONLY_LIMITS, DeviceError, DeviceIdentity, DeviceLostError, DeviceSample
-from sim.needle import Pose, rotation_about
+from sim.needle import rotation_about
 
 VENDOR_LOGITECH, VENDOR_3DCONNEXION = 0x046D, 0x256F
 SPACEMOUSE_PRODUCTS = {
@@ -100,10 +100,9 @@ class RateIntegrator:
         max_speed: float = 0.02,
         max_turn: float = 1.0,
         deadband: float = 0.05,
-        rotation: NDArray[np.float64] | None = None,
     ) -> None:
         self.position = np.array(origin, dtype=np.float64)
-        self.rotation = np.eye(3) if rotation is None else np.array(rotation, dtype=np.float64)
+        self.rotation = np.eye(3)
         self.max_speed, self.max_turn, self.deadband = max_speed, max_turn, deadband
         self._last_time: float | None = None
         self.velocity = np.zeros(3)
@@ -144,36 +143,28 @@ class SpaceMouse:
 
     ``source`` is the open HID handle (anything with ``read(size) -> list[int]`` that
     returns an empty list when no report waits and raises OSError when the device
-    is gone); by default the first SpaceMouse hidapi finds is opened. ``start``: the pose the
-    integration starts from (a station starts the needle holder above the task's first mark).
+    is gone); by default the first SpaceMouse hidapi finds is opened.
 
     A SpaceMouse is a rate control (deflection sets speed, not position: :class:`RateIntegrator`);
-    in the paper it is the subordinate hand's device. As the dominant hand's it works, but it is
-    not a position device and no force is felt: :attr:`RATE_CONTROL_NOTE` says so where it is chosen.
+    in the paper it is the subordinate hand's device. As the dominant hand's it works, but no force is
+    felt, and the station's instructions say so; the station maps its axes onto the view
+    (:class:`sim.devices.workspace.WorkspaceMapping`).
     """
 
     limits = INPUT_ONLY_LIMITS
-    RATE_CONTROL_NOTE = (
-        "the SpaceMouse is a rate control: push the cap and the needle moves at a speed set by how far "
-        "you push it (translation up to 20 mm/s, rotation up to 1 rad/s); no force is felt"
-    )
 
     def __init__(
         self,
         identity: DeviceIdentity | None = None,
         origin: NDArray[np.float64] | None = None,
         source: object | None = None,
-        start: Pose | None = None,
     ) -> None:
         if source is None:
             identity, source = _open_hid(identity)
         self.identity = identity or DeviceIdentity("hidapi", "SpaceMouse")
         self._hid = source
         self.decoder = SpaceMouseDecoder()
-        if start is not None:
-            self.integrator = RateIntegrator(start.position, rotation=start.rotation)
-        else:
-            self.integrator = RateIntegrator(np.zeros(3) if origin is None else origin)
+        self.integrator = RateIntegrator(np.zeros(3) if origin is None else origin)
 
     def read(self, time: float | None = None) -> DeviceSample:
         now = clock.perf_counter() if time is None else time
