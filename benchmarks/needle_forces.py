@@ -7,8 +7,9 @@ Run:  .venv/bin/python benchmarks/needle_forces.py
 2. FEM step on the ~10k-node artery (vessel_10k, porcine-artery preset, precomputed): a needle
    pressing on the wall (kernel + local stress) and one through it (lateral kernel, cutting,
    friction, emergence, local stress); median and p99 of repeats.
-3. Contact start on the same artery: building the kernel set's stiffness and its local-stress
-   operator when the needle first touches, at 40 entry points; median, p99, max.
+3. Contact start on the same artery: the FEM step whose continuous collision test meets the wall,
+   building the kernel set's stiffness and its local-stress operator, at 40 entry points; median,
+   p99, max. Before it, the cost of that test (issue 43) while the needle is carried to the wall.
 4. The wall-stitch patch (0.3 mm cells in its stitch region) built and precomputed uncached.
 5. The haptic and FEM layers' compute time during a whole simulated stitch on the wall-stitch
    task (kernel contact), from the runtime's own telemetry.
@@ -92,14 +93,20 @@ def kernel_figures(tissue: BiphaseTissue, case, live_stress: bool = True, prefet
             surface = tissue.mesh.surface_nodes
             near = surface[np.linalg.norm(tissue.mesh.points[surface] - tip, axis=1) <= 1.5e-3]
             tissue.soft.prefetch(near, full=True)
-        interaction.graphics_step(0.0)  # the first touch nominates the triangle
+        interaction.fem_step(0.0)  # 10 um in: does the needle meet the wall here? (a few do not)
         if interaction.state != "contact":
             continue
+        interaction = NeedleInteraction(tissue, needle, forces=forces)  # again, timed from free
+        interaction.live_stress = live_stress
+        pressing(interaction, outer, angle, z, -1e-5)
+        interaction.fem_step(0.0)  # 10 um outside: free
         pressing(interaction, outer, angle, z, 2e-4)
         began = time.perf_counter()
-        interaction.fem_step(0.001)  # builds the kernel set and its stress operator
+        interaction.fem_step(0.002)  # the sweep meets the wall: nominates, builds the kernels and operator
         starts.append(time.perf_counter() - began)
-        steps += timed(lambda i=interaction: i.fem_step(0.002), 200)
+        if interaction.state != "contact":
+            raise SystemExit(f"benchmark set-up failed: state {interaction.state} after the first touch")
+        steps += timed(lambda i=interaction: i.fem_step(0.004), 200)
     load = interaction._load
     print(f"kernel nodes at the last entry: {len(load.nodes)}", flush=True)
     d = np.array([[0.0, 0.0, -2e-4]])
@@ -134,7 +141,7 @@ def passage_figure(tissue: BiphaseTissue, case) -> None:
     interaction = NeedleInteraction(tissue, needle, forces=forces)
     angle, z = math.radians(250), 0.015
     pressing(interaction, outer, angle, z, 1e-5)
-    interaction.graphics_step(0.0)
+    interaction.fem_step(0.0)  # the first touch
     depth, now = 1e-5, 0.0
     while interaction.state == "contact" and depth < 1.4e-3:
         depth += 2e-5
@@ -157,6 +164,43 @@ def passage_figure(tissue: BiphaseTissue, case) -> None:
         f"lateral kernel, cutting, friction, emergence, local stress)",
         flush=True,
     )
+
+
+def sweep_figure(tissue: BiphaseTissue, case) -> None:
+    """Issue 43: the continuous collision test of the needle's swept path, per FEM step, on the 10k
+    artery: a needle carried towards the wall (free) at 10, 100 and 500 mm/s, 500 Hz FEM; the test
+    alone (``first_touch``) and the whole free FEM step it is part of."""
+    from sim.needle.sweep import first_touch
+
+    forces = tissue_preset("porcine-artery").forces
+    needle = Needle.curved(segments=16)
+    outer = float(np.hypot(case.mesh.points[:, 0], case.mesh.points[:, 1]).max())
+    for speed in (0.01, 0.1, 0.5):
+        sweeps, steps = [], []
+        for k in range(20):
+            angle, z = math.radians(200 + 3 * k), 0.011 + 0.0002 * k
+            gap, now = 3e-3, 0.0
+            interaction = NeedleInteraction(tissue, needle, forces=forces)
+            while gap > speed * 0.002 and interaction.state == "free":
+                pressing(interaction, outer, angle, z, -gap)
+                before = interaction._swept_from
+                after = interaction.needle_vertices()
+                if before is not None:
+                    collision = interaction.collision
+                    sweeps += timed(lambda c=collision, b=before, a=after: first_touch(c, b, a), 1)
+                began = time.perf_counter()
+                interaction.fem_step(now)
+                steps.append(time.perf_counter() - began)
+                gap -= speed * 0.002
+                now += 0.002
+        sweep50, sweep99, _ = percentiles(sweeps)
+        step50, step99, _ = percentiles(steps)
+        print(
+            f"sweep_us at {speed * 1e3:.0f} mm/s: test median={sweep50 * 1e6:.1f} p99={sweep99 * 1e6:.1f}; "
+            f"free FEM step median={step50 * 1e6:.1f} p99={step99 * 1e6:.1f} ({len(steps)} steps, "
+            "10k artery)",
+            flush=True,
+        )
 
 
 def stitch_region_precompute() -> None:
@@ -196,6 +240,7 @@ def stitch_telemetry() -> None:
 
 def main() -> None:
     tissue, case = artery()
+    sweep_figure(tissue, case)
     kernel_figures(tissue, case)
     kernel_figures(tissue, case, prefetched=True)
     kernel_figures(tissue, case, live_stress=False)

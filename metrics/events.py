@@ -19,9 +19,10 @@ EVENT_NAMES: dict[str, str] = {
     "pull_through": "needle pulled through",
     "release": "needle released",
     "regrab": "needle re-grasped",
-    "implausible_hit": "needle body touched the tissue away from its tip",
+    "implausible_hit": "the needle crossed the tissue in a way the simulator does not follow",
     "overstress": "tissue stress at the needle above the damage threshold",
     "edge_overstress": "wound edge stressed past the damage threshold (tearing risk)",
+    "tear": "the wall gave way under the needle (more force than it can carry)",
     "watchdog": "simulator fell behind (safety watchdog)",
     "watchdog_recovered": "simulator caught up",
     "force_clamped": "force to the device limited to its rating",
@@ -36,14 +37,15 @@ EVENT_NAMES: dict[str, str] = {
 """Every event kind the recorder stores, named for a person (tests check none is missing)."""
 
 COLLAPSED: dict[str, str] = {
-    "implausible_hit": "the simulator's plausibility check: the needle's body crossed the tissue surface "
-    "somewhere other than at its tip (usually a needle held too flat against the wall); listed once",
+    "implausible_hit": "the simulator's plausibility check: the needle crossed the tissue's surface in a way "
+    "the model does not follow (inside the wall without piercing it, touching at more points than it models "
+    "at once, or into a wall out of turn); listed once",
     "force_clamped": "the force sent to the device was limited to what it can render safely; listed once",
 }
 """Kinds that come in runs: one line with a count and this explanation instead of one line each."""
 
 
-SAFETY_EVENTS = ("overstress", "edge_overstress", "force_clamped", "nonfinite_force", "device_lost")
+SAFETY_EVENTS = ("overstress", "edge_overstress", "tear", "force_clamped", "nonfinite_force", "device_lost")
 """Kinds that say the patient (or the trainee's hand) was at risk: listed first, apart from the rest."""
 
 

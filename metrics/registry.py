@@ -18,7 +18,9 @@ from metrics.streams import MetricsError
 if TYPE_CHECKING:
     from metrics.context import SessionContext
 
-REGISTRY_VERSION = "7"
+REGISTRY_VERSION = "8"
+"""8: ``stretch`` (peak_stretch, time_above_strain_limit) is the largest edge stretch around the contact
+in the field the display draws, no longer 1 + |d|/h (issue 43)."""
 
 LOWER, HIGHER = "lower", "higher"
 

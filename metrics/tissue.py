@@ -9,8 +9,8 @@ exactly, so this module derives from them, with the same tissue model and the sa
 runtime used (the force kernel of :mod:`sim.needle_load`, or the paper's barycentric drive
 ``b_k d`` for sessions recorded under it):
 
-- ``stretch``: the stretch statistic lambda = 1 + |d| / h (h: wall depth under the contact,
-  as the biphase model uses it), per tick of indentation;
+- ``stretch``: the largest stretch (deformed over rest length) of the edges of the elements within
+  1 mm of the contact in the displacement field the display draws, per tick of indentation;
 - ``local_stress``: the largest von Mises stress (Pa) near the contact, per tick of
   indentation (for sessions that did not stream it; for those that did, the derivation is
   the test oracle of the live stream);
@@ -29,10 +29,10 @@ from numpy.typing import NDArray
 
 from metrics.streams import SessionStreams
 from sim.fem import Tissue
-from sim.fem.fields import IndentationStress, TissueFieldReplay, contact_depth
+from sim.fem.fields import IndentationStress, LocalStress, TissueFieldReplay
 from sim.needle import Needle
 from sim.needle_forces import NeedleForces
-from sim.needle_load import KernelLoad, kernel_factory
+from sim.needle_load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
 
 NEAR_CONTACT_M = 0.002
 """With the paper's rule, elements whose centroid lies within 2 mm of the contact point count as "near
@@ -125,12 +125,14 @@ def with_tissue_fields(
             )
             models[key] = indentation(tissue, contact, forces)
         model = models[key]
-        tool_displacement = streams.tip_position[start:stop] - model.contact.point
+        tips = streams.tip_position[start:stop]
         speed = streams.tip_speed[start:stop]
-        if not per_tick_known:
-            stretch[start:stop], local_stress[start:stop] = model.per_tick(tool_displacement, speed)
+        if not per_tick_known or (first_pierce is not None and stop == first_pierce):
+            run_stretch, run_stress = model.per_tick(tips, speed)
+            if not per_tick_known:
+                stretch[start:stop], local_stress[start:stop] = run_stretch, run_stress
         if first_pierce is not None and stop == first_pierce and streams.stress_field is None:
-            stress_field = model.stress_field(tool_displacement[-1], float(speed[-1]))
+            stress_field = model.stress_field(tips, float(speed[-1]))
     if per_tick_known:
         return dataclasses.replace(streams, stress_field=stress_field)
     return dataclasses.replace(
@@ -152,40 +154,66 @@ class _BarycentricIndentation:
         near = np.flatnonzero(distance <= NEAR_CONTACT_M)
         near = near if near.size else np.array([int(np.argmin(distance))])
         self.operator = IndentationStress(tissue, contact.nodes, contact.barycentric, near)
-        self.depth = contact_depth(tissue, contact.nodes)
+        self.handle = tissue.contact(contact.nodes)
+        self.local = LocalStress(tissue, contact.nodes, np.eye(3 * len(contact.nodes)), [contact.point])
 
-    def per_tick(self, tool_displacement: NDArray, speed: NDArray) -> tuple[NDArray, NDArray]:
-        stretch = 1.0 + np.linalg.norm(tool_displacement, axis=1) / self.depth
+    def per_tick(self, tips: NDArray, speed: NDArray) -> tuple[NDArray, NDArray]:
+        tool_displacement = tips - self.contact.point
+        stretch = np.empty(len(tips))
+        for k, (d, v) in enumerate(zip(tool_displacement, speed, strict=True)):
+            reactions = self.handle.reaction_forces(np.outer(self.contact.barycentric, d), d, float(v))
+            stretch[k] = self.local.stretch(reactions.reshape(-1))
         return stretch, self.operator.von_mises(tool_displacement, speed).max(axis=1)
 
-    def stress_field(self, tool_displacement: NDArray, speed: float) -> pd.DataFrame:
-        drive = np.outer(self.contact.barycentric, tool_displacement)
+    def stress_field(self, tips: NDArray, speed: float) -> pd.DataFrame:
+        drive = np.outer(self.contact.barycentric, tips[-1] - self.contact.point)
         return _surface_table(self.tissue, self.contact.nodes, drive, speed, None)
 
 
 class _KernelIndentation:
-    """The force kernel (:mod:`sim.needle_load`): the same load, share and local-stress operator the
-    runtime built at the first touch, evaluated tick by tick."""
+    """The force kernel (:mod:`sim.needle_load`): the same load, contact law
+    (:func:`sim.needle_load.kernel_step`: stick-slip, loading-only speed effect, tearing) and local
+    operator the runtime built at the first touch, stepped through the run's ticks in order (a tick
+    repeating the last one's tip and speed is the same FEM step, held)."""
 
     def __init__(self, tissue: Tissue, contact: _Contact, forces: NeedleForces) -> None:
-        self.tissue, self.contact = tissue, contact
+        self.tissue, self.contact, self.forces = tissue, contact, forces
         self.load = KernelLoad(tissue, kernel_factory(forces, WIRE_RADIUS, [contact]))
         self.operator = self.load.local_stress(tissue)
-        depth = self.load.depth
-        self.depth = depth if np.isfinite(depth) else contact_depth(tissue, self.load.nodes)
+        self.ratio = mindlin_ratio(tissue_poisson_ratio(tissue))
+        self._last: tuple[NDArray, float] | None = None
 
-    def _forces(self, d: NDArray, speed: float) -> tuple[NDArray, float]:
-        share = self.load.soft_share(d[None, :], speed)
-        return self.load.elastic_forces(d[None, :], share), share
+    def per_tick(self, tips: NDArray, speed: NDArray) -> tuple[NDArray, NDArray]:
+        stretch, stress = np.empty(len(tips)), np.empty(len(tips))
+        point, indentation = self.contact.point.copy(), 0.0
+        held = np.zeros(len(tips), dtype=bool)
+        held[1:] = np.all(tips[1:] == tips[:-1], axis=1) & (speed[1:] == speed[:-1])
+        extra = np.zeros((1, 3))
+        for k in range(len(tips)):
+            if held[k]:
+                stretch[k], stress[k] = stretch[k - 1], stress[k - 1]
+                continue
+            step = kernel_step(
+                self.load,
+                (tips[k] - point)[None, :],
+                extra,
+                float(speed[k]),
+                indentation,
+                self.forces,
+                self.contact.normal,
+                self.ratio,
+            )
+            point, indentation = point + step.shifts[0], step.indentation
+            generalised = step.kernel_forces.reshape(-1)
+            stress[k] = self.operator.maximum(generalised)
+            stretch[k] = self.operator.stretch(generalised, 1.0 / self.load.drive_scale(step.share))
+            self._last = (step.kernel_forces, step.share)
+        return stretch, stress
 
-    def per_tick(self, tool_displacement: NDArray, speed: NDArray) -> tuple[NDArray, NDArray]:
-        stress = np.empty(len(tool_displacement))
-        for k, (d, v) in enumerate(zip(tool_displacement, speed, strict=True)):
-            stress[k] = self.operator.maximum(self._forces(d, float(v))[0].reshape(-1))
-        return 1.0 + np.linalg.norm(tool_displacement, axis=1) / self.depth, stress
-
-    def stress_field(self, tool_displacement: NDArray, speed: float) -> pd.DataFrame:
-        kernel_forces, share = self._forces(tool_displacement, speed)
+    def stress_field(self, tips: NDArray, speed: float) -> pd.DataFrame:
+        if self._last is None:
+            self.per_tick(tips, np.full(len(tips), speed))
+        kernel_forces, share = self._last
         reactions = self.load.nodal_forces(kernel_forces)
         drive = self.load.equivalent_drive(reactions, share)
         return _surface_table(self.tissue, self.load.nodes, drive, speed, share)

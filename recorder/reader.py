@@ -12,9 +12,9 @@ import pyarrow as pa
 from recorder.layout import EVENTS_FILE, HEADER_FILE, SAMPLES_FILE, SAMPLES_JOURNAL, read_checked, read_header
 from recorder.schema import (
     EVENT_SCHEMA,
+    OLDER_SAMPLE_SCHEMAS,
     READABLE_VERSIONS,
     SAMPLE_SCHEMA,
-    SAMPLE_SCHEMA_V1,
     RecorderError,
     upgraded_samples,
 )
@@ -61,9 +61,9 @@ def open_session(path: str | Path, verify: bool = True) -> Session:
         if (path / SAMPLES_JOURNAL).exists():
             raise RecorderError(f"{path} was not closed (a crash?)", remedy=("recover", str(path)))
         raise RecorderError(f"{path} is still marked as recording but has no journal")
-    if version == 1:
+    if version in OLDER_SAMPLE_SCHEMAS:
         samples = upgraded_samples(
-            read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA_V1)
+            read_checked(path, SAMPLES_FILE, header.get("samples"), verify, OLDER_SAMPLE_SCHEMAS[version])
         )
     else:
         samples = read_checked(path, SAMPLES_FILE, header.get("samples"), verify, SAMPLE_SCHEMA)

@@ -11,6 +11,7 @@ from recorder.scene import SceneLog
 from recorder.schema import COLUMN, SAMPLE_COLUMNS
 from recorder.writer import SessionWriter
 from sim.devices.base import DeviceSample
+from sim.needle import Pose
 from sim.runtime.simulation import Simulation
 from sim.runtime.snapshots import STATE_CODES, FemSnapshot
 
@@ -40,10 +41,21 @@ class RuntimeRecorder:
         self._row = np.zeros(len(SAMPLE_COLUMNS))
         self._row[COLUMN["local_stress"]] = math.nan
         self._row[COLUMN["stretch"]] = math.nan
+        velocity = COLUMN["tip_vx"]
+        self._row[velocity : velocity + 3] = math.nan  # not known before the first FEM step
         self._row_cells = memoryview(self._row)  # what record() copies cheapest (recorder/_ring.c)
         self._last_time: float | None = None
+        self._needle_at = None  # (tip, tangent) of the grasped needle for a device sample, once attached
 
     def attach(self, simulation: Simulation) -> Simulation:
+        interaction = simulation.interaction
+
+        def needle_at(sample) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            holder = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
+            pose = holder.compose(interaction.grasp)
+            return interaction.needle.world_vertices(pose)[0], interaction.needle.tip_tangent(pose)
+
+        self._needle_at = needle_at
         simulation.on_sample = self.on_sample
         simulation.on_event = self.on_event
         simulation.on_haptic_start = self.writer.prefault
@@ -77,11 +89,15 @@ class RuntimeRecorder:
             row[14] = fem.tip_speed
             if fem.tip_tangent is not None:
                 row[15:18] = fem.tip_tangent
+            velocity = COLUMN["tip_vx"]
+            row[velocity : velocity + 3] = fem.tip_velocity if fem.tip_velocity is not None else math.nan
             row[COLUMN["contact_triangle"]] = fem.contact_triangle
             row[22:25] = fem.barycentric
             row[25] = fem.local_stress  # held between FEM steps: the latest snapshot's
             row[26] = fem.stretch
             row[COLUMN["pierced"]] = STATE_CODES.get(fem.state, 0)
+        elif self._needle_at is not None:  # before the first FEM step: where the holder puts the needle
+            row[11:14], row[15:18] = self._needle_at(sample)
         row[18:21] = force
         reaction = COLUMN["reaction_x"]
         if fem is not None:

@@ -12,10 +12,11 @@ from sim.errors import VascsimError
 from sim.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
 from sim.runtime.shared import EVENT_CODES as RUNTIME_EVENT_KINDS
 
-SCHEMA_VERSION = 2
-"""2 added the tissue's reaction force on the needle (``reaction_x/y/z``); version 1 files are read
-with those columns NaN (not recorded)."""
-READABLE_VERSIONS = (1, 2)
+SCHEMA_VERSION = 3
+"""2 added the tissue's reaction force on the needle (``reaction_x/y/z``); 3 the tip's velocity vector
+(``tip_vx/vy/vz``, where 2 stored only its speed) and dropped ``compute`` (written 0 in every sample).
+Older files are read with the columns they lack NaN (not recorded) and without ``compute``."""
+READABLE_VERSIONS = (1, 2, 3)
 
 
 class RecorderError(VascsimError):
@@ -57,12 +58,15 @@ SAMPLE_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("sub_dz", "m", ""),
     ("grip", "1", "needle-holder grip closed (1) or open (0)"),
     ("period", "s", "haptic loop period"),
-    ("compute", "s", "haptic step compute time"),
     ("reaction_x", "N", "the tissue's force on the needle (before the device's scale, clamp and rate limit)"),
     ("reaction_y", "N", ""),
     ("reaction_z", "N", ""),
+    ("tip_vx", "m/s", "needle tip velocity (between the last two FEM steps)"),
+    ("tip_vy", "m/s", ""),
+    ("tip_vz", "m/s", ""),
 )
 REACTION_COLUMNS = ("reaction_x", "reaction_y", "reaction_z")
+VELOCITY_COLUMNS = ("tip_vx", "tip_vy", "tip_vz")
 SAMPLE_COLUMNS = tuple(name for name, _, _ in SAMPLE_FIELDS)
 COLUMN = {name: i for i, name in enumerate(SAMPLE_COLUMNS)}
 INTEGER_COLUMNS = {"contact_triangle": pa.int32(), "pierced": pa.int8(), "grip": pa.int8()}
@@ -77,19 +81,30 @@ SAMPLE_SCHEMA = pa.schema(
     [_field(*spec) for spec in SAMPLE_FIELDS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": str(SCHEMA_VERSION)},
 )
+_V2_FIELDS = (
+    *(spec for spec in SAMPLE_FIELDS if spec[0] not in (*REACTION_COLUMNS, *VELOCITY_COLUMNS)),
+    ("compute", "s", "haptic step compute time"),
+    *(spec for spec in SAMPLE_FIELDS if spec[0] in REACTION_COLUMNS),
+)
+SAMPLE_SCHEMA_V2 = pa.schema(
+    [_field(*spec) for spec in _V2_FIELDS],
+    metadata={"vascsim.schema": "samples", "vascsim.schema_version": "2"},
+)
 SAMPLE_SCHEMA_V1 = pa.schema(
-    [_field(*spec) for spec in SAMPLE_FIELDS if spec[0] not in REACTION_COLUMNS],
+    [_field(*spec) for spec in _V2_FIELDS if spec[0] not in REACTION_COLUMNS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": "1"},
 )
+OLDER_SAMPLE_SCHEMAS = {1: SAMPLE_SCHEMA_V1, 2: SAMPLE_SCHEMA_V2}
 
 
 def upgraded_samples(table: pa.Table) -> pa.Table:
-    """A version-1 samples table with the version-2 columns it lacks added as NaN (not recorded)."""
+    """An older samples table in the current layout: the columns it lacks added as NaN (not recorded),
+    the ones the current one dropped (``compute``) left out."""
     import numpy as np
 
-    for name in REACTION_COLUMNS:
-        if name not in table.column_names:
-            table = table.append_column(SAMPLE_SCHEMA.field(name), pa.array(np.full(table.num_rows, np.nan)))
+    for field in SAMPLE_SCHEMA:
+        if field.name not in table.column_names:
+            table = table.append_column(field, pa.array(np.full(table.num_rows, np.nan)))
     return table.select(list(SAMPLE_COLUMNS)).cast(SAMPLE_SCHEMA)
 
 

@@ -3,8 +3,11 @@
 Run:  .venv/bin/python scripts/needle_force_figure.py
 
 Left: force against the tip's depth below the entry surface for the expert (perpendicular, turning
-along the curve) pass, with the puncture and emergence peaks Frick et al. 2001 describe. Right: force
-against time for the expert and three trainee profiles.
+along the curve) pass, with the puncture and emergence peaks Frick et al. 2001 describe. Middle: force
+against time for the expert and three trainee profiles (levering loads the wall until it tears at the
+preset's tear force). Right: the wall pressed to 1 mm and drawn back out at several speeds through the
+runtime's contact law (puncture lifted): Frick et al. found no effect of speed between 1 and 10 mm/s;
+unloading follows the rest curve, so no cycle returns more work than it took.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
+from sim.experiments import load_cycle
 from sim.needle import Needle
 from sim.runtime import Simulation
 
@@ -53,7 +57,7 @@ def stitch(tissue, parameters):
 
 def main() -> None:
     tissue = tissue_for("wall-stitch", None)
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2), dpi=110)
+    figure, (left, right, speeds) = plt.subplots(1, 3, figsize=(15, 4.2), dpi=110)
     time, depth, force, state = stitch(tissue, PROFILES["expert"])
     inserting = (
         (state == "contact")
@@ -93,6 +97,24 @@ def main() -> None:
     right.set_ylabel("needle force (mN)")
     right.set_title("force against time, four profiles")
     right.legend(fontsize=8)
+    spec, forces = task_spec("wall-stitch"), task_preset("wall-stitch").forces
+    for speed in (0.001, 0.01, 0.1, 0.5):
+        cycle = load_cycle(tissue, forces, spec.entry, spec.normal, 1e-3, speed, speed)
+        line = speeds.plot(
+            cycle.loading_depth * 1e3, cycle.loading_force * 1e3, label=f"{speed * 1e3:g} mm/s in"
+        )
+        speeds.plot(
+            cycle.unloading_depth * 1e3,
+            cycle.unloading_force * 1e3,
+            color=line[0].get_color(),
+            ls=":",
+            lw=1.0,
+        )
+    speeds.set_xlim(0, 1.0)
+    speeds.set_xlabel("indentation (mm)")
+    speeds.set_ylabel("normal force (mN)")
+    speeds.set_title("pressed and drawn back (dotted) at four speeds")
+    speeds.legend(fontsize=8, title="1 and 10 mm/s overlap (Frick 2001)", title_fontsize=7)
     figure.tight_layout()
     out = Path(__file__).parents[1] / "docs" / "figures" / "needle_force_curve.png"
     figure.savefig(out)

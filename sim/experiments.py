@@ -169,3 +169,91 @@ def kernel_indentation_curve(
         float(threshold),
         len(load.nodes),
     )
+
+
+class PressedNeedle:
+    """A straight needle held perpendicular to a surface and moved along its normal through the
+    runtime's own interaction (the same contact law, speed rule and kernels as a session), for
+    loading and unloading experiments. It never pierces or tears (those thresholds are lifted), so
+    the elastic law is seen whole.
+
+    ``press_to(depth, speed)`` moves the tip to ``depth`` (m below the surface point) at ``speed``
+    (m/s) in FEM steps of at most ``step`` (m) and returns the depths and normal forces (N, the
+    tissue pushing the needle out) at each step, the start included.
+    """
+
+    def __init__(self, tissue, forces, point: ArrayLike, normal: ArrayLike, step: float = 2e-5) -> None:
+        from sim.interaction import NeedleInteraction
+        from sim.needle import Needle, rotation_aligning
+
+        self.normal = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
+        self.point = np.asarray(point, dtype=np.float64)
+        self.step = step
+        lifted = forces.with_(puncture_force=1e9, tear_force=None)
+        self.needle = Needle.straight(0.01)
+        self.interaction = NeedleInteraction(tissue, self.needle, forces=lifted)
+        self.rotation = rotation_aligning([1.0, 0.0, 0.0], -self.normal)
+        self.time = 0.0
+        self.depth = -1e-4  # start 0.1 mm above the surface
+        self.force = self._place(self.depth)
+
+    def _place(self, depth: float) -> float:
+        from sim.needle import Pose
+
+        tip = self.point - depth * self.normal
+        pose = Pose(tip - self.rotation @ self.needle.vertices[0], self.rotation)
+        self.interaction.hold(self.time, pose, True)
+        return float(self.interaction.fem_step(self.time).needle_force @ self.normal)
+
+    def press_to(self, depth: float, speed: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        if not speed > 0:
+            raise ValueError(f"speed must be positive (m/s); got {speed}")
+        count = max(1, int(np.ceil(abs(depth - self.depth) / self.step)))
+        levels = np.linspace(self.depth, depth, count + 1)
+        dt = abs(depth - self.depth) / speed / count
+        forces = [self.force]
+        for level in levels[1:]:
+            self.time += dt
+            forces.append(self._place(float(level)))
+        self.depth, self.force = depth, forces[-1]
+        return levels, np.array(forces)
+
+
+@dataclass(frozen=True)
+class LoadCycle:
+    """A needle pressed to a depth and drawn back at given speeds, through the runtime's contact law.
+
+    depth (m), force (N, normal) per step of the loading then the unloading branch; work_in and
+    work_out (J): the work done on the tissue while loading and what it returned while unloading.
+    """
+
+    loading_depth: NDArray[np.float64]
+    loading_force: NDArray[np.float64]
+    unloading_depth: NDArray[np.float64]
+    unloading_force: NDArray[np.float64]
+    speed_in: float
+    speed_out: float
+
+    @property
+    def work_in(self) -> float:
+        return float(np.trapezoid(self.loading_force, self.loading_depth))
+
+    @property
+    def work_out(self) -> float:
+        return float(-np.trapezoid(self.unloading_force, self.unloading_depth))
+
+    def as_dict(self) -> dict[str, object]:
+        values = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()}
+        return {**values, "work_in": self.work_in, "work_out": self.work_out}
+
+
+def load_cycle(
+    tissue, forces, point: ArrayLike, normal: ArrayLike, depth: float, speed_in: float, speed_out: float
+) -> LoadCycle:
+    """Press a needle from the surface to ``depth`` (m) at ``speed_in`` and draw it back to the
+    surface at ``speed_out`` (m/s): both branches and the work in and out."""
+    pressed = PressedNeedle(tissue, forces, point, normal)
+    pressed.press_to(0.0, speed_in)
+    loading = pressed.press_to(depth, speed_in)
+    unloading = pressed.press_to(0.0, speed_out)
+    return LoadCycle(*loading, *unloading, speed_in, speed_out)

@@ -40,6 +40,7 @@ instead of rotating it along its curve therefore loads the wall.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from time import perf_counter
@@ -49,8 +50,9 @@ from numpy.typing import NDArray
 
 from sim.collision.mesh import CollisionMesh, TriangleContact
 from sim.fem import Tissue
-from sim.fem.fields import LocalStress, contact_depth
+from sim.fem.fields import LocalStress
 from sim.needle import Needle, Pose, rotation_about
+from sim.needle.sweep import Touch, touches
 from sim.needle_events import (
     EVENT_KINDS,
     FemStep,
@@ -60,7 +62,7 @@ from sim.needle_events import (
     entry_angle_deg,
 )
 from sim.needle_forces import NeedleForces
-from sim.needle_load import KernelLoad, kernel_factory
+from sim.needle_load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
 from sim.needle_passage import GraphicsRateTracking
 
 
@@ -84,6 +86,36 @@ def _checked_region_forces(
             )
         checked[int(region)] = forces
     return checked
+
+
+HOLE_REACH = 1.5e-3
+"""After a pull-through, the needle's body crossing the surface this close (m) to the passage's entry
+or exit point is the body following its tip through the wall, not a new contact (until a contact
+starts)."""
+
+
+HELD_EDGE_REACH = 2e-3
+"""Exterior triangles this close (m) to a clamped node lie along the model's held edge."""
+
+
+def _held_faces(tissue: Tissue) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """(exterior triangles with every corner clamped, those within :data:`HELD_EDGE_REACH` of a
+    clamped node). A needle cannot meet the first: there the model is cut off and held (a vessel
+    segment's ends, a patch's held sides) and the real tissue would go on. Along the second the
+    needle's body may pass round that edge, into the model's wall from where the real wall goes on."""
+    from scipy.spatial import cKDTree
+
+    mesh = tissue.mesh
+    clamped = tissue.base.clamped_nodes
+    is_clamped = np.zeros(mesh.n_nodes, dtype=bool)
+    is_clamped[clamped] = True
+    triangles = mesh.surface_triangles
+    held = is_clamped[triangles].all(axis=1)
+    if clamped.size == 0:
+        return held, held.copy()
+    centroids = mesh.points[triangles].mean(axis=1)
+    distance, _ = cKDTree(mesh.points[clamped]).query(centroids)
+    return held, distance <= HELD_EDGE_REACH
 
 
 class NeedleInteraction(GraphicsRateTracking):
@@ -115,7 +147,9 @@ class NeedleInteraction(GraphicsRateTracking):
         self.local_stress = math.nan
         """Largest von Mises stress (Pa) within 1 mm of the contact at the last FEM step (nan when free)."""
         self.stretch = math.nan
-        """The stretch statistic 1 + |d| / h at the last FEM step (nan when free)."""
+        """The largest stretch (deformed over rest length) of the edges of the elements within 1 mm of
+        the contact in the displacement field the display draws, at the last FEM step (nan when free
+        or without live stress)."""
         self.wound_edge_stress = math.nan
         """Largest von Mises stress (Pa) of the wound's cut-face elements within 3 mm of the contact
         at the last FEM step (nan when free, without live stress, or with no wound edge near)."""
@@ -129,7 +163,8 @@ class NeedleInteraction(GraphicsRateTracking):
         self._settled_at = 0.0  # FEM time of the last step that moved a released needle
         self._wall_path = math.inf  # straight-line length through the wall from the entry (m)
         self._deepest = 0.0  # deepest tip depth reached into the wall since piercing (m)
-        self.collision = collision or CollisionMesh(tissue.mesh)
+        held, self._at_held_edge = _held_faces(tissue)
+        self.collision = collision or CollisionMesh(tissue.mesh, ~held)
         self.state = "free"
         self.grasped = True
         self.grasp = grasp or Pose.identity()  # needle frame in the holder frame
@@ -151,6 +186,15 @@ class NeedleInteraction(GraphicsRateTracking):
         self._pose_seen: Pose | None = None
         self._pose_geometry = (np.zeros((0, 3)), np.zeros(3))
         self.tip_speed = 0.0
+        self._swept_from: NDArray[np.float64] | None = None  # needle vertices at the last FEM step
+        self._touches: list[tuple[int, float]] = []  # per surface contact: the needle's (segment, along)
+        self._serials: list[int] = []  # per surface contact, a number that names it while it lasts
+        self._serial = 0
+        self._indentation = 0.0  # largest kernel displacement at the last FEM step (m): loading or not
+        self._holes: list[NDArray[np.float64]] = []  # entry and exit of the last passage pulled through
+        self._torn: set[int] = set()  # crossings (ranks) that have torn in this contact or passage
+        self._tangential_ratio = mindlin_ratio(tissue_poisson_ratio(tissue))
+        """Tangential over normal stiffness of the surface contact: Mindlin's flat punch, 2(1-nu)/(2-nu)."""
 
     @property
     def watched_edge_elements(self) -> NDArray[np.int64]:
@@ -227,17 +271,25 @@ class NeedleInteraction(GraphicsRateTracking):
     # -- FEM rate -------------------------------------------------------------------------
     def fem_step(self, time: float) -> FemStep:
         """Local CD against the nominated triangle(s), forces, and the piercing decision."""
-        self._fem_time = time
+        previous_time, self._fem_time = self._fem_time, time
+        vertices = self.needle_vertices()
+        before, self._swept_from = self._swept_from, vertices
+        met: list[NeedleEvent] = []
+        if self.state in ("free", "contact"):
+            met = self._meet(previous_time, time, before, vertices)
         if self.state == "free" or not self.contacts:
             self.last_contact = None
             self.local_stress = self.stretch = self.wound_edge_stress = math.nan
             self._check_stress(time, None)
-            return FemStep.untouched()
-        vertices = self.needle_vertices()
+            return FemStep.untouched(met)
         if not self.grasped and self.state != "contact":
             vertices = self._settle_released(vertices, time)
-        tip = vertices[0]
-        step = self._contact_step(time, tip) if self.state == "contact" else self._pierced_step(vertices)
+            self._swept_from = vertices
+        if self.state == "contact":
+            step = self._contact_step(time, vertices)
+        else:
+            step = self._pierced_step(vertices)
+        step.events[:0] = met
         if self.state == "free":  # the tip was withdrawn this step
             self.local_stress = self.stretch = self.wound_edge_stress = math.nan
         elif len(step.contact_nodes) == 0:  # in the wall's state but no longer held (being pulled clear)
@@ -282,23 +334,126 @@ class NeedleInteraction(GraphicsRateTracking):
             kind, time, contact.triangle, tuple(contact.barycentric), tip_speed=self.tip_speed, detail=detail
         )
 
-    def _contact_step(self, time: float, tip: NDArray) -> FemStep:
-        contact = self.contacts[0]
-        if contact.penetration(tip) <= 0.0:
-            event = self._let_go(time, "contact_end", contact, "tip withdrawn above the surface")
-            return FemStep.untouched([event])
-        displacement = tip - contact.point
-        if self.forces.load == "kernel":
-            nodes, reactions = self._kernel_reactions(
-                (("surface", 0),), displacement[None, :], np.zeros((1, 3))
-            )
+    def _meet(
+        self, previous_time: float, time: float, before: NDArray | None, after: NDArray
+    ) -> list[NeedleEvent]:
+        """Continuous collision detection at the FEM rate (:func:`sim.needle.sweep.touches`): the
+        needle's swept path since the last step against the surface. Its first crossing into the
+        tissue starts a contact where and when it happened: at the tip (which may pierce) or, if the
+        body met the wall first, at that point of the body (pushed back, it cannot pierce). In contact,
+        a crossing well away from every current contact (beyond its triangle's size plus 2 mm: nearer,
+        the needle's body dips below the undeformed surface as the tip presses in) is another contact,
+        up to :attr:`max_surface_contacts`."""
+        events = []
+        for touch in touches(self.collision, before, after):
+            event = self._touched(touch, previous_time, time, before, after)
+            if event is not None:
+                events.append(event)
+            if self.state not in ("free", "contact"):
+                break
+        return events
+
+    def _touched(
+        self, touch: Touch, previous_time: float, time: float, before: NDArray | None, after: NDArray
+    ) -> NeedleEvent | None:
+        """A contact for ``touch`` (and its ``contact_start``), unless it is the needle following its
+        tip through its holes, near a current contact, beyond the contacts modelled at once, or only
+        on the surface by the end of the step."""
+        if not touch.at_tip and self._near_hole(touch.point):
+            return None  # the rest of the needle following its tip through the holes it made
+        if self.state == "contact" and (
+            len(self.contacts) >= self.max_surface_contacts
+            or any(self._near_contact(c, touch.point, 2e-3) for c in self.contacts)
+        ):
+            return None
+        triangle = touch.triangle
+        contact = TriangleContact(
+            triangle,
+            self.collision.triangles[triangle].copy(),
+            touch.barycentric,
+            touch.point.copy(),
+            self.collision.normals[triangle].copy(),
+        )
+        material = (0, 1.0) if touch.at_tip else (touch.segment, touch.along)
+        if contact.penetration(self._material_point(after, *material)) <= 0.0:
+            return None  # it ends this step on the surface, not yet in it
+        if self.state == "free":
+            self.contacts, self._touches, self._serials, self.state = [], [], [], "contact"
+            self._holes = []
+            self._torn = set()
+            self.forces = self.forces_at(triangle)
+        self.contacts.append(contact)
+        self._touches.append(material)
+        self._serial += 1
+        self._serials.append(self._serial)
+        self._handle = self._load = None
+        if touch.at_tip:
+            angle, detail = entry_angle_deg(self.tip_tangent(), contact.normal), ""
         else:
+            where = (np.array([touch.segment]), np.array([1.0 - touch.along]))
+            from_tip = float(self.needle.arc_position(*where)[0])
+            angle = math.nan
+            detail = f"needle body, {from_tip * 1e3:.1f} mm from the tip: pushed back, cannot pierce there"
+        if len(self.contacts) > 1:
+            detail = f"{detail}; {len(self.contacts)} contacts at once".lstrip("; ")
+        when = previous_time + touch.fraction * (time - previous_time) if before is not None else time
+        return NeedleEvent(
+            "contact_start", when, triangle, tuple(touch.barycentric.tolist()), angle, self.tip_speed, detail
+        )
+
+    def _near_contact(self, contact: TriangleContact, point: NDArray, margin: float) -> bool:
+        """Whether ``point`` is within the contact triangle's size plus ``margin`` (m) of its point."""
+        corners = self.collision.corners[contact.triangle]
+        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + margin
+        return float(np.linalg.norm(point - contact.point)) <= reach
+
+    def _near_hole(self, point: NDArray) -> bool:
+        """Whether ``point`` is within :data:`HOLE_REACH` of the last pulled-through passage's holes."""
+        return any(float(np.linalg.norm(point - hole)) <= HOLE_REACH for hole in self._holes)
+
+    @staticmethod
+    def _material_point(vertices: NDArray, segment: int, along: float) -> NDArray:
+        """The point ``along`` (1 = the tip end) needle segment ``segment`` (from vertex k+1 to k)."""
+        if segment == 0 and along == 1.0:
+            return vertices[0]
+        return vertices[segment + 1] + along * (vertices[segment] - vertices[segment + 1])
+
+    def _contact_step(self, time: float, vertices: NDArray) -> FemStep:
+        """The needle pressing on the surface at one or more contacts: those whose point of the needle
+        has come back above its triangle's plane let go (``contact_end`` when the last does); the tip's
+        contact pierces at an acceptable angle and normal force."""
+        points = [self._material_point(vertices, *touch) for touch in self._touches]
+        pairs = zip(self.contacts, points, strict=True)
+        held = [k for k, (contact, point) in enumerate(pairs) if contact.penetration(point) > 0.0]
+        if not held:
+            what = "tip" if (0, 1.0) in self._touches else "needle body"
+            event = self._let_go(time, "contact_end", self.contacts[0], f"{what} withdrawn above the surface")
+            return FemStep.untouched([event])
+        if len(held) < len(self.contacts):
+            self.contacts = [self.contacts[k] for k in held]
+            self._touches = [self._touches[k] for k in held]
+            self._serials = [self._serials[k] for k in held]
+            points = [points[k] for k in held]
+            self._load = self._handle = None  # a smaller set of kernels
+        displacements = np.array([p - c.point for c, p in zip(self.contacts, points, strict=True)])
+        events = []
+        if self.forces.load == "kernel":
+            key = tuple(("surface", rank) for rank in range(len(self.contacts)))
+            normals = np.array([c.normal for c in self.contacts])
+            nodes, reactions, torn = self._kernel_reactions(
+                key, displacements, np.zeros_like(displacements), normals
+            )
+            events += self._tear_events(time, torn)
+        else:  # the paper's rule: one contact, its triangle's nodes driven by their barycentric weights
+            contact, displacement = self.contacts[0], displacements[0]
             nodes = contact.nodes
             intended = contact.barycentric[:, None] * displacement
             reactions = self._reactions(contact.nodes, intended, displacement)
             self._nodal_stress(nodes, reactions, [contact.point], displacement[None, :])
         force = -reactions.sum(axis=0)
-        events = []
+        if (0, 1.0) not in self._touches:
+            return FemStep(force, nodes, reactions, events)
+        contact = self.contacts[self._touches.index((0, 1.0))]
         angle = entry_angle_deg(self.tip_tangent(), contact.normal)
         normal_force = float(force @ contact.normal)  # the tissue pushes the needle back out
         threshold = self.forces.puncture_force
@@ -309,6 +464,7 @@ class NeedleInteraction(GraphicsRateTracking):
         )
         if angle <= self.rules.max_entry_angle_deg and punctured:
             self.state = "pierced"
+            self.contacts, self._touches, self._serials = [contact], [], []
             self._handle = None
             self._load = None
             self._start_passage(contact)
@@ -329,6 +485,7 @@ class NeedleInteraction(GraphicsRateTracking):
         """At the pierce: the wall's length along the tip's direction from the entry point (to the
         far surface the emergence ramp ends on), and no wall cut yet."""
         self._deepest = 0.0
+        self._torn = set()
         direction = self.tip_tangent()
         self._wall_path = self.collision.distance_through(contact.point, direction, contact.triangle)
 
@@ -348,8 +505,10 @@ class NeedleInteraction(GraphicsRateTracking):
             axial = self._axial_forces(vertices, tangent, len(crossings))
             key = tuple(("wall", rank) for rank, _ in crossings)
             sideways = np.array([offset for _, offset in crossings])
-            all_nodes, reactions = self._kernel_reactions(key, sideways, axial)
-            return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
+            all_nodes, reactions, torn = self._kernel_reactions(key, sideways, axial)
+            return FemStep(
+                -reactions.sum(axis=0), all_nodes, reactions, self._tear_events(self._fem_time, torn)
+            )
         nodes = [self.contacts[rank].nodes for rank, _ in crossings]
         # the paper's rule: each crossed triangle's nodes driven by their barycentric weights (np.outer,
         # without its wrapper)
@@ -409,8 +568,7 @@ class NeedleInteraction(GraphicsRateTracking):
                 self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points, watched=edge)
                 self._stress_key = tuple(nodes.tolist())
             self.local_stress, self.wound_edge_stress = self._stress.maxima(reactions.reshape(-1))
-        depth = contact_depth(self.tissue, self.contacts[0].nodes)
-        self.stretch = 1.0 + float(np.linalg.norm(displacements, axis=1).max()) / depth
+        self.stretch = math.nan if self._stress is None else self._stress.stretch(reactions.reshape(-1))
 
     def _axial_forces(self, vertices: NDArray, tangent: NDArray, kernels: int) -> NDArray:
         """(kernels, 3) the passage forces on the tissue along the needle (cutting, friction, the far
@@ -432,11 +590,8 @@ class NeedleInteraction(GraphicsRateTracking):
         resistance = forces.axial_resistance(speed, inside, cutting, ramp)
         return np.tile(resistance / kernels * tangent, (kernels, 1))
 
-    def _kernel_reactions(
-        self, key: tuple, displacements: NDArray, extra_forces: NDArray
-    ) -> tuple[NDArray[np.int64], NDArray]:
-        """(kernel nodes, their forces on the tissue (k, 3)) for kernel displacements (m, 3) plus
-        explicit forces on the tissue (m, 3) (N); remembers the equivalent penalty drive."""
+    def _kernel_load(self, key: tuple) -> KernelLoad:
+        """The force kernels of the contact set ``key`` (built, and the build timed, when it changes)."""
         if self._load is None or key != self._load_key:
             began, solved_before = perf_counter(), len(self.tissue.spot_solved)
             chosen = [self.contacts[rank] for _, rank in key]
@@ -449,21 +604,72 @@ class NeedleInteraction(GraphicsRateTracking):
             unsolved = tuple(self.tissue.spot_solved[solved_before:])  # solved here, for this contact
             self.contact_builds.append((self._fem_time, unsolved, perf_counter() - began))
             self._load_key = key
-        load = self._load
-        total = load.total_displacements(displacements, extra_forces)
-        share = load.soft_share(total, self.tip_speed)
-        self.soft_share = share
-        kernel_forces = load.elastic_forces(displacements, share) + extra_forces
+            self._indentation = 0.0
+        return self._load
+
+    def _kernel_reactions(
+        self, key: tuple, displacements: NDArray, extra_forces: NDArray, surface: NDArray | None = None
+    ) -> tuple[NDArray[np.int64], NDArray, list[int]]:
+        """(kernel nodes, their forces on the tissue (k, 3), the kernels torn this step) for kernel
+        displacements (m, 3) plus explicit forces on the tissue (m, 3) (N); remembers the equivalent
+        penalty drive.
+
+        ``surface``: (m, 3) outward normals of a needle pressing on the surface: the contact law of
+        :func:`sim.needle_load.kernel_step` (stick-slip, loading-only speed effect, tearing); the
+        contact points it moves (slid, torn) are moved here."""
+        load = self._kernel_load(key)
+        ranks = [rank for _, rank in key]
+        step = kernel_step(
+            load,
+            displacements,
+            extra_forces,
+            self.tip_speed,
+            self._indentation,
+            self.forces,
+            surface,
+            self._tangential_ratio,
+        )
+        for m, rank in enumerate(ranks):
+            if step.shifts[m].any():
+                self._move_contact(rank, step.shifts[m])
+        self._indentation, self.soft_share = step.indentation, step.share
+        share, kernel_forces, torn = step.share, step.kernel_forces, step.torn
         reactions = load.nodal_forces(kernel_forces)
         self.last_contact = (load.nodes, load.equivalent_drive(reactions, share))
         if self._stress is None:
-            self.local_stress = self.wound_edge_stress = math.nan
+            self.local_stress = self.wound_edge_stress = self.stretch = math.nan
         else:
-            self.local_stress, self.wound_edge_stress = self._stress.maxima(kernel_forces.reshape(-1))
-        self.stretch = 1.0 + float(np.sqrt(np.einsum("ij,ij->i", total, total).max())) / (
-            load.depth if math.isfinite(load.depth) else contact_depth(self.tissue, load.nodes)
-        )
-        return load.nodes, reactions
+            generalised = kernel_forces.reshape(-1)
+            self.local_stress, self.wound_edge_stress = self._stress.maxima(generalised)
+            # the field the display draws: the soft phase's answer to these loads over both phases'
+            self.stretch = self._stress.stretch(generalised, 1.0 / load.drive_scale(share))
+        return load.nodes, reactions, [ranks[m] for m in torn]
+
+    def _move_contact(self, rank: int, shift: NDArray) -> None:
+        """The wall's hold on the needle moves by ``shift`` (m): it slid, or the wall tore."""
+        contact = self.contacts[rank]
+        self.contacts[rank] = dataclasses.replace(contact, point=contact.point + shift)
+
+    def _tear_events(self, time: float, ranks: list[int]) -> list[NeedleEvent]:
+        """A ``tear`` event when a crossing first gives way (once per contact or passage)."""
+        events = []
+        for rank in ranks:
+            if rank in self._torn:
+                continue
+            self._torn.add(rank)
+            contact = self.contacts[rank]
+            where = "at the surface contact" if self.state == "contact" else "where the needle crosses it"
+            events.append(
+                NeedleEvent(
+                    "tear",
+                    time,
+                    contact.triangle,
+                    tuple(contact.barycentric),
+                    tip_speed=self.tip_speed,
+                    detail=f"the wall gave way {where} at {self.forces.tear_force:.2f} N",
+                )
+            )
+        return events
 
     def _reactions(self, nodes: NDArray[np.int64], intended: NDArray, tool_displacement: NDArray) -> NDArray:
         self.last_contact = (nodes, intended)

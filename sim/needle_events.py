@@ -26,6 +26,7 @@ EVENT_KINDS = (
     "implausible_hit",
     "overstress",
     "edge_overstress",
+    "tear",
 )
 
 

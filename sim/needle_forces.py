@@ -61,6 +61,11 @@ class NeedleForces:
     viscous_coefficient: viscous friction (N s/m) along the needle.
     damage_stress: local von Mises stress (Pa) whose first crossing is an ``overstress`` event
         (None: no events); a relative measure of load in this phenomenological model.
+    friction_coefficient: Coulomb coefficient between the needle and the wall's surface: a needle
+        pressing on the wall sticks until its sideways force reaches this times its normal force,
+        then slides.
+    tear_force: the largest force (N) the wall carries at one contact or crossing before it gives
+        way (a ``tear`` event; the contact then follows the needle at that force); None: no limit.
     recoil_time: time constant (s) with which the wall pushes a released needle back to where it no
         longer loads the wall sideways (the tissue's damped elastic recoil).
     edge_damage_stress: von Mises stress (Pa) of the wound's cut-face elements whose first crossing
@@ -82,6 +87,8 @@ class NeedleForces:
     damage_stress: float | None = None
     edge_damage_stress: float | None = None
     recoil_time: float = 0.03
+    friction_coefficient: float = 0.3
+    tear_force: float | None = None
 
     def __post_init__(self) -> None:
         if self.load not in LOAD_MODELS:
@@ -91,14 +98,21 @@ class NeedleForces:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise NeedleForcesError(f"{name} must be a positive number; got {value}")
-        for name in ("emergence_force", "cutting_force", "friction_per_length", "viscous_coefficient"):
+        for name in (
+            "emergence_force",
+            "cutting_force",
+            "friction_per_length",
+            "viscous_coefficient",
+            "friction_coefficient",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise NeedleForcesError(f"{name} must be zero or a positive number; got {value}")
-        for name in ("damage_stress", "edge_damage_stress"):
+        for name in ("damage_stress", "edge_damage_stress", "tear_force"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
-                raise NeedleForcesError(f"{name} must be positive (Pa) or None; got {value}")
+                unit = "N" if name == "tear_force" else "Pa"
+                raise NeedleForcesError(f"{name} must be positive ({unit}) or None; got {value}")
         if self.puncture_force is not None and not (
             math.isfinite(self.puncture_force) and self.puncture_force > 0
         ):

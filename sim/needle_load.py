@@ -12,7 +12,8 @@ one's (one Poisson ratio), otherwise share K_soft d + (1 - share) K_stiff d.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,6 +58,117 @@ def kernel_factory(
         return kernels, fields
 
     return make
+
+
+def tissue_poisson_ratio(tissue: Tissue) -> float:
+    """The tissue's Poisson ratio (a biphase tissue's shared one, else the largest of its regions')."""
+    if tissue.biphase is not None:
+        return float(tissue.biphase.poisson_ratio)
+    material = tissue.base.material
+    values = material.values() if isinstance(material, Mapping) else [material]
+    return max(float(m.poisson_ratio) for m in values)
+
+
+def mindlin_ratio(poisson_ratio: float) -> float:
+    """Tangential over normal stiffness of a rigid flat circular punch bonded to an elastic half-space,
+    2 (1 - nu) / (2 - nu) (Mindlin 1949, J Appl Mech 16:259; Johnson, Contact Mechanics, 1985, 7.2):
+    0.71 at nu = 0.45. Both stiffnesses scale with the same modulus and radius, so the ratio carries
+    the normal stiffness's convergence with mesh and kernel radius over to the tangential one."""
+    return 2.0 * (1.0 - poisson_ratio) / (2.0 - poisson_ratio)
+
+
+def surface_contact(
+    displacements: NDArray[np.float64], normals: NDArray[np.float64], ratio: float, friction: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Stick-slip of a needle pressing on the surface at m kernels: (the displacements (m, 3) the wall
+    carries, each contact point's slide (m, 3), zero while it sticks). The tangential force ``ratio``
+    k_n |d_t| is bounded by ``friction`` times the normal force k_n d_n (Coulomb), so the tangential
+    displacement is bounded by friction d_n / ratio whatever the stiffness; beyond it the contact
+    point slides after the needle and the wall carries the bound."""
+    pressed = -np.einsum("ij,ij->i", displacements, normals)  # indentation depths (m), into the wall
+    along = displacements + pressed[:, None] * normals
+    size = np.sqrt(np.einsum("ij,ij->i", along, along))
+    bound = friction * np.maximum(pressed, 0.0) / ratio
+    slides = np.zeros_like(displacements)
+    sliding = size > bound
+    if not sliding.any():
+        return displacements, slides
+    kept = along[sliding] * (bound[sliding] / size[sliding])[:, None]
+    slides[sliding] = along[sliding] - kept
+    return displacements - slides, slides
+
+
+@dataclass(frozen=True)
+class KernelStep:
+    """One FEM step of the needle's load through its kernels (:func:`kernel_step`).
+
+    kernel_forces: (m, 3) forces on the tissue (N) at the kernels, elastic plus explicit;
+    share: the biphase soft share; indentation: the kernels' largest total displacement (m), what the
+    next step compares with to know whether the wall is loading; shifts: (m, 3) how far (m) each
+    kernel's hold on the needle moved (slid, or the wall gave way); torn: kernels that gave way.
+    """
+
+    kernel_forces: NDArray[np.float64]
+    share: float
+    indentation: float
+    shifts: NDArray[np.float64]
+    torn: tuple[int, ...]
+
+
+def kernel_step(
+    load: KernelLoad,
+    displacements: NDArray[np.float64],
+    extra_forces: NDArray[np.float64],
+    speed: float,
+    indentation: float,
+    forces: NeedleForces,
+    surface: NDArray[np.float64] | None = None,
+    ratio: float = 1.0,
+) -> KernelStep:
+    """The contact law of one FEM step, the one place it is written (the runtime and the post-hoc
+    derivation of recorded sessions both call it).
+
+    displacements: (m, 3) where the needle is against where each kernel holds it (m); extra_forces:
+    (m, 3) explicit forces on the tissue there (the passage's, N); speed: the tip's (m/s);
+    indentation: the previous step's :attr:`KernelStep.indentation`.
+
+    - ``surface`` ((m, 3) outward normals of a needle pressing on the surface at each kernel): each
+      kernel's normal stiffness k_n, the tangential one ``ratio`` k_n (Mindlin) with the Coulomb
+      limit (:func:`surface_contact`: the hold slides beyond it);
+    - the tip's speed stiffens the wall only while it is loading (the kernels' displacement not
+      shrinking): unloading follows the rest curve, so no cycle returns more work than it took;
+    - a kernel whose elastic force would exceed ``forces.tear_force`` gives way: its hold follows the
+      needle and it carries that force, no more.
+    """
+    displacements = np.array(displacements, dtype=np.float64)
+    shifts = np.zeros_like(displacements)
+    if surface is not None:
+        surface = np.asarray(surface, dtype=np.float64).reshape(-1, 3)
+        displacements, slides = surface_contact(displacements, surface, ratio, forces.friction_coefficient)
+        shifts += slides
+    total = load.total_displacements(displacements, extra_forces)
+    now = float(np.sqrt(np.einsum("ij,ij->i", total, total).max()))
+    share = load.soft_share(total, speed if now >= indentation else 0.0)
+    if surface is None:
+        elastic = load.elastic_forces(displacements, share)
+    else:  # each kernel's own normal stiffness (its diagonal block: contacts apart barely couple)
+        probe = np.zeros_like(displacements)
+        stiffness = np.empty(len(surface))
+        for m in range(len(surface)):
+            probe[m] = surface[m]
+            stiffness[m] = float(load.elastic_forces(probe, share)[m] @ surface[m])
+            probe[m] = 0.0
+        normal = np.einsum("ij,ij->i", displacements, surface)[:, None] * surface
+        elastic = stiffness[:, None] * (normal + ratio * (displacements - normal))
+    torn = []
+    if forces.tear_force is not None:
+        sizes = np.sqrt(np.einsum("ij,ij->i", elastic, elastic))
+        for m in np.flatnonzero(sizes > forces.tear_force):
+            scale = forces.tear_force / sizes[m]
+            shifts[m] += (1.0 - scale) * displacements[m]
+            elastic[m] *= scale
+            torn.append(int(m))
+    return KernelStep(elastic + extra_forces, share, now, shifts, tuple(torn))
 
 
 class KernelLoad:

@@ -20,6 +20,9 @@ from sim.needle_events import NeedleEvent, entry_angle_deg
 class GraphicsRateTracking:
     """Global CD and what follows from it (see the module docstring)."""
 
+    max_surface_contacts = 4
+    """Most points of one needle pressing on the surface at once (the tip and three of the body)."""
+
     def graphics_step(self, time: float) -> list[NeedleEvent]:
         """Global CD of the whole needle; promotes, exits, completes passages, flags implausible hits."""
         vertices = self.needle_vertices()
@@ -50,45 +53,35 @@ class GraphicsRateTracking:
     def _promote(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
         if len(hits) == 0:
             return []
-        if not hits.entering[0]:
+        if self._holes:  # the needle's body still following its tip out through the holes it made
+            points = hits.points(*segment_ends(vertices))
+            away = [k for k in range(len(hits)) if not self._near_hole(points[k])]
+            if not away:
+                return []
+            hits = hits.take(np.array(away))
+        if not hits.entering[0] and not self._at_held_edge[hits.triangle[0]]:
             # The part of the needle nearest the tip crosses a surface from inside the tissue
-            # without having pierced it: entry through the wrong face.
+            # without having pierced it: entry through the wrong face (unless beside the model's
+            # held edge, which the needle's body can pass round where the real wall goes on).
             return [
                 self._event("implausible_hit", time, hits, 0, "needle inside the tissue without piercing")
             ]
-        if hits.segment[0] != 0:
-            return [
-                self._event(
-                    "implausible_hit",
-                    time,
-                    hits,
-                    0,
-                    f"first crossing on needle segment {hits.segment[0]}, not at the tip",
-                )
-            ]
-        point = hits.points(*segment_ends(vertices))[0]
-        self.contacts = [TriangleContact.from_hit(self.collision, hits, 0, point)]
-        self.state = "contact"
-        self.forces = self.forces_at(self.contacts[0].triangle)
-        self._handle = None
-        self._load = None
-        tangent = self.tip_tangent()
-        return [
-            self._event("contact_start", time, hits, 0, "", entry_angle_deg(tangent, self.contacts[0].normal))
-        ]
+        return []  # a crossing into the tissue: the FEM rate's continuous test has started its contact
 
     def _check_contact(self, time: float, vertices: NDArray, hits) -> list[NeedleEvent]:
-        """While in contact, flag crossings well away from the contact point.
+        """While in contact with as many points as are modelled at once, flag crossings well away from
+        every contact point (below that, the FEM rate's continuous test makes further touches contacts).
 
         Near the contact the needle's body dips below the undeformed surface as the
         tip presses in (the collision mesh ignores the needle's own deformation), so
         only crossings farther than the contact triangle's size plus 2 mm count.
         """
-        contact = self.contacts[0]
-        corners = self.collision.corners[contact.triangle]
-        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 2e-3
+        if len(self.contacts) < self.max_surface_contacts:
+            return []  # room for more contacts: the FEM rate's continuous test makes further touches them
         points = hits.points(*segment_ends(vertices))
-        away = np.flatnonzero(np.linalg.norm(points - contact.point, axis=1) > reach)
+        away = np.flatnonzero(
+            [not any(self._near_contact(c, point, 2e-3) for c in self.contacts) for point in points]
+        )
         return [
             self._event("implausible_hit", time, hits, int(k), "needle touches the tissue elsewhere")
             for k in away[:1]
@@ -109,31 +102,30 @@ class GraphicsRateTracking:
             if np.any(hits.triangle == c.triangle) or self._crosses_plane_near(vertices, c)
         ]
         if not still_held:
+            self._holes = [c.point.copy() for c in self.contacts]  # the needle's tail follows through them
             return [self._let_go(time, "pull_through", entry, "needle pulled clear of the wall")]
         events = []
         entry_rank = int(through_entry[0]) if through_entry.size else len(hits)
-        ahead = range(entry_rank)  # crossings nearer the tip than the entry
-        exits = [k for k in ahead if not hits.entering[k]]
-        walls = [k for k in ahead if hits.entering[k]]
-        if self.state == "pierced" and exits:
-            k = exits[-1]
-            point = points[k]
-            self.contacts = [entry, TriangleContact.from_hit(self.collision, hits, k, point)]
-            self.state = "exited"
+        # the crossings nearer the tip than the entry, from the entry towards the tip, alternate out of a
+        # wall and into the next (a bite through both edges of a wound: out of one edge's cut face,
+        # into the other's, out through its surface); the first out of turn is implausible
+        chain: list[int] = []
+        for k in range(entry_rank - 1, -1, -1):
+            if bool(hits.entering[k]) != (len(chain) % 2 == 1):
+                break
+            chain.append(k)
+        held = len(self.contacts) - 1  # crossings beyond the entry the wall already holds
+        for position, k in enumerate(chain[held:], start=held):
+            self.contacts.append(TriangleContact.from_hit(self.collision, hits, k, points[k]))
             self._handle = None
             self._load = None
-            events.append(
-                self._event(
-                    "exit",
-                    time,
-                    hits,
-                    k,
-                    "",
-                    entry_angle_deg(-self.tip_tangent(), self.collision.normals[hits.triangle[k]]),
-                )
-            )
-        for k in walls:
-            events.append(self._event("implausible_hit", time, hits, k, "needle enters a second wall"))
+            if position == 0 and self.state == "pierced":
+                self.state = "exited"
+                angle = entry_angle_deg(-self.tip_tangent(), self.collision.normals[hits.triangle[k]])
+                events.append(self._event("exit", time, hits, k, "", angle))
+        for k in range(entry_rank - 1 - len(chain), -1, -1):
+            if hits.entering[k]:
+                events.append(self._event("implausible_hit", time, hits, k, "needle enters a second wall"))
         return events
 
     def _crosses_plane_near(self, vertices: NDArray, contact: TriangleContact) -> bool:

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from metrics.streams import MetricsError
 from sim.devices import ReplayDevice
 from sim.needle import Needle
+from sim.needle_forces import NeedleForces
 from sim.runtime import Simulation
 from sim.runtime.snapshots import STATE_CODES
 
@@ -113,7 +114,10 @@ def replay_track(session, tissue, fps: float = 30.0, needle: Needle | None = Non
     duration = float(time[-1])
     frame_times = np.arange(0.0, duration + 1e-9, 1.0 / fps)
     captured: list = []
-    simulation = Simulation(tissue, needle or Needle.curved(), device)
+    # the law it ran under: since the wall can tear and slide, the needle's path depends on it
+    recorded = session.header.get("needle_forces")
+    forces = NeedleForces.from_dict(dict(recorded)) if isinstance(recorded, dict) else None
+    simulation = Simulation(tissue, needle or Needle.curved(), device, forces=forces)
     state = {"next": 0}
 
     def on_sample(now, sample, force, fem) -> None:

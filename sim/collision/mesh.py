@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sim.collision.segments import SegmentHits, candidate_pairs, intersect_pairs
+from sim.collision.segments import SegmentHits, bounding_boxes, candidate_pairs, intersect_pairs
 from sim.geometry import ray_triangle_distances
 from sim.mesh.tetmesh import TetMesh
 
@@ -29,6 +29,9 @@ class CollisionMesh:
         self.triangles = mesh.surface_triangles
         self.valid = np.ones(len(self.triangles), dtype=bool) if valid is None else np.asarray(valid, bool)
         self._valid_ids = np.flatnonzero(self.valid)
+        self.edges, self.edge_faces = _edges_of(self.triangles[self._valid_ids], self._valid_ids)
+        """(E, 2) node ids of the valid triangles' edges, and (E, 2) the triangles on either side
+        (-1 where an edge borders only one): what a needle's body sweeps across between two poses."""
         self.update(mesh.points)
 
     def update(self, points: NDArray[np.float64]) -> None:
@@ -51,6 +54,7 @@ class CollisionMesh:
         self._sorted_lower = np.ascontiguousarray(lower[self._order])
         self._sorted_upper = np.ascontiguousarray(upper[self._order])
         self._widest_x = float((upper[:, 0] - lower[:, 0]).max()) if len(lower) else 0.0
+        self._trees = None  # KD-trees of triangle centroids and edge midpoints, built when first needed
 
     def deform(self, nodes: NDArray[np.int64], displacement: NDArray[np.float64]) -> None:
         """Rest positions plus a displacement (m) of the given nodes."""
@@ -70,6 +74,70 @@ class CollisionMesh:
         distances[distances < 1e-9] = np.inf  # triangles sharing the entry point
         return float(distances.min()) if distances.size else math.inf
 
+    def near_boxes(
+        self, lower: NDArray[np.float64], upper: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """(valid triangle ids, edge ids) that may reach into any of the boxes ``lower``-``upper``
+        (B, 3) (m): those whose centroid (midpoint) lies within a box's half-diagonal plus their own
+        reach of its centre (a superset; KD-trees built once per mesh position)."""
+        from scipy.spatial import cKDTree
+
+        if self._trees is None:
+            corners = self.corners[self._valid_ids]
+            centroids = corners.mean(axis=1)
+            reach = (
+                float(np.linalg.norm(corners - centroids[:, None, :], axis=2).max()) if len(corners) else 0.0
+            )
+            ends = self.points[self.edges]
+            half = 0.5 * float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max()) if len(ends) else 0.0
+            self._trees = (cKDTree(centroids), reach, cKDTree(ends.mean(axis=1)), half)
+        triangles, reach, edges, half = self._trees
+        centres = 0.5 * (lower + upper)
+        radii = 0.5 * np.sqrt(np.einsum("ij,ij->i", upper - lower, upper - lower))
+        nearest, _ = triangles.query(centres, distance_upper_bound=float(radii.max()) + reach + half)
+        if not np.isfinite(nearest).any():  # nothing within reach of any box: one vectorised query
+            return self._valid_ids[:0], np.zeros(0, dtype=np.int64)
+        found = triangles.query_ball_point(centres, radii + reach, return_sorted=False)
+        crossed = edges.query_ball_point(centres, radii + half, return_sorted=False)
+        near_triangles = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+        near_edges = np.unique(np.concatenate([np.asarray(e, dtype=np.int64) for e in crossed]))
+        return self._valid_ids[near_triangles], near_edges
+
+    def crossings_among(
+        self, start: NDArray[np.float64], end: NDArray[np.float64], triangles: NDArray[np.int64]
+    ) -> SegmentHits:
+        """Every crossing of segments start -> end (S, 3) with the given triangles (ids)."""
+        if len(triangles) == 0 or len(start) == 0:
+            return intersect_pairs(start, end, self.corners, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        lower, upper = bounding_boxes(self.corners[triangles])
+        segments, local = candidate_pairs(start, end, lower, upper)
+        return intersect_pairs(start, end, self.corners, segments, triangles[local])
+
+    def edges_among(
+        self, triangles: NDArray[np.float64], edges: NDArray[np.int64]
+    ) -> tuple[NDArray[np.int64], SegmentHits]:
+        """The given edges (ids into :attr:`edges`) that pass through given triangles (T, 3, 3) (a needle
+        segment's swept path): (the crossing edges' ids, their hits: ``segment`` indexes those ids,
+        ``triangle`` the given triangles, ``t`` runs along the edge from its first node)."""
+        ends = self.points[self.edges[edges]]
+        start, end = ends[:, 0], ends[:, 1]
+        if len(edges) == 0:
+            return edges, intersect_pairs(start, end, triangles, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        lower, upper = bounding_boxes(triangles)
+        found, given = candidate_pairs(start, end, lower, upper)
+        hits = intersect_pairs(start, end, triangles, found, given)
+        return edges[hits.segment], hits
+
+    def crossings(self, start: NDArray[np.float64], end: NDArray[np.float64]) -> SegmentHits:
+        """Every crossing of segments start -> end (S, 3) with the valid triangles, in no order
+        (``entering``: from a triangle's front to its back, i.e. into the tissue)."""
+        low_x = min(start[:, 0].min(), end[:, 0].min()) - self._widest_x
+        high_x = max(start[:, 0].max(), end[:, 0].max())
+        keys = self._sorted_lower[:, 0]
+        window = slice(int(np.searchsorted(keys, low_x, "left")), int(np.searchsorted(keys, high_x, "right")))
+        segments, local = candidate_pairs(start, end, self._sorted_lower[window], self._sorted_upper[window])
+        return intersect_pairs(start, end, self.corners, segments, self._sorted_ids[window][local])
+
     def query(self, vertices: NDArray[np.float64]) -> SegmentHits:
         """Every crossing of a needle polyline (vertices tip first) with the valid triangles.
 
@@ -78,14 +146,25 @@ class CollisionMesh:
         and ``t = 1`` is the tip end. Hits come nearest the tip first; their points
         are ``hits.points(*segment_ends(vertices))``.
         """
-        start, end = segment_ends(vertices)
-        low_x = min(start[:, 0].min(), end[:, 0].min()) - self._widest_x
-        high_x = max(start[:, 0].max(), end[:, 0].max())
-        keys = self._sorted_lower[:, 0]
-        window = slice(int(np.searchsorted(keys, low_x, "left")), int(np.searchsorted(keys, high_x, "right")))
-        segments, local = candidate_pairs(start, end, self._sorted_lower[window], self._sorted_upper[window])
-        hits = intersect_pairs(start, end, self.corners, segments, self._sorted_ids[window][local])
+        hits = self.crossings(*segment_ends(vertices))
         return hits.take(np.lexsort((-hits.t, hits.segment))) if len(hits) > 1 else hits
+
+
+def _edges_of(triangles: NDArray[np.int64], ids: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
+    """(E, 2) unique edges (node ids, smaller first) of triangles (F, 3) and (E, 2) the ids of the
+    triangles either side (-1 for an open edge)."""
+    pairs = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    owners = np.repeat(ids, 3)
+    edges, inverse = np.unique(pairs, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    order = np.argsort(inverse, kind="stable")
+    faces = np.full((len(edges), 2), -1, dtype=np.int64)
+    counts = np.bincount(inverse, minlength=len(edges))
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    faces[:, 0] = owners[order][starts]
+    second = counts >= 2
+    faces[second, 1] = owners[order][starts[second] + 1]
+    return edges.astype(np.int64), faces
 
 
 def segment_ends(vertices: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -261,6 +261,12 @@ def _needle_circle(needle: Needle) -> tuple[NDArray[np.float64], float, float]:
     return centre, angle, radius
 
 
+CARRY_LIFT = 0.004
+"""Between two stitches the hand carries the needle in an arc this high (m) along the next approach: a
+needle carried straight across drags its tail through the wall (a contact a hand would feel and
+avoid)."""
+
+
 def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Trajectory, float]:
     """Several stitches one after another: a trajectory and its total duration (s).
 
@@ -298,7 +304,11 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
             return blend_poses(end, grip, (phase - 0.2) / 0.2), False  # to the grip point, open
         if phase < 0.5:
             return grip, True  # close on the needle
-        return blend_poses(grip, following, (phase - 0.5) / 0.5), True  # carry it to the next approach
+        # carry it to the next approach in an arc over the wall, so the needle's tail clears it
+        fraction = (phase - 0.5) / 0.5
+        carried = blend_poses(grip, following, fraction)
+        rise = CARRY_LIFT * math.sin(math.pi * fraction) * passes[k + 1].approach
+        return Pose.unchecked(carried.position + rise, carried.rotation), True
 
     def see_needle(needle_pose: Callable[[], Pose] | None) -> None:
         for one in passes:

@@ -287,7 +287,7 @@ class LocalStress:
     (q right-hand sides), then each FEM step is a (6E x q) product and a maximum.
     """
 
-    __slots__ = ("_operator", "_split", "elements", "watched")
+    __slots__ = ("_edges", "_operator", "_response", "_rest", "_rest_length", "_split", "elements", "watched")
 
     def __init__(
         self,
@@ -316,7 +316,31 @@ class LocalStress:
         local, tets = np.unique(mesh.tets[elements], return_inverse=True)
         response = model.load_response(ids, force_map, local)
         mu = model.lame[1][elements]
-        self._operator = von_mises_rows(model.element_gradients[elements], mu, tets.reshape(-1, 4), response)
+        corners = tets.reshape(-1, 4)
+        self._operator = von_mises_rows(model.element_gradients[elements], mu, corners, response)
+        # the local elements' edges, for the stretch of the displacement field these loads give
+        pairs = (
+            corners[: self._split][:, [0, 0, 0, 1, 1, 2, 1, 2, 3, 2, 3, 3]]
+            .reshape(-1, 2, 6)
+            .transpose(0, 2, 1)
+        )
+        edges = (
+            np.unique(np.sort(pairs.reshape(-1, 2), axis=1), axis=0) if self._split else np.zeros((0, 2), int)
+        )
+        self._edges = edges
+        self._rest = mesh.points[local[edges[:, 1]]] - mesh.points[local[edges[:, 0]]]
+        self._rest_length = np.sqrt(np.einsum("ij,ij->i", self._rest, self._rest))
+        self._response = response
+
+    def stretch(self, forces: NDArray[np.float64], scale: float = 1.0) -> float:
+        """The largest stretch (deformed over rest length) of the local elements' edges in the
+        displacement field ``scale`` x (the soft phase's response to the generalised forces (q,)):
+        what the display draws around the contact (1.0 with no local elements)."""
+        if not len(self._edges):
+            return 1.0
+        u = (scale * self._response.dot(forces)).reshape(-1, 3)
+        deformed = self._rest + u[self._edges[:, 1]] - u[self._edges[:, 0]]
+        return float((np.sqrt(np.einsum("ij,ij->i", deformed, deformed)) / self._rest_length).max())
 
     def maximum(self, forces: NDArray[np.float64]) -> float:
         """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""

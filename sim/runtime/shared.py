@@ -373,13 +373,14 @@ class SharedFem:
     process records (tip, speed, direction, contact triangle, barycentrics, state) in shared memory.
 
     Layout: [seq, time, tip 3, tip speed, tangent 3, triangle, barycentric 3, state code, needle force 3,
-    local stress, stretch].
+    local stress, stretch, tip velocity 3].
     """
 
     @staticmethod
     def doubles() -> int:
-        """Its size in the arena: a seqlock counter, the step's state, force, stress and stretch."""
-        return 19
+        """Its size in the arena: a seqlock counter, the step's state, force, stress, stretch and tip
+        velocity."""
+        return 22
 
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(self.doubles())
@@ -401,6 +402,7 @@ class SharedFem:
         slot[14:17] = snapshot.needle_force
         slot[17] = snapshot.local_stress
         slot[18] = snapshot.stretch
+        slot[19:22] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
         slot[0] += 1
 
     def get(self):
@@ -426,4 +428,6 @@ class SharedFem:
             math.nan,
             float(copy[17]),
             float(copy[18]),
+            math.nan,
+            copy[19:22],
         )

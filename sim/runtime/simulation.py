@@ -346,6 +346,7 @@ class Simulation:
                 interaction.local_stress,
                 interaction.stretch,
                 holder.time,
+                interaction.tip_velocity,
             )
         )
 

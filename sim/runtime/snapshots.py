@@ -37,8 +37,9 @@ class FemSnapshot(NamedTuple):
     barycentric: tuple[float, float, float] = (math.nan, math.nan, math.nan)
     soft_share: float = math.nan  # the biphase split of the drive (nan: the drive's own strain sets it)
     local_stress: float = math.nan  # Pa, largest von Mises stress within 1 mm of the contact
-    stretch: float = math.nan  # the stretch statistic 1 + |d| / h
+    stretch: float = math.nan  # the largest edge stretch around the contact in the field the display draws
     holder_time: float = math.nan  # s, the device sample the step's needle follows
+    tip_velocity: NDArray[np.float64] | None = None  # m/s, the tip's between the last two FEM steps
 
 
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}

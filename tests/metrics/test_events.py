@@ -23,7 +23,7 @@ def test_a_run_of_plausibility_checks_is_one_line_with_its_count():
     assert [e["name"] for e in readable] == [
         "needle touched the tissue",
         "needle entered the tissue",
-        "needle body touched the tissue away from its tip",
+        "the needle crossed the tissue in a way the simulator does not follow",
         "needle came out",
     ]
     assert readable[0]["entry_angle_deg"] == 2.0 and readable[1]["entry_angle_deg"] is None

@@ -59,8 +59,12 @@ def test_recorded_stress_and_stretch_are_never_nan_in_tissue_and_equal_the_deriv
     assert session_forces(streams) == FORCES
     derived = with_tissue_fields(dataclasses.replace(streams, local_stress=None, stretch=None), wall)
     indenting = streams.needle_state == 1
-    np.testing.assert_allclose(derived.local_stress[indenting], streams.local_stress[indenting], rtol=1e-9)
-    np.testing.assert_allclose(derived.stretch[indenting], streams.stretch[indenting], rtol=1e-9)
+    # the contact point rebuilt from the recorded weights differs from the runtime's by rounding (1e-19 m),
+    # which at the first touch is 1e-11 Pa on a zero stress: hence the absolute tolerance
+    np.testing.assert_allclose(
+        derived.local_stress[indenting], streams.local_stress[indenting], rtol=1e-9, atol=1e-6
+    )
+    np.testing.assert_allclose(derived.stretch[indenting], streams.stretch[indenting], rtol=1e-9, atol=1e-12)
     # the insertion stress field is derived for sessions that streamed the per-tick values too
     assert with_tissue_fields(streams, wall).stress_field is not None
 

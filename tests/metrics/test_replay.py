@@ -36,7 +36,13 @@ def record_pass(folder: Path, tissue, skill: float, seed: int, participant: str,
     device, duration = open_device(
         "scripted", SessionPlan("s", participant, "wall-stitch", 1), None, pass_parameters(skill, seed)
     )
-    header = {"session_id": folder.name, "participant_id": participant, "label": label, "task": "wall-stitch"}
+    header = {
+        "session_id": folder.name,
+        "participant_id": participant,
+        "label": label,
+        "task": "wall-stitch",
+        "needle_forces": FORCES.as_dict(),  # as the runner records it
+    }
     writer = SessionWriter(folder, header, flush_interval=0.1)
     RuntimeRecorder(writer).attach(Simulation(tissue, Needle.curved(), device, forces=FORCES)).run_simulated(
         duration

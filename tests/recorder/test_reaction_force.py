@@ -3,13 +3,14 @@
 import json
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
 from metrics.streams import from_recorded
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from recorder.schema import REACTION_COLUMNS, SAMPLE_SCHEMA_V1
+from recorder.schema import OLDER_SAMPLE_SCHEMAS, REACTION_COLUMNS
 from recorder.writer import sha256_of
 from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
@@ -69,19 +70,54 @@ def test_a_scale_factor_reduces_what_the_device_is_sent_not_what_is_recorded(tmp
         RuntimeSettings(haptic_scale=0.0)
 
 
-def test_a_version_1_session_reads_with_its_reaction_unknown(tmp_path):
-    """Sessions recorded before schema 2: the reaction columns are NaN and metrics use the sent force."""
+def in_older_layout(table, schema):
+    """A samples table written as an older vascsim wrote it: its columns, ``compute`` as 0."""
+    columns = [
+        table.column(f.name) if f.name in table.column_names else pa.array(np.zeros(table.num_rows))
+        for f in schema
+    ]
+    return pa.Table.from_arrays(columns, schema=schema)
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_an_older_session_reads_with_what_it_did_not_record_unknown(tmp_path, version):
+    """Sessions recorded before schema 2 lack the reaction, before 3 the tip velocity vector and they
+    carry ``compute`` (0 in every sample): read with the missing columns NaN and ``compute`` dropped;
+    metrics use the sent force where the reaction is unknown."""
     session = record(tmp_path / "s")
-    old = session.samples.drop_columns(list(REACTION_COLUMNS)).cast(SAMPLE_SCHEMA_V1)
+    old = in_older_layout(session.samples, OLDER_SAMPLE_SCHEMAS[version])
     pq.write_table(old, tmp_path / "s" / "samples.parquet")
     header = json.loads((tmp_path / "s" / "header.json").read_text())
-    header["schema_version"] = 1
+    header["schema_version"] = version
     header["samples"]["sha256"] = sha256_of(tmp_path / "s" / "samples.parquet")
     (tmp_path / "s" / "header.json").write_text(json.dumps(header))
     again = open_session(tmp_path / "s")
     assert again.samples.schema.names == session.samples.schema.names
-    assert np.all(np.isnan(again.samples.column("reaction_x").to_numpy()))
-    streams = from_recorded(again)
-    np.testing.assert_allclose(
-        streams.force, np.column_stack([old.column(c).to_numpy() for c in ("force_x", "force_y", "force_z")])
+    assert "compute" not in again.samples.schema.names
+    assert np.all(np.isnan(again.samples.column("tip_vx").to_numpy()))
+    reaction = again.samples.column("reaction_x").to_numpy()
+    assert (
+        np.all(np.isnan(reaction))
+        if version == 1
+        else np.array_equal(reaction, session.samples.column("reaction_x").to_numpy())
     )
+    streams = from_recorded(again)
+    used = ("force_x", "force_y", "force_z") if version == 1 else REACTION_COLUMNS
+    np.testing.assert_allclose(streams.force, np.column_stack([old.column(c).to_numpy() for c in used]))
+
+
+def test_the_first_sample_has_the_real_tip_and_every_sample_the_tip_velocity_vector(tmp_path):
+    """Before, the first sample's tip and tangent were (0, 0, 0) (a false 10-13 mm jump in the path) and
+    the tip's velocity was stored only as a speed."""
+    session = record(tmp_path / "s")
+    frame = session.samples_frame()
+    tip = frame[["tip_x", "tip_y", "tip_z"]].to_numpy()
+    tangent = frame[["tangent_x", "tangent_y", "tangent_z"]].to_numpy()
+    assert np.linalg.norm(tip[1] - tip[0]) < 1e-4  # no jump from the origin
+    np.testing.assert_allclose(np.linalg.norm(tangent, axis=1), 1.0, atol=1e-12)
+    velocity = frame[["tip_vx", "tip_vy", "tip_vz"]].to_numpy()
+    known = np.all(np.isfinite(velocity), axis=1)
+    assert known[2:].all()
+    np.testing.assert_allclose(np.linalg.norm(velocity[known], axis=1), frame["tip_speed"][known], rtol=1e-12)
+    moving = frame["tip_speed"].to_numpy() > 1e-3
+    assert moving.sum() > 100

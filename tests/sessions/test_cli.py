@@ -77,6 +77,36 @@ def test_calibrated_indentation_is_the_runtime_kernel_and_pierces_in_the_publish
     assert "force (mN)" in printed.stdout and "pierces at" in printed.stdout
 
 
+def test_indentation_at_a_speed_with_its_unloading_branch_and_work(tmp_path):
+    """``--speed`` presses at that speed; ``--unload`` draws the needle back out and reports the work
+    put in and given back, which never exceeds what went in (issue 43: the wall returned 1.69x)."""
+    from sessions.tasks import task_preset, task_spec, tissue_for
+    from sim.experiments import load_cycle
+
+    env = dict(os.environ, VASCSIM_HOME=str(tmp_path))
+    arguments = ["indentation", "--steps", "7", "--max-depth", "0.6", "--speed", "10", "--unload", "--json"]
+    result = CliRunner(env=env).invoke(main, arguments)
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["speed_mm_s"] == 10.0
+    cycle = data["cycle"]
+    assert 0 < cycle["work_out"] <= cycle["work_in"]
+    spec = task_spec("wall-stitch")
+    again = load_cycle(
+        tissue_for("wall-stitch", None),
+        task_preset("wall-stitch").forces,
+        spec.entry,
+        spec.normal,
+        0.6e-3,
+        0.01,
+        0.01,
+    )
+    assert cycle["work_in"] == again.work_in and cycle["work_out"] == again.work_out
+    printed = CliRunner(env=dict(env, COLUMNS="100")).invoke(main, arguments[:-1])
+    assert printed.exit_code == 0, printed.output
+    assert "unloading" in printed.output and "work put in" in printed.output and "mJ" in printed.output
+
+
 def test_bad_option_is_one_line_and_nonzero():
     result = subprocess.run(
         [str(VASCSIM), "indentation", "--steps", "1"], capture_output=True, text=True, timeout=60, check=False

@@ -16,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 from sqlalchemy import func, select, update
 
+from metrics.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY
@@ -125,7 +126,7 @@ def test_statements_follow_xapi_and_cmi5(demo_catalog):
             assert (score["scaled"] >= mastery) == (kind == "passed") == body["result"]["success"]
             assert score["raw"] == round(score["scaled"] * score["max"])
             metric = body["result"]["extensions"]["https://vascsim.org/xapi/metrics/entry_to_target"]
-            assert metric["unit"] == "mm" and metric["registry_version"] == "7"
+            assert metric["unit"] == "mm" and metric["registry_version"] == REGISTRY_VERSION
         if kind == "attempted":
             assert CMI5_CATEGORY not in categories  # not a cmi5-defined statement
     retention = [s for s in statements if s.body["object"]["id"].endswith("/retention")]

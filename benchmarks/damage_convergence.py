@@ -1,0 +1,138 @@
+"""Issue 43, item 5: is the overstress decision converged with mesh refinement?
+
+Run:  .venv/bin/python benchmarks/damage_convergence.py [--cells 0.5,0.35,0.25,0.18]
+
+The wall-stitch patch (porcine-artery preset) is rebuilt with its stitch region at each cell size (mm)
+and a straight needle is, through the runtime's own interaction:
+
+1. pressed perpendicular into the wall (puncture lifted) until the local stress (largest von Mises
+   stress within 1 mm, what ``overstress`` watches) reaches the preset's ``damage_stress``: that
+   depth;
+2. pierced at 0.8 N and levered sideways across itself in the wall until the local stress reaches it:
+   that sideways offset (the way levering trainees fire the event).
+
+Prints both per cell size and the relative difference between the two finest meshes (target <= 5 %).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+sys.path = [p for p in sys.path if Path(p).resolve() != Path(__file__).resolve().parent]
+
+import numpy as np  # noqa: E402
+
+from sessions.tasks import stitch_region_nodes, task_mesh, task_preset, task_spec  # noqa: E402
+from sim.experiments import PressedNeedle  # noqa: E402
+from sim.fem import BiphaseTissue  # noqa: E402
+from sim.interaction import NeedleInteraction  # noqa: E402
+from sim.needle import Needle, Pose, rotation_aligning  # noqa: E402
+
+
+def wall_at(cell: float) -> BiphaseTissue:
+    spec = task_spec("wall-stitch")
+    refined = dataclasses.replace(spec, parameters={**spec.parameters, "stitch_cell_m": cell})
+    mesh = task_mesh(refined)
+    fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
+    region = np.setdiff1d(stitch_region_nodes(refined, mesh), fixed)
+    near = region[np.linalg.norm(mesh.points[region] - np.asarray(spec.entry), axis=1) <= 2.5e-3]
+    tissue = BiphaseTissue.build(mesh, fixed, task_preset("wall-stitch").biphase, contact_nodes=near)
+    tissue.precompute(use_cache=False)
+    return tissue
+
+
+def crossing(xs: list[float], stresses: list[float], limit: float) -> float:
+    """The first x at which the stress reaches ``limit`` (linear between samples; nan if never)."""
+    values = np.asarray(stresses)
+    above = np.flatnonzero(values >= limit)
+    if not above.size:
+        return float("nan")
+    k = int(above[0])
+    if k == 0:
+        return xs[0]
+    return float(np.interp(limit, [values[k - 1], values[k]], [xs[k - 1], xs[k]]))
+
+
+def press_depth(tissue: BiphaseTissue, limit: float) -> float:
+    spec, forces = task_spec("wall-stitch"), task_preset("wall-stitch").forces
+    pressed = PressedNeedle(tissue, forces, spec.entry, spec.normal, step=1e-5)
+    pressed.press_to(0.0, 0.004)
+    depths, stresses = [], []
+    for depth in np.arange(0.02e-3, 1.45e-3, 0.02e-3):
+        pressed.press_to(float(depth), 0.004)
+        depths.append(float(depth))
+        stresses.append(pressed.interaction.local_stress)
+    print(
+        f"  press: largest local stress {max(stresses) / 1e6:.3f} MPa at {depths[-1] * 1e3:.2f} mm",
+        flush=True,
+    )
+    return crossing(depths, stresses, limit)
+
+
+def lever_offset(tissue: BiphaseTissue, limit: float) -> float:
+    spec, forces = task_spec("wall-stitch"), task_preset("wall-stitch").forces
+    needle = Needle.straight(0.01)
+    interaction = NeedleInteraction(tissue, needle, forces=forces.with_(tear_force=None))
+    normal = np.asarray(spec.normal, dtype=np.float64)
+    rotation = rotation_aligning([1.0, 0.0, 0.0], -normal)
+    sideways = np.asarray(spec.bite_direction, dtype=np.float64)
+    now = 0.0
+
+    def place(depth: float, offset: float) -> None:
+        nonlocal now
+        now += 0.002
+        tip = np.asarray(spec.entry) - depth * normal + offset * sideways
+        interaction.hold(now, Pose(tip - rotation @ needle.vertices[0], rotation), True)
+        interaction.fem_step(now)
+
+    place(-1e-4, 0.0)
+    depth = 0.0
+    while interaction.state == "contact" or depth == 0.0:
+        depth += 1e-5
+        place(depth, 0.0)
+        if depth > 1.4e-3:
+            raise SystemExit("set-up failed: the needle did not pierce")
+    place(depth + 0.2e-3, 0.0)  # in the wall, not yet through it
+    offsets, stresses = [], []
+    for offset in np.arange(0.01e-3, 1.0e-3, 0.01e-3):
+        place(depth + 0.2e-3, float(offset))
+        offsets.append(float(offset))
+        stresses.append(interaction.local_stress)
+    print(
+        f"  lever: largest local stress {max(stresses) / 1e6:.3f} MPa at {offsets[-1] * 1e3:.2f} mm, "
+        f"state {interaction.state}",
+        flush=True,
+    )
+    return crossing(offsets, stresses, limit)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cells", default="0.5,0.35,0.25,0.18", help="stitch-region cell sizes in mm")
+    cells = [float(c) * 1e-3 for c in parser.parse_args().cells.split(",")]
+    limit = task_preset("wall-stitch").forces.damage_stress
+    rows = []
+    for cell in cells:
+        began = time.perf_counter()
+        tissue = wall_at(cell)
+        depth, offset = press_depth(tissue, limit), lever_offset(tissue, limit)
+        rows.append((cell, depth, offset))
+        print(
+            f"cell {cell * 1e3:.2f} mm ({tissue.mesh.n_nodes} nodes): overstress at press depth "
+            f"{depth * 1e3:.3f} mm, at lever offset {offset * 1e3:.3f} mm "
+            f"({time.perf_counter() - began:.0f} s)",
+            flush=True,
+        )
+    (_, d1, o1), (_, d2, o2) = rows[-2], rows[-1]
+    print(
+        f"two finest meshes: press depth differs by {abs(d2 - d1) / d2:.1%}, lever offset by "
+        f"{abs(o2 - o1) / o2:.1%} (target <= 5 %)"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,63 @@
+"""Every task with a clumsy and a skilled scripted hand (issue 43's acceptance).
+
+Before: at skill 0.2 the interrupted stitch's trial 1 went straight through the wall at 0 N with 63
+implausible hits and was stored with no puncture; restricted-access trainees spent 0.27-0.68 s inside
+the wall at zero force (22-67 implausible hits); a restricted-access trainee peaked at 16.7 N; experts
+fired ``overstress`` on four tasks and recorded stretches of 2.9-5.5.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sessions.runner import SessionPlan, open_device
+from sessions.synthetic import pass_parameters
+from sessions.tasks import TASKS, task_simulation
+
+KNOWN_GAPS = {("restricted-access", 2): 1}
+"""Measured and left open (issue 43 note): at 45 deg in the restricted access, trial 2's needle is cut
+sideways through the wall until it crosses the vessel's curved surface 1.9 mm from where the wall
+holds it, which the graphics layer reads as a second wall: one implausible hit."""
+
+
+def run(task: str, skill: float, trial: int, cache: Path):
+    plan = SessionPlan(study="s", participant="p", task=task, device="scripted", trial=trial)
+    device, duration = open_device("scripted", plan, None, pass_parameters(skill, seed=trial))
+    simulation = task_simulation(task, device, cache)
+    stretch = []
+    simulation.on_sample = lambda now, sample, force, fem: stretch.append(fem.stretch) if fem else None
+    result = simulation.run_simulated(duration)
+    assert result.error is None, result.error
+    return simulation.events, np.array(stretch, dtype=float)
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("tissues")
+
+
+@pytest.mark.parametrize("task", list(TASKS))
+def test_a_clumsy_hand_pierces_with_a_felt_force_and_nothing_implausible(task, cache):
+    for trial in (1, 2, 3):
+        events, _ = run(task, 0.2, trial, cache)
+        pierces = [e for e in events if e.kind == "pierce"]
+        assert pierces, (task, trial, "no puncture")
+        for pierce in pierces:
+            normal = float(pierce.detail.split()[2])  # "normal force X N"
+            assert 0.3 <= normal <= 6.0, (task, trial, pierce.detail)
+        implausible = [e.detail for e in events if e.kind == "implausible_hit"]
+        assert len(implausible) <= KNOWN_GAPS.get((task, trial), 0), (task, trial, implausible)
+
+
+@pytest.mark.parametrize("task", list(TASKS))
+def test_a_skilled_hand_does_not_overstress_the_wall(task, cache):
+    for trial in (
+        1,
+    ):  # trials 2-3 too when measured (docs/benchmarks.md, session 20); one keeps the suite short
+        events, stretch = run(task, 0.9, trial, cache)
+        kinds = [e.kind for e in events]
+        assert "pierce" in kinds
+        assert "overstress" not in kinds and "tear" not in kinds, (task, trial)
+        assert "implausible_hit" not in kinds, (task, trial)
+        assert np.nanmax(stretch) <= 1.6, (task, trial, np.nanmax(stretch))
