@@ -106,7 +106,9 @@ def kernel_figures(tissue: BiphaseTissue, case, live_stress: bool = True, prefet
         starts.append(time.perf_counter() - began)
         if interaction.state != "contact":
             raise SystemExit(f"benchmark set-up failed: state {interaction.state} after the first touch")
-        steps += timed(lambda i=interaction: i.fem_step(0.004), 200)
+        for k in range(200):  # pressing on, 0.1 um a step (a needle held still would skip the sweep)
+            pressing(interaction, outer, angle, z, 2e-4 + 1e-7 * k)
+            steps += timed(lambda i=interaction, t=0.004 + 0.002 * k: i.fem_step(t), 1)
     load = interaction._load
     print(f"kernel nodes at the last entry: {len(load.nodes)}", flush=True)
     d = np.array([[0.0, 0.0, -2e-4]])

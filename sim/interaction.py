@@ -345,7 +345,21 @@ class NeedleInteraction(GraphicsRateTracking):
         the needle's body dips below the undeformed surface as the tip presses in) is another contact,
         up to :attr:`max_surface_contacts`."""
         events = []
-        for touch in touches(self.collision, before, after):
+
+        def known(points: NDArray) -> NDArray:
+            """Points within reach of a current contact or a hole the needle made (vectorised)."""
+            seen = np.zeros(len(points), dtype=bool)
+            for contact in self.contacts:
+                corners = self.collision.corners[contact.triangle]
+                reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 2e-3
+                offsets = points - contact.point
+                seen |= np.einsum("ij,ij->i", offsets, offsets) <= reach * reach
+            for hole in self._holes:
+                offsets = points - hole
+                seen |= np.einsum("ij,ij->i", offsets, offsets) <= HOLE_REACH * HOLE_REACH
+            return seen
+
+        for touch in touches(self.collision, before, after, known):
             event = self._touched(touch, previous_time, time, before, after)
             if event is not None:
                 events.append(event)
@@ -454,7 +468,6 @@ class NeedleInteraction(GraphicsRateTracking):
         if (0, 1.0) not in self._touches:
             return FemStep(force, nodes, reactions, events)
         contact = self.contacts[self._touches.index((0, 1.0))]
-        angle = entry_angle_deg(self.tip_tangent(), contact.normal)
         normal_force = float(force @ contact.normal)  # the tissue pushes the needle back out
         threshold = self.forces.puncture_force
         punctured = (
@@ -462,7 +475,8 @@ class NeedleInteraction(GraphicsRateTracking):
             if threshold is not None
             else normal_force / self.needle.wire_area >= self.rules.puncture_stress
         )
-        if angle <= self.rules.max_entry_angle_deg and punctured:
+        angle = entry_angle_deg(self.tip_tangent(), contact.normal) if punctured else math.inf
+        if angle <= self.rules.max_entry_angle_deg:
             self.state = "pierced"
             self.contacts, self._touches, self._serials = [contact], [], []
             self._handle = None

@@ -17,6 +17,10 @@ from sim.collision.segments import SegmentHits, bounding_boxes, candidate_pairs,
 from sim.geometry import ray_triangle_distances
 from sim.mesh.tetmesh import TetMesh
 
+NEAR_PADDING = 5e-4
+"""near_boxes asks for this much (m) more than the boxes need, so the next FEM steps' boxes (a needle
+moves 2-20 um a step at hand speeds) fall inside and reuse the answer."""
+
 
 class CollisionMesh:
     """Exterior triangles of a tissue mesh with their current corners, normals and boxes.
@@ -32,6 +36,7 @@ class CollisionMesh:
         self.edges, self.edge_faces = _edges_of(self.triangles[self._valid_ids], self._valid_ids)
         """(E, 2) node ids of the valid triangles' edges, and (E, 2) the triangles on either side
         (-1 where an edge borders only one): what a needle's body sweeps across between two poses."""
+        self._build_trees()
         self.update(mesh.points)
 
     def update(self, points: NDArray[np.float64]) -> None:
@@ -54,7 +59,9 @@ class CollisionMesh:
         self._sorted_lower = np.ascontiguousarray(lower[self._order])
         self._sorted_upper = np.ascontiguousarray(upper[self._order])
         self._widest_x = float((upper[:, 0] - lower[:, 0]).max()) if len(lower) else 0.0
-        self._trees = None  # KD-trees of triangle centroids and edge midpoints, built when first needed
+        self._near_cache = None  # the last near_boxes query: (centres, padded radii, its answer)
+        moved = self.points - self.mesh.points
+        self._moved = float(np.sqrt(np.einsum("ij,ij->i", moved, moved).max())) if len(moved) else 0.0
 
     def deform(self, nodes: NDArray[np.int64], displacement: NDArray[np.float64]) -> None:
         """Rest positions plus a displacement (m) of the given nodes."""
@@ -79,29 +86,43 @@ class CollisionMesh:
     ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """(valid triangle ids, edge ids) that may reach into any of the boxes ``lower``-``upper``
         (B, 3) (m): those whose centroid (midpoint) lies within a box's half-diagonal plus their own
-        reach of its centre (a superset; KD-trees built once per mesh position)."""
-        from scipy.spatial import cKDTree
-
-        if self._trees is None:
-            corners = self.corners[self._valid_ids]
-            centroids = corners.mean(axis=1)
-            reach = (
-                float(np.linalg.norm(corners - centroids[:, None, :], axis=2).max()) if len(corners) else 0.0
-            )
-            ends = self.points[self.edges]
-            half = 0.5 * float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max()) if len(ends) else 0.0
-            self._trees = (cKDTree(centroids), reach, cKDTree(ends.mean(axis=1)), half)
+        reach (and how far the subordinate hand has moved the mesh) of its centre; a superset."""
         triangles, reach, edges, half = self._trees
         centres = 0.5 * (lower + upper)
-        radii = 0.5 * np.sqrt(np.einsum("ij,ij->i", upper - lower, upper - lower))
+        radii = 0.5 * np.sqrt(np.einsum("ij,ij->i", upper - lower, upper - lower)) + self._moved
+        cached = self._near_cache
+        if cached is not None and len(cached[0]) == len(centres):
+            # the boxes still inside the padded balls of the last query: its answer holds
+            shift = np.sqrt(np.einsum("ij,ij->i", centres - cached[0], centres - cached[0]))
+            if np.all(shift + radii <= cached[1]):
+                return cached[2]
+        radii = radii + NEAR_PADDING
         nearest, _ = triangles.query(centres, distance_upper_bound=float(radii.max()) + reach + half)
-        if not np.isfinite(nearest).any():  # nothing within reach of any box: one vectorised query
-            return self._valid_ids[:0], np.zeros(0, dtype=np.int64)
-        found = triangles.query_ball_point(centres, radii + reach, return_sorted=False)
-        crossed = edges.query_ball_point(centres, radii + half, return_sorted=False)
-        near_triangles = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
-        near_edges = np.unique(np.concatenate([np.asarray(e, dtype=np.int64) for e in crossed]))
-        return self._valid_ids[near_triangles], near_edges
+        close = np.isfinite(nearest)
+        if not close.any():  # nothing within reach of any box: one vectorised query
+            result = (self._valid_ids[:0], np.zeros(0, dtype=np.int64))
+        else:
+            near_centres, near_radii = centres[close], radii[close]  # only the boxes with something near
+            found = triangles.query_ball_point(near_centres, near_radii + reach, return_sorted=False)
+            crossed = edges.query_ball_point(near_centres, near_radii + half, return_sorted=False)
+            near_triangles = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+            near_edges = np.unique(np.concatenate([np.asarray(e, dtype=np.int64) for e in crossed]))
+            result = (self._valid_ids[near_triangles], near_edges)
+        self._near_cache = (centres, radii, result)
+        return result
+
+    def _build_trees(self) -> None:
+        """KD-trees of the valid triangles' centroids and the edges' midpoints at rest (built once:
+        a deformed mesh pads the queries by how far it moved instead)."""
+        from scipy.spatial import cKDTree
+
+        rest = self.mesh.points
+        corners = rest[self.triangles[self._valid_ids]]
+        centroids = corners.mean(axis=1)
+        reach = float(np.linalg.norm(corners - centroids[:, None, :], axis=2).max()) if len(corners) else 0.0
+        ends = rest[self.edges]
+        half = 0.5 * float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max()) if len(ends) else 0.0
+        self._trees = (cKDTree(centroids), reach, cKDTree(ends.mean(axis=1)), half)
 
     def crossings_among(
         self, start: NDArray[np.float64], end: NDArray[np.float64], triangles: NDArray[np.int64]

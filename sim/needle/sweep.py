@@ -20,6 +20,7 @@ which triangle, and whether it was moving into the tissue.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,12 +66,23 @@ def first_touch(
 
 
 def touches(
-    collision: CollisionMesh, before: NDArray[np.float64] | None, after: NDArray[np.float64]
+    collision: CollisionMesh,
+    before: NDArray[np.float64] | None,
+    after: NDArray[np.float64],
+    known: Callable[[NDArray[np.float64]], NDArray[np.bool_]] | None = None,
 ) -> list[Touch]:
     """Every crossing into the tissue of the swept needle, earliest first (ties: nearest the tip);
-    with ``before`` None, only the polyline's crossing nearest the tip, if it goes in."""
+    with ``before`` None, only the polyline's crossing nearest the tip, if it goes in.
+
+    ``known(points)`` (N, 3) -> (N,) says whether a crossing at each point is already accounted for (a
+    current contact, the holes the needle made): when every triangle within reach is, there is
+    nothing new to find; the surface edges are swept only when the needle's polyline now crosses the
+    surface into the tissue somewhere neither a vertex's path nor ``known`` explains, the one case in
+    which a segment's middle can have met the surface first."""
     if before is None:  # the crossing nearest the tip, if it goes in (else the tip is already inside)
         candidates = _at_pose(collision, after)[:1]
+    elif before is after or np.array_equal(before, after):  # a needle held still crosses nothing new
+        return []
     else:
         # each segment's swept box: its ends before and after the step
         lower = np.minimum(np.minimum(before[1:], before[:-1]), np.minimum(after[1:], after[:-1]))
@@ -78,9 +90,33 @@ def touches(
         triangles, edges = collision.near_boxes(lower, upper)
         if len(triangles) == 0 and len(edges) == 0:  # nothing within reach: most steps of a free needle
             return []
-        candidates = _vertex_paths(collision, before, after, triangles)
-        candidates += _swept_across_edges(collision, before, after, edges)
+        if known is not None and known(collision.corners[triangles].reshape(-1, 3)).all():
+            return []  # only the surface around what the needle already touches (a needle pressing on)
+        # one test for both: the vertices' paths (before -> after) and the polyline as it is now
+        count = len(after)
+        start, end = np.concatenate([before, after[1:]]), np.concatenate([after, after[:-1]])
+        hits = collision.crossings_among(start, end, triangles)
+        paths = hits.segment < count
+        candidates = _vertex_paths(hits.take(np.flatnonzero(paths)), before, after)
+        now = hits.take(np.flatnonzero(~paths))
+        points = now.points(start, end) if len(now) else np.zeros((0, 3))
+        explained = [t.point for t in candidates if t.entering]
+        accounted = known(points) if known is not None and len(points) else np.zeros(len(points), dtype=bool)
+        unexplained = [
+            point
+            for point, entering, seen in zip(points, now.entering, accounted, strict=True)
+            if entering
+            and not seen
+            and not any(np.linalg.norm(point - p) <= EXPLAINED_WITHIN for p in explained)
+        ]
+        if unexplained:
+            candidates += _swept_across_edges(collision, before, after, edges)
     return sorted((t for t in candidates if t.entering), key=lambda t: (t.fraction, t.segment, -t.along))
+
+
+EXPLAINED_WITHIN = 2e-3
+"""A crossing of the needle's polyline within this distance (m) of a vertex path's crossing is that
+crossing, seen along the needle rather than along the path."""
 
 
 def _material(vertex: int, count: int) -> tuple[int, float]:
@@ -88,10 +124,8 @@ def _material(vertex: int, count: int) -> tuple[int, float]:
     return (vertex, 1.0) if vertex < count - 1 else (count - 2, 0.0)
 
 
-def _vertex_paths(
-    collision: CollisionMesh, before: NDArray, after: NDArray, triangles: NDArray[np.int64]
-) -> list[Touch]:
-    hits = collision.crossings_among(before, after, triangles)
+def _vertex_paths(hits, before: NDArray, after: NDArray) -> list[Touch]:
+    """Touches from the crossings of the vertices' paths (``hits.segment``: the vertex)."""
     if len(hits) == 0:
         return []
     points = hits.points(before, after)
