@@ -124,6 +124,15 @@ class CollisionMesh:
         half = 0.5 * float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max()) if len(ends) else 0.0
         self._trees = (cKDTree(centroids), reach, cKDTree(ends.mean(axis=1)), half)
 
+    def nearest_to_surface(
+        self, points: NDArray[np.float64], within: float, count: int
+    ) -> NDArray[np.float64]:
+        """Up to ``count`` of ``points`` (N, 3) whose nearest valid triangle centroid lies within
+        ``within`` (m), nearest first (a quick measure: what is about to touch the surface)."""
+        distance, _ = self._trees[0].query(points, distance_upper_bound=within + self._trees[1])
+        close = np.flatnonzero(np.isfinite(distance))
+        return points[close[np.argsort(distance[close])][:count]]
+
     def crossings_among(
         self, start: NDArray[np.float64], end: NDArray[np.float64], triangles: NDArray[np.int64]
     ) -> SegmentHits:

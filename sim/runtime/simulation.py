@@ -261,8 +261,9 @@ class Simulation:
         self._previous_frame: GraphicsSnapshot | None = None
         self._safety_seen = 0
         self.contact_latencies: dict[str, list[float]] = {"contact_start": [], "exit": []}
-        """Wall seconds from the graphics frame that found a contact change (a first touch, or the
-        exit face) to the end of the FEM step that gave the exact forces for its triangle."""
+        """Wall seconds from finding a contact change to the end of the FEM step that gave the exact
+        forces for its triangle: a first touch, found by the FEM step's own continuous collision test
+        (from that step's start); the exit face, found by a graphics frame (from its posting)."""
         self._tissue = tissue
         tissue.warm_contact_caches()
         if self.interaction.forces.load == "kernel":
@@ -310,6 +311,7 @@ class Simulation:
             return
         for event in self.interaction.hold(holder.time, holder.pose, holder.grip):
             self._emit(event)
+        began = wallclock.perf_counter()
         changed: list[tuple[str, float]] = []
         while self.global_queue:
             frame_time, vertices, hits, posted = self.global_queue.popleft()
@@ -318,6 +320,8 @@ class Simulation:
                 if event.kind in self.contact_latencies:
                     changed.append((event.kind, posted))
         step = self.interaction.fem_step(now)
+        # a first touch is found in this step by the continuous test: from the step's start
+        changed += [(event.kind, began) for event in step.events if event.kind == "contact_start"]
         for kind, posted in changed:
             self.contact_latencies[kind].append(wallclock.perf_counter() - posted)
         for event in step.events:
@@ -380,6 +384,10 @@ class Simulation:
         tip = fem.needle_vertices[0]
         previous, self._previous_tip = self._previous_tip, tip
         prefetcher, reach = self._prefetcher, self.settings.prefetch_reach
+        if fem.state in ("free", "contact"):  # the body can touch too (issue 43): where it nears the wall,
+            # first, so the tip's requests (newer) are served before them
+            for point in self.interaction.collision.nearest_to_surface(fem.needle_vertices[1:], reach, 4):
+                prefetcher.near(point, self.settings.prefetch_radius)
         if prefetcher.on_demand or fem.state in ("pierced", "exited"):
             prefetcher.near(tip, self.settings.prefetch_radius)
         if fem.state == "free":  # not yet touching: the needle goes where the hand moves it; where it
