@@ -329,8 +329,12 @@ class LocalStress:
         )
         self._edges = edges
         self._rest = mesh.points[local[edges[:, 1]]] - mesh.points[local[edges[:, 0]]]
-        self._rest_length = np.sqrt(np.einsum("ij,ij->i", self._rest, self._rest))
-        self._response = response
+        self._rest_length = np.einsum("ij,ij->i", self._rest, self._rest)  # squared
+        per_node = response.reshape(len(local), 3, -1)
+        # each edge's change of length vector per unit generalised force: one product a step
+        self._response = np.ascontiguousarray(
+            (per_node[edges[:, 1]] - per_node[edges[:, 0]]).reshape(3 * len(edges), -1)
+        )
 
     def stretch(self, forces: NDArray[np.float64], scale: float = 1.0) -> float:
         """The largest stretch (deformed over rest length) of the local elements' edges in the
@@ -338,9 +342,8 @@ class LocalStress:
         what the display draws around the contact (1.0 with no local elements)."""
         if not len(self._edges):
             return 1.0
-        u = (scale * self._response.dot(forces)).reshape(-1, 3)
-        deformed = self._rest + u[self._edges[:, 1]] - u[self._edges[:, 0]]
-        return float((np.sqrt(np.einsum("ij,ij->i", deformed, deformed)) / self._rest_length).max())
+        deformed = self._rest + scale * self._response.dot(forces).reshape(-1, 3)
+        return math.sqrt(float((np.einsum("ij,ij->i", deformed, deformed) / self._rest_length).max()))
 
     def maximum(self, forces: NDArray[np.float64]) -> float:
         """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""

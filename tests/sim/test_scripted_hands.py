@@ -37,9 +37,14 @@ def cache():
     return None  # the tasks' tissues as the other tests build them (one per process)
 
 
+TRAINEE_TRIALS = {"interrupted-stitch": (1, 2, 3), "restricted-access": (1, 2, 3)}
+"""Trials 1-3 where the issue saw the needle pass unfelt; trial 1 elsewhere (all 15 measured:
+docs/benchmarks.md, session 20; the suite stays under its 15 minutes)."""
+
+
 @pytest.mark.parametrize("task", list(TASKS))
 def test_a_clumsy_hand_pierces_with_a_felt_force_and_nothing_implausible(task, cache):
-    for trial in (1, 2, 3):
+    for trial in TRAINEE_TRIALS.get(task, (1,)):
         events, _ = run(task, 0.2, trial, cache)
         pierces = [e for e in events if e.kind == "pierce"]
         assert pierces, (task, trial, "no puncture")
