@@ -16,6 +16,10 @@ from numpy.typing import NDArray
 from sim.collision.mesh import TriangleContact, segment_ends
 from sim.needle_events import NeedleEvent, entry_angle_deg
 
+TORN_HOLE = 2e-3
+"""How much further (m) a torn entry holds the needle: levered through the wall it has cut a slit, and
+where its body crosses the (curved) surface may lie that far beyond where the wall holds it."""
+
 
 class GraphicsRateTracking:
     """Global CD and what follows from it (see the module docstring)."""
@@ -140,6 +144,8 @@ class GraphicsRateTracking:
         away (as it is pulled clear) does not."""
         corners = self.collision.corners[contact.triangle]
         reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 1e-3
+        if self.contacts and contact is self.contacts[0] and 0 in self._torn:
+            reach += TORN_HOLE  # a torn entry is a slit the needle was levered along
         return float(np.linalg.norm(point - contact.point)) <= reach
 
     @staticmethod

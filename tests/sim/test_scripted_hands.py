@@ -15,11 +15,6 @@ from sessions.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
 from sessions.tasks import TASKS, task_simulation
 
-KNOWN_GAPS = {("restricted-access", 2): 1}
-"""Measured and left open (issue 43 note): at 45 deg in the restricted access, trial 2's needle is cut
-sideways through the wall until it crosses the vessel's curved surface 1.9 mm from where the wall
-holds it, which the graphics layer reads as a second wall: one implausible hit."""
-
 
 def run(task: str, skill: float, trial: int, cache: Path | None):
     plan = SessionPlan(study="s", participant="p", task=task, device="scripted", trial=trial)
@@ -52,7 +47,7 @@ def test_a_clumsy_hand_pierces_with_a_felt_force_and_nothing_implausible(task, c
             normal = float(pierce.detail.split()[2])  # "normal force X N"
             assert 0.3 <= normal <= 6.0, (task, trial, pierce.detail)
         implausible = [e.detail for e in events if e.kind == "implausible_hit"]
-        assert len(implausible) <= KNOWN_GAPS.get((task, trial), 0), (task, trial, implausible)
+        assert not implausible, (task, trial, implausible)
 
 
 @pytest.mark.parametrize("task", list(TASKS))
