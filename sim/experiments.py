@@ -15,6 +15,11 @@ from sim.mesh import TetMesh, box_mesh
 NEEDLE_WEIGHTS = (0.5, 0.3, 0.2)
 
 
+def _plain(result) -> dict[str, object]:
+    """A result dataclass as plain JSON values (arrays as lists)."""
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(result).items()}
+
+
 @dataclass(frozen=True)
 class IndentationCurve:
     """Force and volume change of the paper's cube pressed by a needle, per strain level.
@@ -37,7 +42,7 @@ class IndentationCurve:
         return 1.0 + self.strain
 
     def as_dict(self) -> dict[str, object]:
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()}
+        return _plain(self)
 
 
 def paper_cube() -> tuple[TetMesh, np.ndarray]:
@@ -116,7 +121,7 @@ class KernelIndentation:
     kernel_nodes: int
 
     def as_dict(self) -> dict[str, object]:
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()}
+        return _plain(self)
 
 
 def kernel_indentation_curve(
@@ -243,8 +248,7 @@ class LoadCycle:
         return float(-np.trapezoid(self.unloading_force, self.unloading_depth))
 
     def as_dict(self) -> dict[str, object]:
-        values = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()}
-        return {**values, "work_in": self.work_in, "work_out": self.work_out}
+        return {**_plain(self), "work_in": self.work_in, "work_out": self.work_out}
 
 
 def load_cycle(

@@ -63,7 +63,7 @@ from sim.needle_events import (
 )
 from sim.needle_forces import NeedleForces
 from sim.needle_load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
-from sim.needle_passage import GraphicsRateTracking
+from sim.needle_passage import NEAR_CONTACT, GraphicsRateTracking
 
 
 def _checked_region_forces(
@@ -86,12 +86,6 @@ def _checked_region_forces(
             )
         checked[int(region)] = forces
     return checked
-
-
-HOLE_REACH = 1.5e-3
-"""After a pull-through, the needle's body crossing the surface this close (m) to the passage's entry
-or exit point is the body following its tip through the wall, not a new contact (until a contact
-starts)."""
 
 
 HELD_EDGE_REACH = 2e-3
@@ -188,8 +182,6 @@ class NeedleInteraction(GraphicsRateTracking):
         self.tip_speed = 0.0
         self._swept_from: NDArray[np.float64] | None = None  # needle vertices at the last FEM step
         self._touches: list[tuple[int, float]] = []  # per surface contact: the needle's (segment, along)
-        self._serials: list[int] = []  # per surface contact, a number that names it while it lasts
-        self._serial = 0
         self._indentation = 0.0  # largest kernel displacement at the last FEM step (m): loading or not
         self._holes: list[NDArray[np.float64]] = []  # entry and exit of the last passage pulled through
         self._torn: set[int] = set()  # crossings (ranks) that have torn in this contact or passage
@@ -347,17 +339,8 @@ class NeedleInteraction(GraphicsRateTracking):
         events = []
 
         def known(points: NDArray) -> NDArray:
-            """Points within reach of a current contact or a hole the needle made (vectorised)."""
-            seen = np.zeros(len(points), dtype=bool)
-            for contact in self.contacts:
-                corners = self.collision.corners[contact.triangle]
-                reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 2e-3
-                offsets = points - contact.point
-                seen |= np.einsum("ij,ij->i", offsets, offsets) <= reach * reach
-            for hole in self._holes:
-                offsets = points - hole
-                seen |= np.einsum("ij,ij->i", offsets, offsets) <= HOLE_REACH * HOLE_REACH
-            return seen
+            """Points within reach of a current contact or a hole the needle made."""
+            return self._near_contacts(points, NEAR_CONTACT) | self._near_holes(points)
 
         for touch in touches(self.collision, before, after, known):
             event = self._touched(touch, previous_time, time, before, after)
@@ -373,11 +356,11 @@ class NeedleInteraction(GraphicsRateTracking):
         """A contact for ``touch`` (and its ``contact_start``), unless it is the needle following its
         tip through its holes, near a current contact, beyond the contacts modelled at once, or only
         on the surface by the end of the step."""
-        if not touch.at_tip and self._near_hole(touch.point):
+        if not touch.at_tip and self._near_holes(touch.point)[0]:
             return None  # the rest of the needle following its tip through the holes it made
         if self.state == "contact" and (
             len(self.contacts) >= self.max_surface_contacts
-            or any(self._near_contact(c, touch.point, 2e-3) for c in self.contacts)
+            or self._near_contacts(touch.point, NEAR_CONTACT)[0]
         ):
             return None
         triangle = touch.triangle
@@ -392,14 +375,12 @@ class NeedleInteraction(GraphicsRateTracking):
         if contact.penetration(self._material_point(after, *material)) <= 0.0:
             return None  # it ends this step on the surface, not yet in it
         if self.state == "free":
-            self.contacts, self._touches, self._serials, self.state = [], [], [], "contact"
+            self.contacts, self._touches, self.state = [], [], "contact"
             self._holes = []
             self._torn = set()
             self.forces = self.forces_at(triangle)
         self.contacts.append(contact)
         self._touches.append(material)
-        self._serial += 1
-        self._serials.append(self._serial)
         self._handle = self._load = None
         if touch.at_tip:
             angle, detail = entry_angle_deg(self.tip_tangent(), contact.normal), ""
@@ -414,16 +395,6 @@ class NeedleInteraction(GraphicsRateTracking):
         return NeedleEvent(
             "contact_start", when, triangle, tuple(touch.barycentric.tolist()), angle, self.tip_speed, detail
         )
-
-    def _near_contact(self, contact: TriangleContact, point: NDArray, margin: float) -> bool:
-        """Whether ``point`` is within the contact triangle's size plus ``margin`` (m) of its point."""
-        corners = self.collision.corners[contact.triangle]
-        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + margin
-        return float(np.linalg.norm(point - contact.point)) <= reach
-
-    def _near_hole(self, point: NDArray) -> bool:
-        """Whether ``point`` is within :data:`HOLE_REACH` of the last pulled-through passage's holes."""
-        return any(float(np.linalg.norm(point - hole)) <= HOLE_REACH for hole in self._holes)
 
     @staticmethod
     def _material_point(vertices: NDArray, segment: int, along: float) -> NDArray:
@@ -446,7 +417,6 @@ class NeedleInteraction(GraphicsRateTracking):
         if len(held) < len(self.contacts):
             self.contacts = [self.contacts[k] for k in held]
             self._touches = [self._touches[k] for k in held]
-            self._serials = [self._serials[k] for k in held]
             points = [points[k] for k in held]
             self._load = self._handle = None  # a smaller set of kernels
         displacements = np.array([p - c.point for c, p in zip(self.contacts, points, strict=True)])
@@ -478,7 +448,7 @@ class NeedleInteraction(GraphicsRateTracking):
         angle = entry_angle_deg(self.tip_tangent(), contact.normal) if punctured else math.inf
         if angle <= self.rules.max_entry_angle_deg:
             self.state = "pierced"
-            self.contacts, self._touches, self._serials = [contact], [], []
+            self.contacts, self._touches = [contact], []
             self._handle = None
             self._load = None
             self._start_passage(contact)

@@ -16,6 +16,14 @@ from numpy.typing import NDArray
 from sim.collision.mesh import TriangleContact, segment_ends
 from sim.needle_events import NeedleEvent, entry_angle_deg
 
+HOLE_REACH = 1.5e-3
+"""After a pull-through, the needle's body crossing the surface this close (m) to the passage's entry
+or exit point is the body following its tip through the wall, not a new contact (until a contact
+starts)."""
+NEAR_CONTACT = 2e-3
+"""Crossings within a contact triangle's size plus this (m) of a contact are that contact: near it the
+needle's body dips below the undeformed surface as the tip presses in (the collision mesh ignores
+the needle's own deformation of the wall)."""
 TORN_HOLE = 2e-3
 """How much further (m) a torn entry holds the needle: levered through the wall it has cut a slit, and
 where its body crosses the (curved) surface may lie that far beyond where the wall holds it."""
@@ -58,11 +66,10 @@ class GraphicsRateTracking:
         if len(hits) == 0:
             return []
         if self._holes:  # the needle's body still following its tip out through the holes it made
-            points = hits.points(*segment_ends(vertices))
-            away = [k for k in range(len(hits)) if not self._near_hole(points[k])]
-            if not away:
+            away = np.flatnonzero(~self._near_holes(hits.points(*segment_ends(vertices))))
+            if not away.size:
                 return []
-            hits = hits.take(np.array(away))
+            hits = hits.take(away)
         if not hits.entering[0] and not self._at_held_edge[hits.triangle[0]]:
             # The part of the needle nearest the tip crosses a surface from inside the tissue
             # without having pierced it: entry through the wrong face (unless beside the model's
@@ -83,9 +90,7 @@ class GraphicsRateTracking:
         if len(self.contacts) < self.max_surface_contacts:
             return []  # room for more contacts: the FEM rate's continuous test makes further touches them
         points = hits.points(*segment_ends(vertices))
-        away = np.flatnonzero(
-            [not any(self._near_contact(c, point, 2e-3) for c in self.contacts) for point in points]
-        )
+        away = np.flatnonzero(~self._near_contacts(points, NEAR_CONTACT))
         return [
             self._event("implausible_hit", time, hits, int(k), "needle touches the tissue elsewhere")
             for k in away[:1]
@@ -142,11 +147,31 @@ class GraphicsRateTracking:
         nominated triangle's size plus 1 mm of the contact point, so a needle held sideways in the
         wound still counts as passing through it, and one whose other end crosses the plane far
         away (as it is pulled clear) does not."""
-        corners = self.collision.corners[contact.triangle]
-        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + 1e-3
+        margin = 1e-3
         if self.contacts and contact is self.contacts[0] and 0 in self._torn:
-            reach += TORN_HOLE  # a torn entry is a slit the needle was levered along
-        return float(np.linalg.norm(point - contact.point)) <= reach
+            margin += TORN_HOLE  # a torn entry is a slit the needle was levered along
+        return bool(self._within_reach(contact, point, margin)[0])
+
+    def _within_reach(self, contact: TriangleContact, points: NDArray, margin: float) -> NDArray[np.bool_]:
+        """Whether each of ``points`` ((N, 3) or one) lies within the contact triangle's size plus
+        ``margin`` (m) of the contact point."""
+        corners = self.collision.corners[contact.triangle]
+        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + margin
+        offsets = np.atleast_2d(points) - contact.point
+        return np.einsum("ij,ij->i", offsets, offsets) <= reach * reach
+
+    def _near_contacts(self, points: NDArray, margin: float) -> NDArray[np.bool_]:
+        """Whether each of ``points`` ((N, 3) or one) is within reach (``margin``) of a current contact."""
+        near = np.zeros(len(np.atleast_2d(points)), dtype=bool)
+        for contact in self.contacts:
+            near |= self._within_reach(contact, points, margin)
+        return near
+
+    def _near_holes(self, points: NDArray) -> NDArray[np.bool_]:
+        """Whether each of ``points`` ((N, 3) or one) lies within :data:`HOLE_REACH` of a hole of the
+        last passage pulled through (the needle's body following its tip out through them)."""
+        offsets = np.atleast_2d(points)[:, None, :] - np.asarray(self._holes).reshape(1, -1, 3)
+        return (np.einsum("ijk,ijk->ij", offsets, offsets) <= HOLE_REACH * HOLE_REACH).any(axis=1)
 
     @staticmethod
     def _needle_point_at_plane(vertices: NDArray, contact: TriangleContact) -> NDArray | None:
