@@ -133,7 +133,7 @@ def _print_unloading(cycle: Any, depths: np.ndarray) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"Needle drawn back out at {cycle.speed_out * 1e3:g} mm/s (unloading)")
+    table = Table(title=f"Then unloading at {cycle.speed_out * 1e3:g} mm/s")
     for header in ("depth (mm)", "force (mN)"):
         table.add_column(header, justify="right")
     order = np.argsort(cycle.unloading_depth)
@@ -145,7 +145,7 @@ def _print_unloading(cycle: Any, depths: np.ndarray) -> None:
     given_back = cycle.work_out / cycle.work_in if cycle.work_in > 0 else float("nan")
     console.print(
         f"work put in {cycle.work_in * 1e3:.4f} mJ, given back {cycle.work_out * 1e3:.4f} mJ "
-        f"({given_back:.1%}; never more than 100 %: the wall does not create energy)"
+        f"({given_back * 100:.1f} %; never more than 100 %: the wall does not create energy)"
     )
 
 
