@@ -52,12 +52,13 @@ def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
     def wrapper(*args: Any, view: str | None, stereo, size, handedness, **kwargs: Any) -> Any:
         from sessions.running.live import LiveView, default_view
         from sessions.running.window import ViewSettings
-        from sim.devices.discovery import display_available
+        from sim.devices.discovery import display_problem
         from sim.devices.mouse import MouseMapping
 
         chosen = view or default_view()
-        if chosen == "window" and not display_available():
-            raise click.UsageError("--view window needs a display (DISPLAY or WAYLAND_DISPLAY is not set)")
+        problem = display_problem() if chosen == "window" else None
+        if problem is not None:
+            raise click.UsageError(f"--view window needs a display: {problem}")
         live = None
         if chosen == "window":
             live = LiveView(ViewSettings(size=size, stereo=stereo), MouseMapping(handedness=handedness))

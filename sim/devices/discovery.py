@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import importlib.util
 import os
 import sys
@@ -79,3 +81,30 @@ def display_available() -> bool:
     return sys.platform in ("win32", "darwin") or bool(
         os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
     )
+
+
+def display_problem() -> str | None:
+    """Why a window cannot open on this station's display, or None when it can.
+
+    An X11 display named by ``DISPLAY`` is opened and closed once (libX11, which the window's OpenGL
+    uses too): VTK crashes the process when its own connection is refused, so the station asks first
+    and says which display it could not reach."""
+    if not display_available():
+        return "no display (DISPLAY or WAYLAND_DISPLAY is not set)"
+    name = os.environ.get("DISPLAY")
+    if sys.platform in ("win32", "darwin") or not name:
+        return None
+    found = ctypes.util.find_library("X11")
+    if found is None:
+        return None  # no libX11 to ask with; the window's own connection will tell
+    xlib = ctypes.CDLL(found)
+    xlib.XOpenDisplay.restype = ctypes.c_void_p
+    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    connection = xlib.XOpenDisplay(name.encode())
+    if not connection:
+        return (
+            f"cannot connect to the X display {name!r} (is its X server running, and may this user open it?)"
+        )
+    xlib.XCloseDisplay(connection)
+    return None

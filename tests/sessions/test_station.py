@@ -194,11 +194,7 @@ def session_row(home: Path, uid: str):
 
 def only_uid(home: Path) -> str:
     sessions = sorted(p.name for p in (home / "sessions").iterdir())
-    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
-    try:
-        mine = [r.uid for r in CatalogStore(catalog).sessions("Course") if r.participant == "P1"]
-    finally:
-        catalog.close()
+    mine = p1_sessions(home)
     assert len(mine) == 1 and mine[0] in sessions
     return mine[0]
 
@@ -253,7 +249,7 @@ def test_a_trainee_places_a_whole_stitch_with_keyboard_and_mouse(display, statio
     finally:
         if station.poll() is None:
             station.kill()
-            station.communicate()
+        station.communicate()  # reaps it and closes its pipes, also when it ended by itself
     assert station.returncode == 0, err
     assert "Traceback" not in err
     assert "1 trial(s) recorded and scored" in out
@@ -289,7 +285,7 @@ def test_escape_mid_session_keeps_a_complete_scored_session(display, station_hom
     finally:
         if station.poll() is None:
             station.kill()
-            station.communicate()
+        station.communicate()  # reaps it and closes its pipes, also when it ended by itself
     assert station.returncode == 0 and "Traceback" not in err, err
     uid = only_uid(station_home)
     status, metrics = session_row(station_home, uid)
@@ -320,7 +316,7 @@ def test_ctrl_c_in_the_terminal_ends_the_run_complete_with_no_traceback(display,
     finally:
         if run.poll() is None:
             os.killpg(run.pid, signal.SIGKILL)
-            run.communicate()
+        run.communicate()  # reaps it and closes its pipes, also when it ended by itself
     assert run.returncode == 0, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     uid = only_uid(station_home)
@@ -349,6 +345,26 @@ class RecordedReports:
 
     def close(self) -> None:
         """Nothing to close."""
+
+
+def test_a_display_nobody_serves_is_named_in_one_line_not_a_crash(station_home):
+    """DISPLAY names an X display with no server behind it (as after a remote session ended): the
+    station says which display it could not reach and exits 2; the window library is never asked
+    (it ends the process with a segmentation fault when its connection is refused)."""
+    env = environment(":987", station_home)
+    done = subprocess.run(STATION, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert "cannot connect to the X display ':987'" in done.stderr
+    assert "Traceback" not in done.stderr and "vtk" not in done.stderr.lower()
+    assert p1_sessions(station_home) == []  # no trial was started
+
+
+def p1_sessions(home: Path) -> list[str]:
+    catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
+    try:
+        return [r.uid for r in CatalogStore(catalog).sessions("Course") if r.participant == "P1"]
+    finally:
+        catalog.close()
 
 
 @pytest.mark.slow
