@@ -6,6 +6,8 @@ signed-out browser to the sign-in page).
 
 from __future__ import annotations
 
+import shlex
+
 from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse, Response
@@ -77,7 +79,7 @@ def said(error: VascsimError, api: bool = False) -> str:
     words = API_REMEDIES if api else REMEDIES
     if remedy is None or remedy[0] not in words:
         return str(error)
-    return f"{error}; {words[remedy[0]].format(remedy[1])}"
+    return f"{error}; {words[remedy[0]].format(shlex.quote(str(remedy[1])))}"  # pastes as shown
 
 
 def status_of(error: VascsimError) -> int:

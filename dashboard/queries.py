@@ -14,6 +14,7 @@ import pandas as pd
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
 from metrics.feedback import metric_groups, participant_feedback, session_feedback
+from metrics.proficiency import benchmarks_heading
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import (
     composite_summary,
@@ -30,6 +31,7 @@ from recorder.layout import SAMPLES_JOURNAL
 from sessions.review import against_band, expert_band, session_stitches
 from sessions.status import SCORABLE
 from sessions.store import CatalogStore, ParticipantRecord, SessionRecord
+from sim.errors import VascsimError
 
 ATTENTION_AFTER_TRIALS = 5
 """A trainee not yet proficient after this many practice sessions needs a supervisor's look."""
@@ -84,7 +86,12 @@ def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
         row["attention"] = reasons
         if reasons:
             attention.append({"participant_id": row["id"], "code": row["code"], "reasons": reasons})
-    overview.update(benchmarks=benchmark_rows(analysis), attention=attention, synthetic=analysis.synthetic)
+    overview.update(
+        benchmarks=benchmark_rows(analysis),
+        benchmark_heading=benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts),
+        attention=attention,
+        synthetic=analysis.synthetic,
+    )
     return overview
 
 
@@ -189,6 +196,17 @@ def participant_progress(
     return progress
 
 
+def _task_benchmarks(analyses: AnalysisCache, study_id: int, task: str) -> pd.DataFrame | None:
+    """The study's benchmarks when its declared analysis is of ``task`` (what the session is judged
+    against, as the station and `vascsim sessions show` judge it); None when it has none for it."""
+    try:
+        analysis = analyses.get(study_id).analysis
+    except VascsimError:  # nothing analysable yet
+        return None
+    tasks = set(map(str, analysis.sessions["task"])) if "task" in analysis.sessions.columns else set()
+    return analysis.benchmarks if tasks == {task} else None
+
+
 def session_detail(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer, uid: str) -> dict:
     """A session, its metrics against the expert band (quartiles of expert sessions), events and files."""
     facts = store.session_facts(uid, viewer)
@@ -216,7 +234,10 @@ def session_detail(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
     )
     detail["metrics"] = against_band(values, band)
     detail["signal_bands"] = signal_bands(detail["metrics"])
-    detail.update(session_feedback(detail["metrics"]), metric_groups=metric_groups(detail["metrics"]))
+    marks = _task_benchmarks(analyses, study_id, detail["task"]) if row.status in SCORABLE else None
+    detail.update(
+        session_feedback(detail["metrics"], benchmarks=marks), metric_groups=metric_groups(detail["metrics"])
+    )
     detail["stitches"] = session_stitches(catalog, uid)
     detail["target_bite_m"] = target_bite(detail["task"])
     return detail

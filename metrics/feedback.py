@@ -15,15 +15,15 @@ trainee's recent practice.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import pandas as pd
 
 from metrics.band import against_band, expert_quartiles
-from metrics.registry import REGISTRY
+from metrics.registry import REGISTRY, display_name
 from metrics.standards import SAFETY_METRICS
 from metrics.study import StudyAnalysis, practice_mask
-from metrics.units import significant
+from metrics.units import shown, significant
 
 KINDS = ("safety", "quality", "efficiency")
 """The order feedback is ranked in: what harms the patient, then what makes the anastomosis, then speed
@@ -106,6 +106,36 @@ def _ranked(rows: Sequence[dict], positions: tuple[str, ...], side: str) -> list
     return items
 
 
+def benchmark_gaps(values: Mapping[str, float | None], benchmarks: pd.DataFrame | None) -> list[dict]:
+    """The pass marks ``values`` (SI, by metric) do not meet, furthest (relative to the mark) first:
+    what stops the next session passing. Each: metric, kind "benchmark", gap (SI, by direction), line
+    (the advice, then the value, the mark and the gap in display units). A metric with no value or no
+    mark is left out (it neither blocks nor passes)."""
+    if benchmarks is None or benchmarks.empty:
+        return []
+    items = []
+    for bench in benchmarks.itertuples():
+        value = values.get(bench.metric)
+        if value is None or bench.metric not in REGISTRY or not math.isfinite(bench.benchmark):
+            continue
+        if not math.isfinite(value):
+            continue
+        gap = value - bench.benchmark if bench.better == "lower" else bench.benchmark - value
+        if gap <= 0:
+            continue
+        metric = REGISTRY[bench.metric]
+        line = (
+            f"{metric.advice} ({display_name(bench.metric)} {shown(value, metric.unit)}; the pass mark is "
+            f"{bench.pass_if}: {shown(gap, metric.unit)} to go)"
+        )
+        relative = gap / abs(bench.benchmark) if bench.benchmark else math.inf
+        items.append(
+            {"metric": bench.metric, "kind": "benchmark", "gap": gap, "relative": relative, "line": line}
+        )
+    items.sort(key=lambda item: -item["relative"])
+    return [{k: v for k, v in item.items() if k != "relative"} for item in items]
+
+
 def feedback_line(item: dict) -> str:
     """ "Aim the needle tip at the entry mark before piercing. (entry_to_target 0.65 mm; experts
     0.07-0.10 mm, lower is better)": what to do, then the numbers behind it in display units."""
@@ -124,22 +154,31 @@ def strength_line(item: dict) -> str:
 
 def _numbers(row: dict) -> tuple[str, str]:
     """("entry_to_target 0.65 mm", "experts 0.07-0.10 mm, lower is better") in display units."""
-    shown = row["display"]
+    display = row["display"]
     unit = f" {row['display_unit']}" if row["display_unit"] else ""
-    low, high = significant(shown["expert_q1"]), significant(shown["expert_q3"])
+    low, high = significant(display["expert_q1"]), significant(display["expert_q3"])
     experts = low if low == high else f"{low}-{high}"
-    value = f"{row['metric']} {significant(shown['value'])}{unit}"
+    value = f"{display_name(row['metric'])} {significant(display['value'])}{unit}"
     return value, f"experts {experts}{unit}, {row['better']} is better"
 
 
-def session_feedback(rows: Sequence[dict], limit: int = 3) -> dict[str, list[dict]]:
+def session_feedback(
+    rows: Sequence[dict], limit: int = 3, benchmarks: pd.DataFrame | None = None
+) -> dict[str, list[dict]]:
     """What to work on and strengths for rows as :func:`metrics.band.against_band` gives them, each
-    item ready to show: metric, kind, line. The session page, ``vascsim sessions show``, the
+    item ready to show: metric, kind, line. What to work on leads with the pass marks of
+    ``benchmarks`` (the study's, for this task) the values miss (:func:`benchmark_gaps`: what stops
+    the next pass), then the never events and safety, then the rest, at most ``limit`` after the
+    marks. The session page, ``vascsim sessions show``, the station's feedback screen, the
     participant page and the report all show these."""
+    gaps = benchmark_gaps({row["metric"]: row["value"] for row in rows}, benchmarks)
+    blocking = {gap["metric"] for gap in gaps}
+    band = [row for row in rows if row["metric"] not in blocking]
     return {
-        "work_on": [
+        "work_on": [{k: gap[k] for k in ("metric", "kind", "line")} for gap in gaps]
+        + [
             {"metric": i["metric"], "kind": i["kind"], "line": feedback_line(i)}
-            for i in what_to_work_on(rows, limit)
+            for i in what_to_work_on(band, max(limit - len(gaps), 1))
         ],
         "strengths": [
             {"metric": i["metric"], "kind": i["kind"], "line": strength_line(i)} for i in strengths(rows)
@@ -183,4 +222,5 @@ def participant_feedback(analysis: StudyAnalysis, code: str, recent: int = RECEN
         return {"work_on": [], "strengths": [], "trials": []}
     medians = mine[names].median(skipna=True)
     values = {name: (None if pd.isna(medians[name]) else float(medians[name])) for name in names}
-    return {**session_feedback(against_band(values, band)), "trials": [int(t) for t in mine["trial"]]}
+    feedback = session_feedback(against_band(values, band), benchmarks=analysis.benchmarks)
+    return {**feedback, "trials": [int(t) for t in mine["trial"]]}

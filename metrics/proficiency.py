@@ -75,6 +75,10 @@ def check_rule(rule: str) -> None:
     rule_value(np.array([1.0, 2.0]), rule, "lower", np.array([3.0, 5.0]))
 
 
+BENCHMARK_COLUMNS = ("metric", "benchmark", "better", "pass_if", "rule", "experts")
+"""A benchmarks table's columns (also when it has no row: no metric could be benchmarked)."""
+
+
 def proficiency_benchmarks(
     table: pd.DataFrame,
     metrics: Sequence[str],
@@ -111,7 +115,18 @@ def proficiency_benchmarks(
                 "experts": values.size,
             }
         )
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=BENCHMARK_COLUMNS)
+
+
+def benchmarks_heading(benchmarks: pd.DataFrame, min_experts: int) -> str:
+    """What a page calls a study's benchmarks: provisional when fewer than ``min_experts`` experts set
+    them, and "no standard" when no metric could be benchmarked (the page says why)."""
+    if benchmarks.empty:
+        return "Proficiency benchmarks: no standard (no metric shows the experts clearly better)"
+    experts = int(benchmarks["experts"].min())
+    if experts < min_experts:
+        return f"Proficiency benchmarks (provisional: {experts} expert(s), the rule asks for {min_experts})"
+    return f"Proficiency benchmarks (from {experts} experts)"
 
 
 def pass_condition(benchmark: float, better: str, unit: str) -> str:

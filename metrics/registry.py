@@ -120,6 +120,32 @@ class Registry:
 
 REGISTRY = Registry()
 
+TITLES = {
+    "entry_angle_error_deg": "entry angle error",
+    "tip_speed_before_pierce": "tip speed before piercing",
+    "tip_speed_after_pierce": "tip speed after piercing",
+    "spectral_arc_length": "smoothness (SPARC)",
+    "log_dimensionless_jerk": "smoothness (log dimensionless jerk)",
+    "entry_to_target": "entry distance from its mark",
+    "exit_to_target": "exit distance from its mark",
+    "bite_error_entry": "bite error at entry",
+    "bite_error_exit": "bite error at exit",
+    "contact_to_pierce_time": "time from contact to piercing",
+    "force_at_insertion": "force at insertion",
+    "peak_force_rate": "peak force rate",
+    "rms_force": "RMS force",
+    "high_stress_area": "area under high stress",
+    "time_above_strain_limit": "time above the strain limit",
+    "full_thickness_fraction": "full-thickness bites",
+    "needle_track_offset": "needle track offset",
+}
+"""Metric names as a surgeon reads them where the generated one ("task time") would not do."""
+
+
+def display_name(name: str) -> str:
+    """A metric's name for a person ("entry angle error", "task time"); the stored name stays the key."""
+    return TITLES.get(name, name.replace("_", " "))
+
 
 def metric(
     name: str,

@@ -21,6 +21,7 @@ from sklearn.metrics import roc_curve
 from metrics.feedback import RECENT_SESSIONS, participant_feedback
 from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
+from metrics.proficiency import benchmarks_heading
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.reliability import agreement_shown
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
@@ -110,7 +111,10 @@ def _roc(analysis: StudyAnalysis, folder: Path) -> str:
     axis.set_xlabel("false positive rate")
     axis.set_ylabel(f"true positive rate ({settings.skilled_group})")
     axis.set_title("ROC, participant level, metrics oriented better = higher", fontsize=9)
-    axis.legend(fontsize=7, loc="lower right")
+    if axis.get_legend_handles_labels()[1]:
+        axis.legend(fontsize=7, loc="lower right")
+    else:  # e.g. every expert's or every trainee's sessions unscored: say so rather than draw nothing
+        axis.text(0.5, 0.5, "no curve: no metric has values\nfrom both groups", ha="center", va="center")
     figure.tight_layout()
     return _save(figure, folder, "roc")
 
@@ -435,7 +439,7 @@ demonstrate the pipeline; they are not evidence about people.</p>{% endif %}
 {% if concurrent_table %}<h2>Concurrent validity</h2>
 <ul>{% for note in concurrent_notes %}<li>{{ note }}</li>{% endfor %}</ul>
 {{ concurrent_table }}{% endif %}
-<h2>Proficiency benchmarks</h2>
+<h2>{{ benchmark_heading }}</h2>
 {{ benchmark_table }}
 {% if standards %}<h2>Standard setting: how often each pass mark misjudges</h2>
 <ul>{% for note in standards.notes %}<li>{{ note }}</li>{% endfor %}</ul>
@@ -464,6 +468,8 @@ and the largest shift in trials-to-proficiency among those proficient both ways.
 {% if items.strengths %}<p>Strengths:</p><ul>{% for item in items.strengths %}
 <li>{{ item.line }}</li>{% endfor %}</ul>{% endif %}
 {% endfor %}{% endif %}
+{% if left_out_table %}<h3 id="left-out">Participants not in this analysis, and why</h3>
+{{ left_out_table }}{% endif %}
 {% for path in learning %}<p><img src="{{ path }}" alt="learning curve"></p>{% endfor %}
 <h2>Learning-curve fits</h2>
 {{ curve_table }}
@@ -778,7 +784,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "concurrent_notes": concurrent.notes if concurrent is not None else [],
         "roc": roc,
         "benchmark_table": _html_table(benchmarks_for_reading(analysis.benchmarks)),
+        "benchmark_heading": benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts),
         "trainee_table": _html_table(trainee_summary(analysis)),
+        "left_out_table": _html_table(pd.DataFrame(analysis.left_out)) if analysis.left_out else "",
         "feedback": feedback,
         "feedback_basis": FEEDBACK_BASIS,
         "learning": learning,
@@ -815,7 +823,12 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         lines += ["## Concurrent validity", "", *[f"- {n}" for n in concurrent.notes], ""]
         lines += [_markdown_table(concurrent_for_reading(concurrent.table)), ""]
     benchmarks = _markdown_table(benchmarks_for_reading(analysis.benchmarks))
-    lines += ["## Proficiency benchmarks", "", benchmarks, ""]
+    lines += [
+        f"## {benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts)}",
+        "",
+        benchmarks,
+        "",
+    ]
     if standards:
         lines += ["## Standard setting: how often each pass mark misjudges", ""]
         lines += [*[f"- {n}" for n in analysis.standards.notes], "", _markdown_table(standards["marks"]), ""]
@@ -835,6 +848,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
             lines += [f"{n}. **{i['kind']}**: {i['line']}" for n, i in enumerate(items["work_on"], start=1)]
             lines += [] if items["work_on"] else ["Nothing worse than the experts' middle half."]
             lines += ["", *[f"- Strength: {i['line']}" for i in items["strengths"]], ""]
+    if analysis.left_out:
+        lines += ["### Participants not in this analysis, and why", ""]
+        lines += [_markdown_table(pd.DataFrame(analysis.left_out)), ""]
     lines += [f"![learning curve]({p})" for p in learning] + [""]
     lines += ["## Learning-curve fits", "", _markdown_table(_curves_for_reading(curves)), ""]
     lines += [

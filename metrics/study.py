@@ -41,6 +41,9 @@ class StudySettings:
     metrics: tuple[str, ...] | None = None  # metrics validated (default: every metric with values)
     benchmark_rule: str = "mean"
     benchmark_metrics: tuple[str, ...] | None = None  # default: the discriminating metrics
+    # a declared benchmark metric whose AUC interval includes 0.5 is kept only with a reason (logged)
+    benchmark_override: str = ""
+    min_experts: int = 5  # fewer experts behind a mark: the standard is provisional (MScore-style)
     consecutive_passes: int = 2
     progression_window: int | None = None  # N of the last M sessions (M); None: N in a row
     non_compensatory: bool = False  # safety events (metrics.standards.SAFETY_METRICS) fail a session
@@ -71,6 +74,9 @@ class StudyAnalysis:
     concurrent: ConcurrentValidityResult | None = None
     reliability: Reliability | None = None
     standards: StandardSetting | None = None
+    # participants of the study who are not in this analysis, and why (code, group, reason): filled by
+    # the catalog's analysis (sessions.analysis), so every report accounts for every participant
+    left_out: list[dict] = field(default_factory=list)
 
 
 def practice_mask(table: pd.DataFrame) -> pd.Series:
@@ -97,6 +103,46 @@ def sessions_of_task(table: pd.DataFrame, task: str | None) -> pd.DataFrame:
     if task not in tasks:
         raise MetricsError(f"the study has no scored session of task {task!r}; its tasks: {', '.join(tasks)}")
     return table[table["task"] == task].reset_index(drop=True)
+
+
+def benchmark_choice(
+    validity: ConstructValidityResult, settings: StudySettings
+) -> tuple[list[str], list[str]]:
+    """The metrics a study benchmarks, and notes on any refused: the declared benchmark metrics or else
+    the discriminating ones, each kept only where the skilled group does better (oriented AUC > 0.5)
+    and its participant-level AUC interval excludes 0.5 (or, for declared metrics, the analysis gives
+    ``benchmark_override``, a reason that is printed). A mark on a metric where trainees do as well or
+    better would pass them for it: no standard rather than a wrong one."""
+    table = validity.table.set_index("metric")
+    candidates = list(settings.benchmark_metrics or validity.discriminating())
+    chosen, refused, notes = [], [], []
+    for name in candidates:
+        if name not in table.index:
+            refused.append(f"{name} (not analysed)")
+            continue
+        auc, low = float(table.at[name, "auc"]), float(table.at[name, "auc_ci_low"])
+        if not auc > 0.5:
+            refused.append(f"{name} (experts do not do better: AUC {auc:.2f})")
+        elif low > 0.5:
+            chosen.append(name)
+        elif settings.benchmark_metrics and settings.benchmark_override:
+            chosen.append(name)
+            shown = "no interval" if math.isnan(low) else f"interval from {low:.2f}"
+            notes.append(
+                f"{name} is benchmarked though its AUC {shown} includes 0.5: {settings.benchmark_override}"
+            )
+        else:
+            shown = "no interval (too few participants)" if math.isnan(low) else f"interval from {low:.2f}"
+            refused.append(f"{name} (AUC {auc:.2f}, {shown}: it may not separate the groups)")
+    if refused:
+        notes.append("Not benchmarked: " + "; ".join(refused) + ".")
+    if not chosen:
+        notes.append(
+            "No standard: no analysed metric shows the experts doing better with an AUC interval above 0.5, "
+            "so no session can pass; gather more expert and trainee sessions, or declare benchmark "
+            "metrics with a reason (benchmark_override)."
+        )
+    return chosen, notes
 
 
 def session_judge(settings: StudySettings) -> Callable[[pd.DataFrame, pd.DataFrame], pd.DataFrame]:
@@ -135,18 +181,7 @@ def analyse_study(
         n_boot=settings.n_boot,
         seed=settings.seed,
     )
-    chosen = list(settings.benchmark_metrics or validity.discriminating())
-    notes = []
-    if not chosen:
-        # without discriminating metrics, benchmark on the largest effects but say so
-        ranked = validity.table.assign(effect=lambda t: (t["auc"] - 0.5).abs()).sort_values(
-            "effect", ascending=False
-        )
-        chosen = ranked["metric"].head(3).tolist()
-        notes.append(
-            "No metric discriminated after correction; proficiency benchmarks use the three metrics with the "
-            f"largest effect sizes ({', '.join(chosen)}) and are provisional."
-        )
+    chosen, notes = benchmark_choice(validity, settings)
     benchmarks = proficiency_benchmarks(
         table[practice],
         chosen,
@@ -155,6 +190,13 @@ def analyse_study(
         settings.cluster_col,
         settings.benchmark_rule,
     )
+    experts = int(benchmarks["experts"].min()) if not benchmarks.empty else 0
+    benchmarks["provisional"] = experts < settings.min_experts
+    if not benchmarks.empty and experts < settings.min_experts:
+        notes.append(
+            f"The benchmarks are provisional: {experts} expert(s) set them, fewer than the "
+            f"{settings.min_experts} the rule asks for."
+        )
     judge = session_judge(settings)
     proficiency = judge(table, benchmarks)
     proficiency.insert(0, "session_id", table["session_id"])
@@ -191,16 +233,20 @@ def analyse_study(
     reliability = reliability_evidence(
         in_practice, validity.table["metric"].tolist(), chosen, settings.cluster_col, ratings
     )
-    standards = standard_setting(
-        in_practice,
-        chosen,
-        settings.benchmark_rule,
-        settings.group_col,
-        settings.skilled_group,
-        settings.cluster_col,
-        settings.consecutive_passes,
-        settings.progression_window,
-        judge,
+    standards = (
+        None
+        if benchmarks.empty
+        else standard_setting(
+            in_practice,
+            chosen,
+            settings.benchmark_rule,
+            settings.group_col,
+            settings.skilled_group,
+            settings.cluster_col,
+            settings.consecutive_passes,
+            settings.progression_window,
+            judge,
+        )
     )
     return StudyAnalysis(
         settings,
@@ -242,12 +288,11 @@ def _per_trainee(table, practice, proficiency, benchmarks, settings):
             record["retention_passed"] = retained
             changes = []
             for bench in benchmarks.itertuples():
-                kept = retention(
-                    in_practice[bench.metric],
-                    float(delayed[bench.metric].iloc[-1]),
-                    bench.better,
-                    settings.retention_baseline,
-                )
+                later = float(delayed[bench.metric].iloc[-1])
+                if math.isnan(later) or in_practice[bench.metric].isna().all():
+                    record[f"retention_change_{bench.metric}"] = math.nan  # not measured: no change known
+                    continue
+                kept = retention(in_practice[bench.metric], later, bench.better, settings.retention_baseline)
                 changes.append(kept.worse)
                 record[f"retention_change_{bench.metric}"] = kept.change
             record["retention_worse_metrics"] = int(np.sum(changes))

@@ -10,6 +10,7 @@ overrides applied and named in the analysis' notes. Declarations are versioned:
 from __future__ import annotations
 
 import dataclasses
+import shlex
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,10 +20,11 @@ from sqlalchemy.orm import Session as OrmSession
 
 from metrics.streams import MetricsError
 from metrics.study import StudyAnalysis, StudySettings, analyse_study
-from sessions.catalog import Catalog, CatalogError, now
+from sessions.catalog import Catalog, CatalogError, WrongState, now
 from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
 from sessions.runner import study_table
 from sessions.status import SCORABLE
+from sim.errors import VascsimError
 
 DECLARABLE = (
     "group_col",
@@ -32,6 +34,8 @@ DECLARABLE = (
     "metrics",
     "benchmark_rule",
     "benchmark_metrics",
+    "benchmark_override",
+    "min_experts",
     "consecutive_passes",
     "progression_window",
     "non_compensatory",
@@ -73,7 +77,7 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
             if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
                 raise CatalogError(f"{what}: {name} must be a list of names; got {value!r}")
             values[name] = tuple(value)
-        elif name in ("consecutive_passes", "retention_baseline"):
+        elif name in ("consecutive_passes", "retention_baseline", "min_experts"):
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise CatalogError(f"{what}: {name} must be a whole number >= 1; got {value!r}")
             values[name] = value
@@ -86,6 +90,12 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
         elif name == "non_compensatory":
             if not isinstance(value, bool):
                 raise CatalogError(f"{what}: non_compensatory must be true or false; got {value!r}")
+            values[name] = value
+        elif name == "benchmark_override":
+            if not isinstance(value, str) or len(value) > 500:
+                raise CatalogError(
+                    f"{what}: benchmark_override must be a reason (text, at most 500 characters)"
+                )
             values[name] = value
         elif name in ("rating_col", "task"):
             if value is not None and (not isinstance(value, str) or not value):
@@ -135,8 +145,21 @@ def settings_to_json(settings: StudySettings) -> dict:
     }
 
 
-def default_settings(table: pd.DataFrame) -> StudySettings:
-    """For a study that declared nothing: experts against the other group, every metric, the expert mean."""
+DEFAULT_WORDS = {
+    "metrics": "the task's primary metrics (vascsim tasks show TASK)",
+    "benchmark_metrics": "the analysed metrics on which experts do better (discriminating)",
+    "rating_col": "the study's GRS or OSATS totals where sessions are rated, else none",
+    "task": "the study's only task",
+    "progression_window": "none: the passes must come in a row",
+}
+"""What an analysis setting left at its default (None) means, in words."""
+
+
+def default_settings(table: pd.DataFrame | None) -> StudySettings:
+    """For a study that declared nothing: experts against the other group, the task's primary metrics,
+    the expert mean. ``table`` None: a study with no scored session yet (a declaration made before
+    the data)."""
+    table = pd.DataFrame({"label": []}) if table is None else table
     labels = [label for label in pd.unique(table["label"]) if label != "expert"] if "label" in table else []
     other = "trainee" if "trainee" in labels or not labels else sorted(map(str, labels))[0]
     return StudySettings(groups=("expert", other), skilled_group="expert")
@@ -184,7 +207,11 @@ def declared_settings(catalog: Catalog, study_name: str, table: pd.DataFrame | N
         if latest is not None:
             what = f"declared analysis v{latest.version} of study {study_name!r}"
             return settings_from_json(latest.settings, what), latest.version, latest.author
-    table = study_table(catalog, study_name) if table is None else table
+    if table is None:
+        try:
+            table = study_table(catalog, study_name)
+        except WrongState:  # nothing scored yet: an analysis can still be declared before the data
+            table = None
     return default_settings(table), None, ""
 
 
@@ -223,15 +250,28 @@ def analyse_catalog_study(
             if getattr(settings, k) != getattr(merged, k)
         }
         settings = merged
+    settings, primaries = with_primary_metrics(settings, table)
     from sessions.ratings import study_ratings
 
     analysis = analyse_study(table, settings, study_ratings(catalog, study_name))
+    if primaries:
+        analysis.notes.insert(
+            0,
+            f"Metrics: the task's {len(settings.metrics or ())} primary metrics (the default); declare "
+            f"others with `vascsim studies analysis {shlex.quote(study_name)} --metrics ...`.",
+        )
+    analysis.left_out = participants_left_out(catalog, study_name, analysis)
+    if analysis.left_out:
+        analysis.notes.append(
+            f"{len(analysis.left_out)} participant(s) of the study are not in this analysis; the report's "
+            "last table says why."
+        )
     stale = stale_sessions(catalog, study_name)
     if stale:
         analysis.notes.insert(
             0,
             f"{len(stale)} session(s) carry only metrics of an older registry version and are left out "
-            f"(e.g. {stale[0]}); rescore them with `vascsim score --study {study_name}`.",
+            f"(e.g. {stale[0]}); rescore them with `vascsim score --study {shlex.quote(study_name)}`.",
         )
     unverified = imported_unverified_sessions(catalog, study_name)
     if unverified:
@@ -239,7 +279,7 @@ def analyse_catalog_study(
             0,
             f"{len(unverified)} session(s) carry metric values imported from a bundle and not "
             f"recomputed here (unverified; e.g. {unverified[0]}); recompute them with "
-            f"`vascsim score --study {study_name}`.",
+            f"`vascsim score --study {shlex.quote(study_name)}`.",
         )
     source = (
         "declared analysis v" + str(version) if version is not None else "default analysis (none declared)"
@@ -261,6 +301,51 @@ def analyse_catalog_study(
             + ".",
         )
     return analysis, AnalysisSource(version, author, overridden)
+
+
+def with_primary_metrics(settings: StudySettings, table: pd.DataFrame) -> tuple[StudySettings, bool]:
+    """``settings`` with its metrics, when it declares none, set to the analysed task's primary metrics
+    that the table has (:attr:`sessions.tasks.TaskSpec.primary_metrics`); and whether that was done."""
+    from sessions.tasks import task_spec
+
+    if settings.metrics is not None or "task" not in table.columns:
+        return settings, False
+    tasks = sorted(map(str, pd.unique(table["task"])))
+    task = settings.task if settings.task is not None else (tasks[0] if len(tasks) == 1 else None)
+    if task is None:
+        return settings, False  # several tasks and none chosen: the analysis says to choose one
+    try:
+        primaries = task_spec(task).primary_metrics
+    except VascsimError:  # a user's task since removed: every metric, as before
+        return settings, False
+    present = tuple(m for m in primaries if m in table.columns)
+    if not present:
+        return settings, False
+    return dataclasses.replace(settings, metrics=present), True
+
+
+def participants_left_out(catalog: Catalog, study_name: str, analysis: StudyAnalysis) -> list[dict]:
+    """Every participant of the study absent from ``analysis``, with the reason in words."""
+    from sessions.store import CatalogStore
+
+    settings = analysis.settings
+    analysed = set(map(str, analysis.sessions[settings.cluster_col]))
+    tasks = sorted(map(str, pd.unique(analysis.sessions["task"]))) if "task" in analysis.sessions else []
+    task = settings.task or (tasks[0] if len(tasks) == 1 else "the analysed task")
+    out = []
+    for person in CatalogStore(catalog).participants(study_name):
+        if person.code in analysed:
+            continue
+        if not person.group:
+            reason = "no group given"
+        elif person.group not in settings.groups:
+            reason = f"group '{person.group}' is not one of the two compared ({', '.join(settings.groups)})"
+        elif not person.sessions:
+            reason = "no session yet"
+        else:
+            reason = f"no scored session of {task} (under this metrics registry)"
+        out.append({"participant": person.code, "group": person.group or "-", "reason": reason})
+    return out
 
 
 def metric_versions(catalog: Catalog, session_ids: list[int]) -> dict[int, str]:

@@ -299,10 +299,14 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
     Participants come without any account link (accounts are this site's business); database ids
     are this catalog's own."""
     from metrics.registry import REGISTRY_VERSION
+    from sessions.groups import declared_group, group_name
     from sessions.runner import stitch_results
 
     info = manifest.study
-    study = Study(name=info.name, description=info.description, created_at=info.created_at)
+    custom = [declared_group(name) for name in info.groups]
+    study = Study(
+        name=info.name, description=info.description, created_at=info.created_at, custom_groups=custom
+    )
     orm.add(study)
     orm.flush()
     for entry in manifest.analyses:
@@ -319,7 +323,11 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
         tasks[task_name] = task
     people: dict[str, Participant] = {}
     for person in manifest.participants:
-        people[person.code] = Participant(study_id=study.id, **person.model_dump())
+        fields = person.model_dump()
+        what = f"the bundle's participant {person.code!r}"
+        fields["level"] = group_name(person.level, custom, f"level of {what}")
+        fields["group_label"] = group_name(person.group_label, custom, f"group of {what}")
+        people[person.code] = Participant(study_id=study.id, **fields)
         orm.add(people[person.code])
     orm.flush()
     differing = 0

@@ -81,6 +81,7 @@ def export_study(
                 "name": study.name,
                 "description": study.description,
                 "created_at": _when(study.created_at),
+                "groups": list(study.custom_groups or ()),
             },
             "participants": [_row(p, PARTICIPANT_FIELDS) for p in participants],
             # the study's declared analysis, every version, so an import analyses it the same way

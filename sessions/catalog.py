@@ -209,13 +209,17 @@ class Catalog:
         handedness: str = "right",
         synthetic: bool = False,
     ) -> Participant:
+        from sessions.groups import group_name
+
         if orm.scalar(select(Participant).where(Participant.study_id == study.id, Participant.code == code)):
             raise AlreadyExists(f"participant {code!r} already exists in study {study.name!r}")
+        level = group_name(level, study.custom_groups or (), "level")
+        group_label = group_name(group_label, study.custom_groups or ()) or level
         participant = Participant(
             study_id=study.id,
             code=code,
             level=level,
-            group_label=group_label or level,
+            group_label=group_label,
             years_experience=years_experience,
             handedness=handedness,
             synthetic=synthetic,

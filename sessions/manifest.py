@@ -80,6 +80,8 @@ class StudyRecord(_Strict):
     name: Annotated[str, Field(min_length=1, max_length=200)]
     description: Text
     created_at: When
+    # groups the study declared beyond the standard ones (sessions.groups); bundles before them have none
+    groups: Annotated[list[_label(32)], Field(max_length=50)] = []
 
 
 class ParticipantRecord(_Strict):

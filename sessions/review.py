@@ -14,7 +14,7 @@ import pandas as pd
 from sqlalchemy import select
 
 from metrics.band import against_band, expert_quartiles
-from metrics.registry import REGISTRY_VERSION
+from metrics.registry import REGISTRY_VERSION, display_name
 from sessions.catalog import Catalog
 from sessions.models import MetricResult, Participant, Session, StitchResult
 from sessions.status import SCORABLE
@@ -114,8 +114,8 @@ def review_session(catalog: Catalog, uid: str) -> SessionReview:
         row = catalog.recorded_session(orm, uid)
         study, task, trial = row.participant.study.name, row.task.name, row.trial
     rows = session_against_experts(catalog, uid)
-    verdict, standard, benchmarks = _against_standard(catalog, study, task, uid, rows)
-    feedback = session_feedback(rows)
+    verdict, standard, benchmarks, marks = _against_standard(catalog, study, task, uid, rows)
+    feedback = session_feedback(rows, benchmarks=marks)
     return SessionReview(
         uid, task, trial, verdict, standard, benchmarks, feedback["work_on"], feedback["strengths"]
     )
@@ -123,22 +123,23 @@ def review_session(catalog: Catalog, uid: str) -> SessionReview:
 
 def _against_standard(
     catalog: Catalog, study: str, task: str, uid: str, rows: list[dict]
-) -> tuple[str, str, list[dict]]:
+) -> tuple[str, str, list[dict], pd.DataFrame | None]:
+    """(verdict, the standard in words, each benchmark's reading, the benchmarks table or None)."""
     from metrics.units import shown
     from sessions.analysis import analyse_catalog_study
     from sim.errors import VascsimError
 
     if all(row["expert_q1"] is None for row in rows):  # the band is the experts' on this task
         why = f"no standard for {task} yet: no expert of this study has a scored session of it"
-        return "no standard", why, []
+        return "no standard", why, [], None
     try:
         analysis, _ = analyse_catalog_study(catalog, study, {"task": task})
     except VascsimError as error:  # the study's analysis cannot be run (yet): no verdict, and why
-        return "no standard", f"no standard for {task} in this study yet: {error}", []
+        return "no standard", f"no standard for {task} in this study yet: {error}", [], None
     sessions = analysis.sessions
     found = sessions.index[sessions["session_id"] == uid]
     if not len(found) or analysis.benchmarks.empty:
-        return "no standard", f"no standard for {task} in this study yet (no benchmarks)", []
+        return "no standard", f"no standard for {task} in this study yet (no benchmarks)", [], None
     index = found[0]
     by_metric = {r["metric"]: r for r in rows}
     benchmarks = []
@@ -159,7 +160,7 @@ def _against_standard(
                 "better": bench.better,
                 "pass_if": bench.pass_if,
                 "passed": passed,
-                "line": f"{bench.metric} {shown(value, unit)}: {reading}, the standard is "
+                "line": f"{display_name(bench.metric)} {shown(value, unit)}: {reading}, the standard is "
                 f"{bench.pass_if} ({bench.better} is better)",
             }
         )
@@ -168,8 +169,9 @@ def _against_standard(
     standard = (
         f"the study's benchmarks on {task}: {len(benchmarks)} metric(s), rule "
         f"{analysis.settings.benchmark_rule}, from {experts} expert(s)"
+        + (", provisional" if experts < analysis.settings.min_experts else "")
     )
-    return ("pass" if passed else "not yet"), standard, benchmarks
+    return ("pass" if passed else "not yet"), standard, benchmarks, analysis.benchmarks
 
 
 def experts_on_task(catalog: Catalog, study: str, task: str) -> bool:

@@ -40,6 +40,18 @@ class TaskSpec:
         """The stitches the task asks for (one per target entry mark; one without marks)."""
         return len(self.placement["entry_targets"]) if self.placement else 1
 
+    @property
+    def primary_metrics(self) -> tuple[str, ...]:
+        """The metrics a study of this task analyses unless it declares others, chosen before any data:
+        the source paper's proposed needle velocity near the insertion point (before and after
+        piercing), its perpendicular-entry criterion, the hand's smoothness (the wrist should turn the
+        needle smoothly), and, where the task marks targets, where the bite went against its mark. A
+        short declared list keeps the multiple-comparison correction from diluting what matters."""
+        needle = ("tip_speed_before_pierce", "tip_speed_after_pierce", "entry_angle_error_deg")
+        hand = ("spectral_arc_length",)
+        placement = ("entry_to_target",) if self.placement else ()
+        return needle + hand + placement
+
     def bites(self) -> list[tuple]:
         """Every bite of the task, in order: (entry, normal, bite_direction) each (m, unit vectors)."""
         return [(self.entry, self.normal, self.bite_direction), *self.more_bites]

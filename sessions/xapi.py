@@ -212,12 +212,13 @@ def study_statements(catalog: Catalog, study_name: str, settings: XapiSettings) 
         checks = [c for c in judged.columns if c.startswith(("pass_", "safety_"))]
         for uid in judged.index:
             values = {c: metrics.at[uid, c] for c in metrics.columns if c in REGISTRY}
-            outcome = judged.loc[uid, checks].astype(bool)
+            outcome = judged.loc[uid, checks]
+            measured = outcome[outcome.notna()].astype(bool)  # a metric with no value is no check
             by_session[uid] = {
                 "values": values,
                 "passed": bool(judged.at[uid, "passed"]),
-                "raw": int(outcome.sum()),
-                "checks": len(checks),
+                "raw": int(measured.sum()),
+                "checks": int(measured.size),
             }
     ended: dict[tuple[str, str, int], datetime] = {}
     for row in rows:

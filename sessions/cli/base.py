@@ -7,6 +7,7 @@ domain layer (catalog, runner, analysis).
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -41,13 +42,17 @@ REMEDIES = {
 }
 """A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) as the command that applies it."""
 
+LISTS = ("choose-task",)
+"""Remedies whose value is a list to choose from, not an argument to paste (the rest are quoted)."""
+
 
 def remedy_in_words(error: VascsimError) -> str:
     """ "; " and the CLI's words for the error's remedy, or "" when it names none."""
     remedy = getattr(error, "remedy", None)
     if remedy is None or remedy[0] not in REMEDIES:
         return ""
-    return "; " + REMEDIES[remedy[0]].format(remedy[1])
+    value = remedy[1] if remedy[0] in LISTS else shlex.quote(str(remedy[1]))  # a command pastes as shown
+    return "; " + REMEDIES[remedy[0]].format(value)
 
 
 def user_errors(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -173,7 +178,7 @@ def analysis_options(groups, level, metric_names, rule, consecutive=None) -> dic
 
     options: dict = {"level": level, "benchmark_rule": rule, "consecutive_passes": consecutive}
     if groups is not None:
-        names = tuple(part.strip() for part in groups.split(","))
+        names = tuple(part.strip().lower() for part in groups.split(","))  # groups are lower-case
         if len(names) != 2:
             raise CatalogError(f"--groups needs two comma-separated groups, skilled first; got {groups!r}")
         options["groups"], options["skilled_group"] = names, names[0]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 import click
@@ -14,7 +15,7 @@ from sessions.cli.base import (
     print_json,
     user_errors,
 )
-from sessions.status import SESSION_STATUSES
+from sessions.status import SCORABLE, SESSION_STATUSES
 
 
 @click.group()
@@ -61,7 +62,7 @@ def sessions_list(study, task, status, as_json) -> None:
         studies = sorted({r["study"] for r in stale})
         click.echo(
             f"{len(stale)} session(s) scored with an older metric registry; rescore: "
-            + "; ".join(f"vascsim score --study {name}" for name in studies)
+            + "; ".join(f"vascsim score --study {shlex.quote(name)}" for name in studies)
         )
 
 
@@ -94,13 +95,18 @@ def sessions_show(uid: str, as_json: bool) -> None:
         "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in facts.files],
     }
     from metrics.feedback import metric_groups, session_feedback
-    from sessions.review import session_against_experts, session_stitches
+    from sessions.review import review_session, session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)
     data["metrics"] = {r["metric"]: r["value"] for r in rows}
     data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
     data["stitches"] = session_stitches(catalog, uid)
-    data.update(session_feedback(rows))
+    if row.status in SCORABLE:  # judged as the station judges it: the marks it misses lead
+        review = review_session(catalog, uid)
+        data.update(verdict=review.verdict, standard=review.standard)
+        data.update(work_on=review.work_on, strengths=review.strengths)
+    else:
+        data.update(session_feedback(rows))
     if as_json:
         print_json(data)
         return
@@ -119,7 +125,7 @@ def sessions_show(uid: str, as_json: bool) -> None:
         elif key == "versus_experts":
             continue
         elif key == "work_on":
-            click.echo("work on      (safety, then quality, then efficiency; furthest out first)")
+            click.echo("work on      (the pass marks missed, then safety, quality, efficiency)")
             for item in value or [{"kind": "", "line": "nothing worse than the experts' middle half"}]:
                 text = f"{item['kind']}: {item['line']}" if item["kind"] else item["line"]
                 click.echo(click.wrap_text(text, 78, initial_indent="  ", subsequent_indent="    "))
@@ -129,6 +135,8 @@ def sessions_show(uid: str, as_json: bool) -> None:
                 click.echo(click.wrap_text(item["line"], 78, initial_indent="  ", subsequent_indent="    "))
         elif key == "stitches":
             _show_stitches(value)
+        elif key == "standard":
+            click.echo(click.wrap_text(f"{key:12s} {value}", 80, subsequent_indent=" " * 13))
         else:
             click.echo(f"{key:12s} {value}")
 

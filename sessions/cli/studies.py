@@ -57,6 +57,27 @@ def studies_add(name: str, description: str) -> None:
     click.echo(f"study {name} created")
 
 
+@studies.command("groups")
+@click.argument("study")
+@click.option("--add", "added", multiple=True, help="Declare another group (repeatable), e.g. --add fellow.")
+@user_errors
+def studies_groups(study: str, added: tuple[str, ...]) -> None:
+    """List the groups a participant of STUDY can be in, or declare more.
+
+    Every study knows expert, intermediate, trainee and novice; labels are case-insensitive and
+    stored lower-case. A label outside the list is refused, so a typo never makes a group nobody
+    analyses."""
+    from sessions.groups import STANDARD_GROUPS, study_groups
+
+    catalog, _ = open_catalog()
+    groups = study_groups(catalog, study, added)
+    custom = [g for g in groups if g not in STANDARD_GROUPS]
+    click.echo(
+        f"study {study!r}: groups {', '.join(STANDARD_GROUPS)}"
+        + (f"; declared: {', '.join(custom)}" if custom else "")
+    )
+
+
 @studies.command("analysis")
 @click.argument("study")
 @click.option("--groups", default=None, help="The two groups compared, skilled first (a,b).")
@@ -73,12 +94,44 @@ def studies_add(name: str, description: str) -> None:
     default=None,
     help="Retention: compare the delayed session with the mean of this many last practice sessions.",
 )
+@click.option(
+    "--benchmarks",
+    "benchmark_names",
+    default=None,
+    help="Comma-separated metrics to set pass marks on (default: the analysed metrics that discriminate). "
+    "Only metrics on which the skilled group does better are ever benchmarked.",
+)
+@click.option(
+    "--override-reason",
+    default=None,
+    help="Why the declared --benchmarks stand though their AUC interval includes 0.5 (printed in every "
+    "report); without it such a metric is not benchmarked.",
+)
+@click.option(
+    "--min-experts",
+    type=click.IntRange(1, 1000),
+    default=None,
+    help="Experts a standard needs; fewer make it provisional wherever it is shown [default: 5].",
+)
 @click.option("--by", "author", default=None, help="Who declares this version (default: the login name).")
 @click.option("--note", default="", help="Why this version.")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @user_errors
 def studies_analysis(
-    study, groups, level, metric_names, rule, consecutive, rating, retention_baseline, author, note, as_json
+    study,
+    groups,
+    level,
+    metric_names,
+    rule,
+    consecutive,
+    rating,
+    retention_baseline,
+    benchmark_names,
+    override_reason,
+    min_experts,
+    author,
+    note,
+    as_json,
 ) -> None:
     """Show a study's declared analysis and its versions, or declare a new version.
 
@@ -89,7 +142,13 @@ def studies_analysis(
     import dataclasses
     import getpass
 
-    from sessions.analysis import analysis_history, declare_analysis, declared_settings, settings_to_json
+    from sessions.analysis import (
+        DEFAULT_WORDS,
+        analysis_history,
+        declare_analysis,
+        declared_settings,
+        settings_to_json,
+    )
 
     catalog, _ = open_catalog()
     changes = analysis_options(groups, level, metric_names, rule, consecutive)
@@ -97,6 +156,12 @@ def studies_analysis(
         changes["rating_col"] = rating
     if retention_baseline is not None:
         changes["retention_baseline"] = retention_baseline
+    if benchmark_names is not None:
+        changes["benchmark_metrics"] = tuple(p.strip() for p in benchmark_names.split(",") if p.strip())
+    if override_reason is not None:
+        changes["benchmark_override"] = override_reason.strip()
+    if min_experts is not None:
+        changes["min_experts"] = min_experts
     if changes:
         current, _, _ = declared_settings(catalog, study)
         version = declare_analysis(
@@ -116,9 +181,9 @@ def studies_analysis(
     )
     for name, value in settings_to_json(settings).items():
         if value is None:
-            value = (
-                "the discriminating metrics" if name == "benchmark_metrics" else "every metric with values"
-            )
+            value = f"default: {DEFAULT_WORDS[name]}"
+        elif value == "":
+            value = "none"
         elif isinstance(value, list):
             value = ", ".join(value)
         click.echo(f"  {name:20s} {value}")

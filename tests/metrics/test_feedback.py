@@ -8,6 +8,7 @@ import json
 import pytest
 from click.testing import CliRunner
 from fastapi.testclient import TestClient
+from markupsafe import escape
 from sqlalchemy import select
 
 from dashboard.app import create_app
@@ -68,10 +69,67 @@ def test_ranking_puts_safety_first_then_quality_then_efficiency():
     line = feedback_line(items[1])
     assert line == (
         "Bring the needle out at the exit mark: rotate along its curve. "
-        "(exit_to_target 0.6 mm; experts 0.1-0.2 mm, lower is better)"
+        "(exit distance from its mark 0.6 mm; experts 0.1-0.2 mm, lower is better)"
     )
     only_safety = what_to_work_on(against_band(values, band), limit=0)
     assert [i["metric"] for i in only_safety] == ["back_wall_catches"]  # safety is never cut
+
+
+def test_the_pass_marks_a_session_misses_lead_then_safety_then_the_rest():
+    """Issue 44, seen 5: T01 is blocked by entry_to_target, yet "what to work on" listed three safety
+    items and never the mark that stops them passing. The marks missed come first (the furthest
+    from its mark first), each with the gap in display units, then the never events, then the rest."""
+    import pandas as pd
+
+    from metrics.proficiency import pass_condition
+
+    band = {
+        "back_wall_catches": {"expert_q1": 0.0, "expert_median": 0.0, "expert_q3": 0.0},
+        "entry_to_target": {"expert_q1": 1e-4, "expert_median": 1.5e-4, "expert_q3": 2e-4},
+        "exit_to_target": {"expert_q1": 1e-4, "expert_median": 1.5e-4, "expert_q3": 2e-4},
+        "path_length": {"expert_q1": 0.02, "expert_median": 0.025, "expert_q3": 0.03},
+        "peak_force": {"expert_q1": 0.8, "expert_median": 0.9, "expert_q3": 1.0},
+        "task_time": {"expert_q1": 5.0, "expert_median": 6.0, "expert_q3": 7.0},
+    }
+    values = {
+        "back_wall_catches": 1.0,
+        "entry_to_target": 3e-4,  # misses its mark 0.173 mm by 0.127 mm (73 % of the mark)
+        "exit_to_target": 6e-4,
+        "path_length": 0.09,  # misses its mark 60 mm by 30 mm (50 %)
+        "peak_force": 1.6,  # safety, worse than the experts, no mark
+        "task_time": 4.0,  # meets its mark
+    }
+    marks = {"entry_to_target": 1.73e-4, "path_length": 0.06, "task_time": 6.0}
+    benchmarks = pd.DataFrame(
+        [
+            {
+                "metric": name,
+                "benchmark": mark,
+                "better": "lower",
+                "pass_if": pass_condition(mark, "lower", REGISTRY[name].unit),
+                "rule": "mean",
+                "experts": 5,
+            }
+            for name, mark in marks.items()
+        ]
+    )
+    feedback = session_feedback(against_band(values, band), limit=4, benchmarks=benchmarks)
+    order = [(item["metric"], item["kind"]) for item in feedback["work_on"]]
+    assert order == [
+        ("entry_to_target", "benchmark"),
+        ("path_length", "benchmark"),
+        ("back_wall_catches", "safety"),
+        ("peak_force", "safety"),
+    ]
+    assert feedback["work_on"][0]["line"] == (
+        f"{REGISTRY['entry_to_target'].advice} (entry distance from its mark 0.3 mm; the pass mark is "
+        "<= 0.173 mm: 0.127 mm to go)"
+    )
+    assert feedback["work_on"][1]["line"].endswith(
+        "(path length 90 mm; the pass mark is <= 60 mm: 30 mm to go)"
+    )
+    without = session_feedback(against_band(values, band), limit=4)  # no standard: the band alone
+    assert [item["kind"] for item in without["work_on"]][:2] == ["safety", "safety"]
 
 
 def test_the_cli_and_the_session_page_say_the_same(tmp_path, copy_demo, monkeypatch):
@@ -101,9 +159,9 @@ def test_the_cli_and_the_session_page_say_the_same(tmp_path, copy_demo, monkeypa
         sign_in(client, "supervisor", "correct horse battery")
         page = client.get(f"/sessions/{uid}").text
     for item in shown["work_on"]:
-        assert item["line"].replace("'", "&#39;") in page
+        assert str(escape(item["line"])) in page
     for item in shown["strengths"]:
-        assert item["line"].replace("'", "&#39;") in page
+        assert str(escape(item["line"])) in page
     catalog.close()
 
 
@@ -120,9 +178,10 @@ def test_strengths_are_the_metrics_better_than_the_experts_then_safety_level_wit
     # better than the band: quality before efficiency; then the never event level with the experts
     assert [i["metric"] for i in found] == ["entry_to_target", "path_length", "back_wall_catches"]
     assert strength_line(found[0]) == (
-        "Better than the experts' middle half: entry_to_target 0.05 mm (experts 0.1-0.2 mm, lower is better)"
+        "Better than the experts' middle half: entry distance from its mark 0.05 mm "
+        "(experts 0.1-0.2 mm, lower is better)"
     )
-    assert strength_line(found[2]).startswith("Level with the experts: back_wall_catches 0 (experts 0,")
+    assert strength_line(found[2]).startswith("Level with the experts: back wall catches 0 (experts 0,")
     assert not any(i["metric"] == "task_time" for i in strengths(rows, limit=10))  # level efficiency: no
     shown = session_feedback(rows)
     assert shown["work_on"] == [] and [i["metric"] for i in shown["strengths"]] == [

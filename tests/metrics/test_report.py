@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from markupsafe import escape
 
 from metrics import compute_session_metrics
 from metrics.registry import REGISTRY_VERSION
@@ -112,7 +113,7 @@ def test_the_report_lists_each_trainees_feedback_and_its_csvs_say_their_units(an
     code = analysis.trainees["participant_id"].iloc[0]
     assert "What each trainee should work on next" in text
     for item in participant_feedback(analysis, code)["work_on"]:
-        assert item["line"].replace("'", "&#39;") in text
+        assert str(escape(item["line"])) in text
     sessions = pd.read_csv(page.parent / "tables/session_metrics.csv")
     assert {"path_length [m]", "entry_angle_error_deg [deg]", "force_at_insertion [N]"} <= set(
         sessions.columns

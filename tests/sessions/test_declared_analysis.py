@@ -53,7 +53,12 @@ def _cli(home, *args):
 def test_the_demo_declares_its_analysis(demo):
     catalog, _ = demo
     settings, version, author = declared_settings(catalog, DEMO_STUDY)
-    assert version == 1 and author == "vascsim demo" and settings == DEMO_ANALYSIS
+    fixture = dataclasses.replace(
+        DEMO_ANALYSIS,
+        benchmark_metrics=DEMO_ANALYSIS.metrics,
+        benchmark_override=REDUCED_DEMO_SIZE["benchmark_override"],
+    )
+    assert version == 1 and author == "vascsim demo" and settings == fixture
 
 
 def test_the_demo_rates_every_session_with_two_synthetic_raters_and_reports_every_strand(demo):
@@ -287,3 +292,38 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
     assert all(
         row["rho_ci_low"] is None or row["rho_ci_low"] != row["rho_ci_low"] for row in concurrent.values()
     )
+
+
+def test_an_analysis_is_declared_on_a_study_before_its_data(tmp_path):
+    """Issue 44, seen 3: pre-registration. A new course with no session yet declares its analysis;
+    the shown defaults say what each means (not "every metric with values" for a task or a rating);
+    a command suggested in a message quotes the study's name so it pastes as shown."""
+    study = "Vascular Course Nov 2026"
+    _cli(tmp_path, "studies", "add", study)
+    env = {"VASCSIM_HOME": str(tmp_path), "VASCSIM_DATABASE_URL": f"sqlite:///{tmp_path / 'catalog.sqlite'}"}
+    defaults = _cli(tmp_path, "studies", "analysis", study).stdout
+    assert "no analysis declared" in defaults
+    lines = {line.split()[0]: line for line in defaults.splitlines()[1:]}
+    assert "the study's only task" in lines["task"] and "GRS or OSATS" in lines["rating_col"]
+    assert "primary metrics" in lines["metrics"] and "every metric" not in defaults
+    declared = _cli(tmp_path, "studies", "analysis", study, "--metrics", "task_time,entry_to_target")
+    assert f"study {study!r}: analysis version 1 declared" in declared.stdout
+    assert "task_time, entry_to_target" in declared.stdout
+    report = CliRunner().invoke(main, ["report", "--study", study], env=env)
+    assert report.exit_code == 1
+    assert "run `vascsim score --study 'Vascular Course Nov 2026'` first" in report.output
+
+
+def test_left_at_its_default_an_analysis_uses_the_tasks_primary_metrics(tmp_path, copy_demo):
+    """Not all 38: the analysed task's declared primary metrics, and the analysis says so."""
+    from sessions.tasks import task_spec
+
+    catalog = Catalog(copy_demo(tmp_path))
+    declare_analysis(
+        catalog, DEMO_STUDY, dataclasses.replace(DEMO_ANALYSIS, metrics=None), "supervisor", "the default"
+    )
+    analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    primaries = task_spec(DEMO_ANALYSIS.task).primary_metrics
+    assert analysis.validity.table["metric"].tolist() == list(primaries)
+    assert any(n.startswith(f"Metrics: the task's {len(primaries)} primary metrics") for n in analysis.notes)
+    catalog.close()
