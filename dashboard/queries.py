@@ -79,6 +79,10 @@ def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
     analysis = cached.analysis
     latest = _latest_scores(analysis)
     trainees = analysis.trainees.set_index("participant_id") if not analysis.trainees.empty else None
+    if analysis.benchmarks.empty:  # no standard: nobody is worse than a mark that does not exist
+        trainees = None
+        for scores in latest.values():
+            scores.update(latest_passed=None, passes=None)
     attention = []
     for row in participants:
         row.update(latest.get(row["code"], {}))
@@ -223,6 +227,7 @@ def session_detail(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
         "ended_at": row.ended_at,
         "error": facts.error,
         "participant": {"id": facts.participant_id, "code": row.participant, "group": facts.group},
+        "synthetic": facts.synthetic,
         "study": {"id": facts.study_id, "name": row.study},
         "files": [f.as_dict() for f in facts.files],
         "annotations": [a.as_dict() for a in facts.annotations],

@@ -138,8 +138,20 @@ def _against_standard(
         return "no standard", f"no standard for {task} in this study yet: {error}", [], None
     sessions = analysis.sessions
     found = sessions.index[sessions["session_id"] == uid]
-    if not len(found) or analysis.benchmarks.empty:
-        return "no standard", f"no standard for {task} in this study yet (no benchmarks)", [], None
+    if not len(found):
+        return (
+            "no standard",
+            f"no standard for {task} in this study yet (this session is not analysed)",
+            [],
+            None,
+        )
+    if analysis.benchmarks.empty:
+        counts = ", ".join(f"{n} {group}(s)" for group, n in analysis.validity.n_participants.items())
+        why = (
+            f"no standard for {task} in this study yet: no metric shows the experts clearly better "
+            f"({counts} so far)"
+        )
+        return "no standard", why, [], None
     index = found[0]
     by_metric = {r["metric"]: r for r in rows}
     benchmarks = []

@@ -180,6 +180,8 @@ def run_session(
 
             left = view is not None and view.mapping.handedness == "left"
             device = mapped_onto_task(device, spec, left_handed=left)
+        if natural is not None and plan.device == "scripted":  # a script's hand stops where it ends
+            duration = natural if duration is None else min(duration, natural)
         duration = duration if duration is not None else natural
         if duration is None:  # a live device: until done or stopped, within a bound the arena needs
             from sessions.running.scene import LIVE_TIME_FACTOR
@@ -192,6 +194,7 @@ def run_session(
         with catalog.session() as orm:
             orm.delete(catalog.recorded_session(orm, uid))
         raise
+    synthetic = synthetic or plan.device == "scripted"  # a script, not this person's hand
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
     options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
     simulated = task_simulation(plan.task, device, cache_dir(home), **options)

@@ -17,7 +17,12 @@ from sessions.cli.station import LIVE_DEVICES, view_options
 @click.command()
 @click.option("--study", required=True, help="Study the session belongs to.")
 @click.option("--participant", required=True, help="Participant code.")
-@click.option("--task", default="wall-stitch", show_default=True, help="Task / scenario.")
+@click.option(
+    "--task",
+    default=None,
+    help="Task to run (`vascsim tasks`) [default: the task of the study's declared analysis, else "
+    "interrupted-stitch].",
+)
 @click.option(
     "--device",
     default="scripted",
@@ -37,8 +42,9 @@ from sessions.cli.station import LIVE_DEVICES, view_options
     "--duration",
     type=click.FloatRange(0.1, 7200),
     default=None,
-    help="Seconds [default: a scripted pass's own length; a live device until the task is done, "
-    "Esc or Ctrl-C, at most twice the task's time budget].",
+    help="Seconds [default: a scripted pass's own length (a longer --duration still ends with the "
+    "script); a live device until the task is done, Esc or Ctrl-C, at most twice the task's time "
+    "budget].",
 )
 @click.option(
     "--realtime", is_flag=True, help="Real-time clock (a person at the device); default simulated time."
@@ -58,12 +64,23 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     crash, `vascsim recover` restores it. Ends with the verdict against the study's standard and the
     three things to work on first (--json: everything).
     """
-    from sessions.review import review_session
+    from sessions.review import experts_on_task, review_session
     from sessions.runner import SessionPlan, run_session
     from sessions.store import CatalogStore
     from sessions.synthetic import pass_parameters
 
     catalog, home = open_catalog()
+    with catalog.session() as orm:  # who and where first: a wrong code is the one line said
+        catalog.participant(orm, catalog.study(orm, study), participant)
+    task = task or default_task(catalog, study)
+    if not experts_on_task(catalog, study, task):  # said before the run, not discovered after it
+        click.echo(
+            f"note: no expert of study {study!r} has a scored session of {task} yet: this session is "
+            "recorded and scored, with no standard to judge it against",
+            err=True,
+        )
+    if device == "scripted":
+        click.echo("note: a scripted pass, not a person's hand: the session is marked synthetic", err=True)
     clock = "realtime" if realtime or device in LIVE_DEVICES else "simulated"
     plan = SessionPlan(study, participant, task, None, phase, device, clock)  # next trial, allocated
     parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
@@ -81,6 +98,18 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
         for line in review_lines(review, participant):
             click.echo(line)
     push_after_scoring(catalog, home, [uid])
+
+
+DEFAULT_TASK = "interrupted-stitch"
+"""The task a run practises when neither --task nor the study's declared analysis names one."""
+
+
+def default_task(catalog, study: str) -> str:
+    """The task of the study's declared analysis, else :data:`DEFAULT_TASK`."""
+    from sessions.analysis import declared_settings
+
+    settings, _, _ = declared_settings(catalog, study)
+    return settings.task or DEFAULT_TASK
 
 
 def review_lines(review, participant: str) -> list[str]:

@@ -5,7 +5,7 @@ Scoped lookups take the reader's :class:`sessions.store.scope.Scope` (the CLI re
 from __future__ import annotations
 
 import pandas as pd
-from sqlalchemy import case, func, select
+from sqlalchemy import case, func, or_, select
 from sqlalchemy.orm import Session as OrmSession
 
 from metrics.registry import REGISTRY, REGISTRY_VERSION
@@ -41,6 +41,16 @@ LISTED = (
 """The columns of a :class:`SessionRecord`, in its order."""
 
 
+SCRIPTED_DEVICE = "scripted"
+"""A session recorded with this device followed a script, not a person's hand: synthetic data."""
+
+
+def synthetic_session():
+    """A session is synthetic when its participant is, or when a script, not a hand, moved the needle
+    (a scripted run for a real participant code is still not evidence about that person)."""
+    return or_(Participant.synthetic, Session.device == SCRIPTED_DEVICE)
+
+
 def listed_sessions():
     """A query of :data:`LISTED` (add WHERE and ORDER BY)."""
     return sessions_with(*LISTED).join(Study, Participant.study_id == Study.id)
@@ -59,7 +69,7 @@ class Listings:
                 Study.description,
                 func.count(func.distinct(Participant.id)),
                 func.count(Session.id),
-                func.max(case((Participant.synthetic, 1), else_=0)),
+                func.max(case((synthetic_session(), 1), else_=0)),
             )
             .outerjoin(Participant, Participant.study_id == Study.id)
             .outerjoin(Session, Session.participant_id == Participant.id)
@@ -169,7 +179,7 @@ class Listings:
                     Participant.group_label,
                     Session.trial,
                     Session.phase,
-                    Participant.synthetic,
+                    synthetic_session(),
                     Task.name,
                     MetricResult.metric,
                     MetricResult.value,

@@ -11,7 +11,7 @@ from metrics.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog
 from sessions.models import AnalysisDeclaration, Annotation, MetricResult, Participant, Rating, Session, Task
 from sessions.status import SessionStatus
-from sessions.store.listing import listed_sessions, participant_records, sessions_with
+from sessions.store.listing import SCRIPTED_DEVICE, listed_sessions, participant_records, sessions_with
 from sessions.store.records import (
     AnnotationRecord,
     FileRecord,
@@ -113,7 +113,7 @@ class ScopedReads:
                 study_id=participant.study_id,
                 participant_id=participant.id,
                 group=participant.group_label,
-                synthetic=bool(participant.synthetic),
+                synthetic=bool(participant.synthetic) or row.device == SCRIPTED_DEVICE,
                 task_id=row.task_id,
                 clock=row.clock,
                 directory=row.directory,

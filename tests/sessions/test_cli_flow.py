@@ -176,3 +176,29 @@ def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
     listed = invoke("sessions", "list", "--study", "synthetic-demo").stdout  # a curriculum: the task shown
     assert "arteriotomy-closure" in listed and "interrupted-stitch" in listed and uid in listed
     assert max(len(line) for line in listed.splitlines()) <= 80 and "metrics current" in listed
+
+
+def test_a_scripted_run_ends_with_its_script_is_marked_synthetic_and_names_a_task_without_experts(home):
+    """Issue 44, seen 8: with --duration longer than the script the needle kept turning after the
+    pull-through and pierced again (2 stitches, extra_punctures 1); a scripted run for a real
+    participant code was stored "synthetic": false; a task the study has no expert for was run
+    silently. Now the script's end ends the session, the session is synthetic wherever shown, and
+    the missing standard is said before the run."""
+    from recorder import open_session
+
+    invoke("studies", "add", "course")
+    invoke("participants", "add", "P01", "--study", "course", "--level", "trainee")
+    args = ("run", "--study", "course", "--participant", "P01", "--task", "wall-stitch", "--json")
+    result = CliRunner().invoke(main, [*args, "--duration", "40"])
+    assert result.exit_code == 0, result.output
+    said = "note: no expert of study 'course' has a scored session of wall-stitch yet"
+    assert result.stderr.startswith(said)
+    assert "marked synthetic" in result.stderr
+    ran = json.loads(result.stdout)
+    assert ran["metrics"]["extra_punctures"] == 0.0
+    shown = json.loads(invoke("sessions", "show", ran["session"], "--json").stdout)
+    assert shown["synthetic"] is True and len(shown["stitches"]) == 1
+    samples = open_session(Path(shown["directory"])).samples_frame()
+    assert samples["time"].iloc[-1] < 20.0  # the script's own length, not the 40 s asked for
+    listed = json.loads(invoke("studies", "list", "--json").stdout)
+    assert next(s for s in listed if s["study"] == "course")["synthetic"] is True
