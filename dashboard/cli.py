@@ -6,7 +6,9 @@ dashboard -> sessions); the web stack is imported only when `serve` runs.
 
 from __future__ import annotations
 
+import errno
 import inspect
+import socket
 
 import click
 
@@ -68,11 +70,28 @@ def serve(host: str, port: int, secure_cookies: bool, setting_pairs: tuple[str, 
             chosen[name] = value  # an explicit --host/--port/--secure-cookies wins
     settings = DashboardSettings(home=home, database_url=catalog.url, **chosen)
     host, port = settings.host, settings.port
+    listening = _listen(host, port)  # before the banner: a busy port is one line, not a banner and a trace
     app = create_app(settings, catalog)
     if host not in ("127.0.0.1", "localhost", "::1"):
         click.echo(f"warning: binding {host}: the dashboard is reachable from other machines", err=True)
     click.echo(f"vascsim dashboard on http://{host}:{port}/ (data: {home}; Ctrl-C stops)")
-    uvicorn.run(app, host=host, port=port, log_level="warning", proxy_headers=False)
+    with listening:
+        uvicorn.run(app, fd=listening.fileno(), log_level="warning", proxy_headers=False)
+
+
+def _listen(host: str, port: int) -> socket.socket:
+    """A listening socket on ``host``:``port`` for the server, or a one-line SettingError saying why not."""
+    from dashboard.settings import SettingError
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    try:
+        return socket.create_server((host, port), family=family, reuse_port=False)
+    except OSError as error:
+        if error.errno == errno.EADDRINUSE:
+            raise SettingError(
+                f"port {port} on {host} is already in use (another vascsim serve?); choose another: --port"
+            ) from None
+        raise SettingError(f"cannot listen on {host}:{port}: {error.strerror or error}") from None
 
 
 serve.help = inspect.cleandoc(serve.help or "") + "\n\nSettings:\n\n" + _settings_help()

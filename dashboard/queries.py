@@ -92,7 +92,9 @@ def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
             attention.append({"participant_id": row["id"], "code": row["code"], "reasons": reasons})
     overview.update(
         benchmarks=benchmark_rows(analysis),
-        benchmark_heading=benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts),
+        benchmark_heading=benchmarks_heading(
+            analysis.benchmarks, analysis.settings.min_experts, analysis.standard_label
+        ),
         attention=attention,
         synthetic=analysis.synthetic,
     )

@@ -118,9 +118,13 @@ def proficiency_benchmarks(
     return pd.DataFrame(rows, columns=BENCHMARK_COLUMNS)
 
 
-def benchmarks_heading(benchmarks: pd.DataFrame, min_experts: int) -> str:
-    """What a page calls a study's benchmarks: provisional when fewer than ``min_experts`` experts set
-    them, and "no standard" when no metric could be benchmarked (the page says why)."""
+def benchmarks_heading(benchmarks: pd.DataFrame, min_experts: int, standard: str = "") -> str:
+    """What a page calls a study's benchmarks: the stored standard's label when they are one
+    (``standard``, e.g. "standard v2, set 2026-12-05 from 4 expert(s) (12 sessions)"); provisional
+    when fewer than ``min_experts`` experts set them; "no standard" when no metric could be
+    benchmarked (the page says why)."""
+    if standard:
+        return f"Proficiency benchmarks: {standard}"
     if benchmarks.empty:
         return "Proficiency benchmarks: no standard (no metric shows the experts clearly better)"
     experts = int(benchmarks["experts"].min())

@@ -333,15 +333,6 @@ NO_INTERVAL = "n/a"
 """What an AUC without an interval carries: the design is too small for one (the notes say why)."""
 
 
-def auc_with_interval(auc: float, low: float, high: float) -> str:
-    """An AUC with its interval, "0.83 (0.61-0.95)", or "1.00 n/a" where the design is too small."""
-    if math.isnan(auc):
-        return ""
-    if math.isnan(low):
-        return f"{auc:.2f} {NO_INTERVAL}"
-    return f"{auc:.2f} ({low:.2f}-{high:.2f})"
-
-
 def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
     """The headline table for a terminal: direction, medians, oriented AUC with its interval, Holm p, flag
     (read with :func:`compact_caption`)."""
@@ -353,15 +344,20 @@ def compact_summary(analysis: StudyAnalysis) -> pd.DataFrame:
         values = table[f"median_{group}"].tolist()
         return [_short(in_display_units(v, u) if v == v else v) for v, u in zip(values, units, strict=True)]
 
+    arrows = {"lower": " \u2193", "higher": " \u2191"}  # down: lower is better, up: higher is
     return pd.DataFrame(
         {
             "metric": table["metric"],
-            "unit": [display_unit(u) for u in units],
-            "better": table["better"],
+            "unit": [
+                (display_unit(u) + arrows.get(b, "")).strip()
+                for u, b in zip(units, table["better"], strict=True)
+            ],
             str(groups[0]): medians(str(groups[0])),
             str(groups[1]): medians(str(groups[1])),
-            "AUC (95% CI)": [
-                auc_with_interval(*v) for v in table[["auc", "auc_ci_low", "auc_ci_high"]].to_numpy()
+            "AUC": ["" if a != a else f"{a:.2f}" for a in table["auc"]],
+            "95% CI": [
+                ("" if a != a else NO_INTERVAL) if low != low else f"{low:.2f}-{high:.2f}"
+                for a, low, high in table[["auc", "auc_ci_low", "auc_ci_high"]].to_numpy()
             ],
             "Holm p": [_short(v) for v in table["p_holm"]],
             "flag": table["discriminates"],
@@ -377,9 +373,9 @@ def compact_caption(analysis: StudyAnalysis) -> str:
     skilled = analysis.settings.skilled_group
     groups = " and ".join(map(str, analysis.settings.groups))
     return (
-        f"{groups}: participant medians. AUC: probability that {'an' if skilled[:1] in 'aeiou' else 'a'} "
-        f"{skilled} participant does better (1 = perfect, 0.5 = none); {NO_INTERVAL}: too few participants "
-        "for an interval. flag: discriminates after Holm."
+        f"{groups}: participant medians; \u2193 lower is better, \u2191 higher is better. AUC: probability "
+        f"that {'an' if skilled[:1] in 'aeiou' else 'a'} {skilled} participant does better (1 = perfect, "
+        f"0.5 = none); {NO_INTERVAL}: too few participants for an interval. flag: discriminates after Holm."
     )
 
 
@@ -784,7 +780,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         "concurrent_notes": concurrent.notes if concurrent is not None else [],
         "roc": roc,
         "benchmark_table": _html_table(benchmarks_for_reading(analysis.benchmarks)),
-        "benchmark_heading": benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts),
+        "benchmark_heading": benchmarks_heading(
+            analysis.benchmarks, analysis.settings.min_experts, analysis.standard_label
+        ),
         "trainee_table": _html_table(trainee_summary(analysis)),
         "left_out_table": _html_table(pd.DataFrame(analysis.left_out)) if analysis.left_out else "",
         "feedback": feedback,
@@ -823,8 +821,9 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         lines += ["## Concurrent validity", "", *[f"- {n}" for n in concurrent.notes], ""]
         lines += [_markdown_table(concurrent_for_reading(concurrent.table)), ""]
     benchmarks = _markdown_table(benchmarks_for_reading(analysis.benchmarks))
+    heading = benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts, analysis.standard_label)
     lines += [
-        f"## {benchmarks_heading(analysis.benchmarks, analysis.settings.min_experts)}",
+        f"## {heading}",
         "",
         benchmarks,
         "",

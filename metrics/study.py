@@ -77,6 +77,9 @@ class StudyAnalysis:
     # participants of the study who are not in this analysis, and why (code, group, reason): filled by
     # the catalog's analysis (sessions.analysis), so every report accounts for every participant
     left_out: list[dict] = field(default_factory=list)
+    # the stored standard judged against ("standard v2, set 2026-12-05 from 4 experts (12 sessions)");
+    # "" when the marks were computed from this table (candidates)
+    standard_label: str = ""
 
 
 def practice_mask(table: pd.DataFrame) -> pd.Series:
@@ -152,10 +155,15 @@ def session_judge(settings: StudySettings) -> Callable[[pd.DataFrame, pd.DataFra
 
 
 def analyse_study(
-    table: pd.DataFrame, settings: StudySettings | None = None, ratings: pd.DataFrame | None = None
+    table: pd.DataFrame,
+    settings: StudySettings | None = None,
+    ratings: pd.DataFrame | None = None,
+    benchmarks: pd.DataFrame | None = None,
 ) -> StudyAnalysis:
     """Everything the study report shows, from one table of per-session metrics (and the study's
-    ratings, long: session_id, rater, instrument, item, score)."""
+    ratings, long: session_id, rater, instrument, item, score). ``benchmarks``: a standard's marks as
+    they were set (columns of :func:`metrics.proficiency.proficiency_benchmarks`), used as they are
+    instead of marks computed from this table."""
     settings = settings or StudySettings()
     if settings.progression_window is not None and settings.progression_window < settings.consecutive_passes:
         raise MetricsError(
@@ -181,15 +189,19 @@ def analyse_study(
         n_boot=settings.n_boot,
         seed=settings.seed,
     )
-    chosen, notes = benchmark_choice(validity, settings)
-    benchmarks = proficiency_benchmarks(
-        table[practice],
-        chosen,
-        settings.group_col,
-        settings.skilled_group,
-        settings.cluster_col,
-        settings.benchmark_rule,
-    )
+    if benchmarks is not None:  # a standard set earlier: its marks stand, whatever today's data say
+        chosen, notes = [m for m in benchmarks["metric"] if m in table.columns], []
+        benchmarks = benchmarks[benchmarks["metric"].isin(chosen)].reset_index(drop=True)
+    else:
+        chosen, notes = benchmark_choice(validity, settings)
+        benchmarks = proficiency_benchmarks(
+            table[practice],
+            chosen,
+            settings.group_col,
+            settings.skilled_group,
+            settings.cluster_col,
+            settings.benchmark_rule,
+        )
     experts = int(benchmarks["experts"].min()) if not benchmarks.empty else 0
     benchmarks["provisional"] = experts < settings.min_experts
     if not benchmarks.empty and experts < settings.min_experts:

@@ -231,10 +231,27 @@ def analysis_history(catalog: Catalog, study_name: str) -> list[dict]:
         ]
 
 
+MARK_SETTINGS = (
+    "group_col",
+    "groups",
+    "skilled_group",
+    "metrics",
+    "benchmark_rule",
+    "benchmark_metrics",
+    "benchmark_override",
+)
+"""Settings that change how pass marks are set: overriding one computes candidate marks for that run
+instead of judging against the stored standard."""
+
+
 def analyse_catalog_study(
-    catalog: Catalog, study_name: str, overrides: dict[str, Any] | None = None
+    catalog: Catalog, study_name: str, overrides: dict[str, Any] | None = None, standard: str = "current"
 ) -> tuple[StudyAnalysis, AnalysisSource]:
-    """The study's analysis from its declaration; ``overrides`` change it for this run only, and say so."""
+    """The study's analysis from its declaration; ``overrides`` change it for this run only, and say so.
+
+    ``standard``: "current" judges against the newest standard set for the analysed task
+    (:mod:`sessions.standards`), its marks as stored; where none is set, or an override changes how
+    marks are set, or with "candidate", marks are computed from today's data and called candidates."""
     table = study_table(catalog, study_name)
     settings, version, author = declared_settings(catalog, study_name, table)
     overridden: dict[str, tuple[Any, Any]] = {}
@@ -252,8 +269,23 @@ def analyse_catalog_study(
         settings = merged
     settings, primaries = with_primary_metrics(settings, table)
     from sessions.ratings import study_ratings
+    from sessions.standards import current_standard, set_command
 
-    analysis = analyse_study(table, settings, study_ratings(catalog, study_name))
+    tasks = sorted(map(str, pd.unique(table["task"])))
+    task = settings.task or (tasks[0] if len(tasks) == 1 else None)
+    stored = None
+    if standard == "current" and task is not None and not set(overridden) & set(MARK_SETTINGS):
+        stored = current_standard(catalog, study_name, task)
+    marks = stored.benchmarks() if stored is not None else None
+    analysis = analyse_study(table, settings, study_ratings(catalog, study_name), benchmarks=marks)
+    analysis.standard_label = stored.label() if stored is not None else ""
+    if stored is not None:
+        analysis.notes.append(f"Judged against the study's {stored.label()} on {task}, its marks as set.")
+    elif task is not None and standard == "current" and not analysis.benchmarks.empty:
+        analysis.notes.append(
+            f"No standard is set for {task}: these marks are candidates computed from today's sessions "
+            f"and move as sessions are added; set one with `{set_command(study_name, task)}`."
+        )
     if primaries:
         analysis.notes.insert(
             0,

@@ -59,6 +59,29 @@ class AnalysisDeclaration(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
+class Standard(Base):
+    """One version of a study's standard on one task: the pass marks as they were set, from which
+    experts and sessions, by whom and when (sessions.standards). Never edited: a new version is a
+    new row, and analyses judge against the newest instead of recomputing marks from today's data."""
+
+    __tablename__ = "standards"
+    __table_args__ = (UniqueConstraint("study_id", "task", "version", name="uq_standard_version"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    task: Mapped[str] = mapped_column(String(100))
+    version: Mapped[int] = mapped_column(Integer)
+    rule: Mapped[str] = mapped_column(String(32))
+    marks: Mapped[list] = mapped_column(JSON)  # per metric: metric, benchmark (SI), better, pass_if, experts
+    experts: Mapped[list] = mapped_column(JSON)  # participant codes
+    sessions: Mapped[list] = mapped_column(JSON)  # the expert sessions' uids
+    min_experts: Mapped[int] = mapped_column(Integer)
+    registry_version: Mapped[str] = mapped_column(String(16))
+    analysis_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    set_by: Mapped[str] = mapped_column(String(100))
+    set_at: Mapped[datetime] = mapped_column(DateTime)
+    note: Mapped[str] = mapped_column(Text, default="")
+
+
 class Participant(Base):
     """A pseudonymous participant: ``code`` is the only identifier stored."""
 

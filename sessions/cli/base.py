@@ -108,14 +108,18 @@ def open_store():
 def progress_bar(transient: bool = False):
     """A progress bar on stderr; a transient one vanishes when done and stays silent off a terminal."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.table import Column
 
     console = stderr_console()
     return Progress(
         TextColumn("{task.description}"),
         BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("{task.fields[last]}"),
+        MofNCompleteColumn(table_column=Column(no_wrap=True, min_width=5)),
+        TimeElapsedColumn(table_column=Column(no_wrap=True, min_width=7)),  # never "0:01:…"
+        # what is running now gives way first: cut at the end, on one line
+        TextColumn(
+            "{task.fields[last]}", table_column=Column(no_wrap=True, overflow="ellipsis", max_width=36)
+        ),
         transient=transient,
         disable=transient and not console.is_terminal,
         console=console,
@@ -139,7 +143,7 @@ def print_frame(frame, title: str, caption: str | None = None) -> None:
     # over the table and cropped where the table is narrower than it)
     console = Console()
     console.print(title, style="italic", overflow="fold")
-    table = Table(box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True)
+    table = Table(box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True, pad_edge=False)
     for k, column in enumerate(frame.columns):
         # names are never cut and no value ends in an ellipsis: a short value keeps its width, a long
         # one wraps at its spaces ("0.83" over "(0.61-0.95)")

@@ -90,7 +90,17 @@ def demo(small: bool, as_json: bool) -> None:
         f"Construct validity, {groups[0]} vs {groups[1]}, participant level (SYNTHETIC participants)",
         compact_caption(analysis),
     )
-    print_frame(trainees, "Trainees: proficiency (benchmarks from the experts)", proficiency_rule(analysis))
+    shown = trainees.rename(
+        columns={
+            "participant_id": "trainee",
+            "trials_to_proficiency": "proficient at trial",
+            "retention_passed": "retention passed",
+        }
+    )
+    if analysis.benchmarks.empty:  # no standard: nobody passed or failed a mark that does not exist
+        shown = shown[["trainee"]].assign(proficient="no standard")
+    heading = analysis.standard_label or "benchmarks from the experts"
+    print_frame(shown, f"Trainees: proficiency ({heading})", proficiency_rule(analysis))
     for note in validity.notes + analysis.notes:
         click.echo(click.wrap_text(f"note: {note}", 80, subsequent_indent="      "))
     click.echo(f"composite score: {composite_summary(validity.composite)}")

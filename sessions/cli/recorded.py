@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shlex
+from datetime import UTC
 from pathlib import Path
 
 import click
@@ -45,6 +46,7 @@ def sessions_list(study, task, status, as_json) -> None:
                 (r.uid, r.study, r.participant, r.task, r.trial, r.phase, r.device, r.status),
                 strict=True,
             ),
+            started=r.started_at.replace(tzinfo=UTC).isoformat(),  # the catalog keeps UTC
             metrics=versions[r.id],
         )
         for r in found
@@ -52,11 +54,21 @@ def sessions_list(study, task, status, as_json) -> None:
     if as_json:
         print_json(rows)
         return
-    frame = pd.DataFrame(rows, columns=[*columns, "metrics"])
+    frame = pd.DataFrame(rows, columns=[*columns, "started", "metrics"])
+    frame = frame.rename(columns={"participant": "who"})
+    days = {f"{r.started_at:%Y-%m-%d}" for r in found}
+    one_day = len(days) == 1  # then the day is said once and each row keeps its time
+    frame["started"] = [
+        f"{r.started_at:%H:%M}" if one_day else f"{r.started_at:%Y-%m-%d %H:%M}" for r in found
+    ]
+    frame = frame.rename(columns={"started": "time (UTC)" if one_day else "started (UTC)"})
     # a column with one value in every row is said once, in the caption, so the rest fit 80 columns
-    same = [c for c in ("study", "device", "metrics") if len(frame) and frame[c].nunique() == 1]
-    caption = "; ".join(f"{c} {frame[c].iloc[0]}" for c in same) if same else None
-    print_frame(frame.drop(columns=same), "Sessions", f"all sessions: {caption}" if caption else None)
+    same = [
+        c for c in ("study", "phase", "device", "status", "metrics") if len(frame) and frame[c].nunique() == 1
+    ]
+    said = [f"{c} {frame[c].iloc[0]}" for c in same] + ([f"on {days.pop()} (UTC)"] if one_day else [])
+    caption = _lines(["all sessions:", *[f"{item};" for item in said[:-1]], *said[-1:]]) if said else None
+    print_frame(frame.drop(columns=same), "Sessions", caption)
     stale = [r for r in rows if r["metrics"].startswith("stale")]
     if stale:
         studies = sorted({r["study"] for r in stale})
@@ -139,6 +151,18 @@ def sessions_show(uid: str, as_json: bool) -> None:
             click.echo(click.wrap_text(f"{key:12s} {value}", 80, subsequent_indent=" " * 13))
         else:
             click.echo(f"{key:12s} {value}")
+
+
+def _lines(items: list[str], width: int = 80) -> str:
+    """``items`` joined by spaces into lines of at most ``width`` characters, never breaking one."""
+    lines = [""]
+    for item in items:
+        joined = f"{lines[-1]} {item}".strip()
+        if len(joined) <= width or not lines[-1]:
+            lines[-1] = joined
+        else:
+            lines.append(item)
+    return "\n".join(lines)
 
 
 def final_task_line(final, report) -> str:

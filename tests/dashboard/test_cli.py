@@ -88,6 +88,15 @@ def test_serve_binds_localhost_and_answers(tmp_path):
             login = {"username": "nobody", "password": "a wrong password"}
             assert httpx.post(f"http://127.0.0.1:{port}/api/login", json=login).status_code == 401
             assert httpx.post(f"http://127.0.0.1:{port}/api/login", json=login).status_code == 429
+            # issue 44, seen 10: a second server on the busy port printed the banner, uvicorn's error and
+            # exited 3; now one line naming the port, exit 1, and the first server still answers
+            second = subprocess.run(arguments, env=env, capture_output=True, text=True, timeout=60)
+            assert second.returncode == 1 and second.stdout == ""
+            assert second.stderr == (
+                f"vascsim: error: port {port} on 127.0.0.1 is already in use (another vascsim serve?); "
+                "choose another: --port\n"
+            )
+            assert httpx.get(f"http://127.0.0.1:{port}/login").status_code == 200
         finally:
             server.terminate()
             server.wait(20)

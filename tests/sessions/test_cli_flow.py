@@ -26,6 +26,9 @@ def test_enrol_run_show_score_delete(home):
     assert ran["metrics"]["peak_stretch"] > 1.0 and ran["metrics"]["stress_concentration"] > 0.0
     listed = json.loads(invoke("sessions", "list", "--study", "course-1", "--json").stdout)
     assert [(r["session"], r["status"]) for r in listed] == [(uid, "complete")]
+    assert listed[0]["started"].endswith("+00:00")  # issue 44, seen 10: when, with its zone
+    table = CliRunner().invoke(main, ["sessions", "list"], env={"COLUMNS": "80"}).stdout
+    assert "(UTC)" in table and max(len(line) for line in table.splitlines()) <= 80
     shown = json.loads(invoke("sessions", "show", uid, "--json").stdout)
     assert {f["name"] for f in shown["files"]} >= {"samples.parquet", "events.parquet", "header.json"}
     assert shown["metrics"] == ran["metrics"]

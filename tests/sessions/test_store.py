@@ -124,7 +124,7 @@ def test_participants_are_created_listed_and_numbered_by_the_store(store):
         "course",
         3,
         2,
-        False,
+        True,  # its sessions are scripted passes: synthetic data, though its participants are not
     )
     assert store.studies_of_sessions([first, second]) == ["course"]
     assert store.scorable_sessions("course") == [first, second]
