@@ -325,8 +325,8 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
     for person in manifest.participants:
         fields = person.model_dump()
         what = f"the bundle's participant {person.code!r}"
-        fields["level"] = group_name(person.level, custom, f"level of {what}")
-        fields["group_label"] = group_name(person.group_label, custom, f"group of {what}")
+        fields["level"] = group_name(person.level, custom, f"level of {what}", info.name)
+        fields["group_label"] = group_name(person.group_label, custom, f"group of {what}", info.name)
         people[person.code] = Participant(study_id=study.id, **fields)
         orm.add(people[person.code])
     orm.flush()

@@ -213,8 +213,8 @@ class Catalog:
 
         if orm.scalar(select(Participant).where(Participant.study_id == study.id, Participant.code == code)):
             raise AlreadyExists(f"participant {code!r} already exists in study {study.name!r}")
-        level = group_name(level, study.custom_groups or (), "level")
-        group_label = group_name(group_label, study.custom_groups or ()) or level
+        level = group_name(level, study.custom_groups or (), "level", study.name)
+        group_label = group_name(group_label, study.custom_groups or (), "group", study.name) or level
         participant = Participant(
             study_id=study.id,
             code=code,

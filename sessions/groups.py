@@ -24,17 +24,18 @@ def known_groups(custom: Iterable[str] = ()) -> tuple[str, ...]:
     return STANDARD_GROUPS + tuple(g for g in custom if g not in STANDARD_GROUPS)
 
 
-def group_name(label: str, custom: Iterable[str] = (), what: str = "group") -> str:
+def group_name(label: str, custom: Iterable[str] = (), what: str = "group", study: str = "STUDY") -> str:
     """``label`` as stored: lower-case and one of :func:`known_groups` ("" stays "": no group given).
-    Anything else is a CatalogError naming the label and listing the groups."""
+    Anything else is a CatalogError naming the label and listing the groups (its remedy: declare
+    another group in ``study``)."""
     name = " ".join(str(label).split()).lower()
     if not name:
         return ""
     known = known_groups(custom)
     if name not in known:
         raise CatalogError(
-            f"unknown {what} {label!r}; the study's groups are {', '.join(known)} "
-            "(declare another with `vascsim studies groups STUDY --add NAME`)"
+            f"unknown {what} {label!r}; the study's groups are {', '.join(known)}",
+            remedy=("declare-group", study),
         )
     return name
 

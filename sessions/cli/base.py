@@ -39,10 +39,11 @@ REMEDIES = {
     "choose-task": "pass --task, one of {}",
     "choose-versus": "pass --vs SESSION or --vs-group GROUP",
     "choose-device": "pass --device {}",
+    "declare-group": "declare another with `vascsim studies groups {} --add NAME`",
 }
 """A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) as the command that applies it."""
 
-LISTS = ("choose-task",)
+LISTS = ("choose-task", "choose-device")
 """Remedies whose value is a list to choose from, not an argument to paste (the rest are quoted)."""
 
 

@@ -34,7 +34,9 @@ def _build_small_study() -> None:
     for code, level, skill in (("E1", "expert", "1.0"), ("T1", "trainee", "0.2")):
         assert invoke("participants", "add", code, "--study", "course", "--level", level).exit_code == 0
         for _ in range(1 if code == "E1" else 2):
-            result = invoke("run", "--study", "course", "--participant", code, "--skill", skill)
+            result = invoke(
+                "run", "--study", "course", "--participant", code, "--task", "wall-stitch", "--skill", skill
+            )
             assert result.exit_code == 0, result.output
 
 

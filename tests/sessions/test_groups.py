@@ -26,9 +26,9 @@ def test_a_group_typed_in_another_case_is_the_same_group_and_an_unknown_one_is_r
     assert added.exit_code == 0, added.output
     typo = _cli("participants", "add", "T6", "--study", "Course", "--level", "Traine")
     assert typo.exit_code == 1 and typo.output.count("\n") == 1
-    assert (
-        "unknown level 'Traine'; the study's groups are expert, intermediate, trainee, novice" in typo.output
-    )
+    listing = "the study's groups are expert, intermediate, trainee, novice"
+    remedy = "declare another with `vascsim studies groups Course --add NAME`"  # the CLI's words
+    assert f"unknown level 'Traine'; {listing}; {remedy}" in typo.output
     custom = _cli("participants", "add", "F1", "--study", "Course", "--group", "Fellow")
     assert custom.exit_code == 1 and "unknown group 'Fellow'" in custom.output
     declared = _cli("studies", "groups", "Course", "--add", "Fellow")
