@@ -53,7 +53,7 @@ def change_sessions(catalog: Catalog, changes: list[str]) -> int:
     return len(sessions)
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(changes=st.lists(CHANGES, min_size=4, max_size=16))
 def test_exports_of_a_study_with_missing_failed_and_unscored_sessions(copy_demo, changes):
     from metrics.report import write_report
