@@ -100,6 +100,22 @@ def test_supervisor_sees_accounts_and_live_view_but_cannot_administer(seeded, cl
     accounts = {p["code"]: p["account"] for p in overview["participants"]}
     assert accounts[seeded.other_code] == "trainee2"
     assert client.get("/api/live").status_code == 200
+    # issue 44, seen 10: the live page's times carry their zone
+    from sqlalchemy import select, update
+
+    from sessions.models import Session
+
+    uid = seeded.other_sessions[0]
+    with seeded.catalog.session() as orm:
+        status = orm.scalar(select(Session.status).where(Session.uid == uid))
+        orm.execute(update(Session).where(Session.uid == uid).values(status="running"))
+    try:
+        page = client.get("/live").text
+        line = next(part for part in page.split("<li>") if uid in part)
+        assert " UTC)" in line and "since 20" in line
+    finally:
+        with seeded.catalog.session() as orm:
+            orm.execute(update(Session).where(Session.uid == uid).values(status=status))
     assert client.get("/api/users").status_code == 403
     answer = client.post(
         "/api/users",
