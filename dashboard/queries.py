@@ -298,6 +298,7 @@ def validity_report(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer
         "level": analysis.validity.level,
         "n_participants": {str(k): int(v) for k, v in analysis.validity.n_participants.items()},
         "n_sessions": {str(k): int(v) for k, v in analysis.validity.n_sessions.items()},
+        "left_out": list(analysis.left_out),  # every participant not counted above, and why
         "practice_sessions": len(practice),
         "table": records(table),
         "notes": list(analysis.validity.notes) + list(analysis.notes),

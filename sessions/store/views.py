@@ -9,7 +9,16 @@ from sqlalchemy import func, select
 
 from metrics.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog
-from sessions.models import AnalysisDeclaration, Annotation, MetricResult, Participant, Rating, Session, Task
+from sessions.models import (
+    AnalysisDeclaration,
+    Annotation,
+    MetricResult,
+    Participant,
+    Rating,
+    Session,
+    Standard,
+    Task,
+)
 from sessions.status import SessionStatus
 from sessions.store.listing import SCRIPTED_DEVICE, listed_sessions, participant_records, sessions_with
 from sessions.store.records import (
@@ -154,8 +163,8 @@ class ScopedReads:
             return [tuple(row) for row in orm.execute(query).all()]
 
     def study_fingerprint(self, study_id: int) -> tuple:
-        """What changes whenever a study's analysis could: its sessions, results, participants and
-        declaration, and the metric registry's version."""
+        """What changes whenever a study's analysis could: its sessions, results, participants,
+        declaration and standards, and the metric registry's version."""
         with self.catalog.session() as orm:
             sessions = orm.execute(
                 select(func.count(Session.id), func.max(Session.id), func.max(Session.ended_at))
@@ -171,4 +180,5 @@ class ScopedReads:
             declared = orm.scalar(
                 select(func.max(AnalysisDeclaration.id)).where(AnalysisDeclaration.study_id == study_id)
             )
-        return (*sessions, *results, *participants, declared, REGISTRY_VERSION)
+            standard = orm.scalar(select(func.max(Standard.id)).where(Standard.study_id == study_id))
+        return (*sessions, *results, *participants, declared, standard, REGISTRY_VERSION)

@@ -88,4 +88,18 @@ def test_every_report_accounts_for_every_participant(tmp_path, copy_demo):
     }
     page = write_report(analysis, tmp_path / "report").read_text()
     assert 'id="left-out"' in page and "no session yet" in page and "I1" in page
+    from fastapi.testclient import TestClient
+
+    from dashboard.app import create_app
+    from dashboard.settings import DashboardSettings
+    from sessions.accounts import create_user
+    from tests.dashboard.conftest import sign_in
+
+    with catalog.session() as orm:
+        create_user(orm, "supervisor", "correct horse battery", "supervisor")
+    settings = DashboardSettings(home=tmp_path / "home", database_url=catalog.url)
+    with TestClient(create_app(settings, catalog)) as client:
+        sign_in(client, "supervisor", "correct horse battery")
+        validity = client.get("/studies/1/validity").text
+    assert "not counted: " in validity and "T5 (no session yet)" in validity  # the page counts everyone
     catalog.close()

@@ -62,6 +62,30 @@ def test_marks_stand_still_when_sessions_change_until_a_new_version_is_set(tmp_p
     catalog.close()
 
 
+def test_the_study_page_names_the_standard_in_force_and_follows_a_new_version(tmp_path, copy_demo):
+    """The dashboard's cached analysis is keyed on the standards too: a version set on the command
+    line is the one the page names at the next request."""
+    from fastapi.testclient import TestClient
+
+    from dashboard.app import create_app
+    from dashboard.settings import DashboardSettings
+    from sessions.accounts import create_user
+    from tests.dashboard.conftest import sign_in
+
+    home = tmp_path / "home"
+    url = copy_demo(home)
+    catalog = Catalog(url)
+    with catalog.session() as orm:
+        create_user(orm, "supervisor", "correct horse battery", "supervisor")
+    app = create_app(DashboardSettings(home=home, database_url=url), catalog)
+    with TestClient(app) as client:
+        sign_in(client, "supervisor", "correct horse battery")
+        assert "Proficiency benchmarks: standard v1, set " in client.get("/studies/1").text
+        assert _cli(home, url, "standards", "set", "--study", DEMO_STUDY, "--task", TASK).exit_code == 0
+        assert "Proficiency benchmarks: standard v2, set " in client.get("/studies/1").text
+    catalog.close()
+
+
 def test_no_standard_can_be_set_where_no_metric_qualifies(tmp_path, copy_demo):
     """Declared without the fixture's override reason, two experts and three trainees give no AUC
     interval: setting a standard is refused in one line that says why, and nothing is stored."""
