@@ -28,6 +28,7 @@ from metrics.report import (
 from metrics.study import practice_mask
 from metrics.units import display_unit, in_display_units
 from recorder.layout import SAMPLES_JOURNAL
+from sessions.analysis import analysed_task
 from sessions.review import against_band, expert_band, session_stitches
 from sessions.status import SCORABLE
 from sessions.store import CatalogStore, ParticipantRecord, SessionRecord
@@ -209,8 +210,7 @@ def _task_benchmarks(analyses: AnalysisCache, study_id: int, task: str) -> pd.Da
         analysis = analyses.get(study_id).analysis
     except VascsimError:  # nothing analysable yet
         return None
-    tasks = set(map(str, analysis.sessions["task"])) if "task" in analysis.sessions.columns else set()
-    return analysis.benchmarks if tasks == {task} else None
+    return analysis.benchmarks if analysed_task(analysis.settings, analysis.sessions) == task else None
 
 
 def session_detail(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer, uid: str) -> dict:

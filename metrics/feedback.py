@@ -116,9 +116,9 @@ def benchmark_gaps(values: Mapping[str, float | None], benchmarks: pd.DataFrame 
     items = []
     for bench in benchmarks.itertuples():
         value = values.get(bench.metric)
-        if value is None or bench.metric not in REGISTRY or not math.isfinite(bench.benchmark):
+        if value is None or not math.isfinite(value) or not math.isfinite(bench.benchmark):
             continue
-        if not math.isfinite(value):
+        if bench.metric not in REGISTRY:
             continue
         gap = value - bench.benchmark if bench.better == "lower" else bench.benchmark - value
         if gap <= 0:

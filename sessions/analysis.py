@@ -271,8 +271,7 @@ def analyse_catalog_study(
     from sessions.ratings import study_ratings
     from sessions.standards import current_standard, set_command
 
-    tasks = sorted(map(str, pd.unique(table["task"])))
-    task = settings.task or (tasks[0] if len(tasks) == 1 else None)
+    task = analysed_task(settings, table)
     stored = None
     if standard == "current" and task is not None and not set(overridden) & set(MARK_SETTINGS):
         stored = current_standard(catalog, study_name, task)
@@ -335,17 +334,23 @@ def analyse_catalog_study(
     return analysis, AnalysisSource(version, author, overridden)
 
 
+def analysed_task(settings: StudySettings, table: pd.DataFrame) -> str | None:
+    """The task an analysis of ``table`` is of: the declared one, else the table's only task; None
+    when the table holds several and none is chosen (or has no task column)."""
+    if settings.task is not None:
+        return settings.task
+    tasks = pd.unique(table["task"]) if "task" in table.columns else []
+    return str(tasks[0]) if len(tasks) == 1 else None
+
+
 def with_primary_metrics(settings: StudySettings, table: pd.DataFrame) -> tuple[StudySettings, bool]:
     """``settings`` with its metrics, when it declares none, set to the analysed task's primary metrics
     that the table has (:attr:`sessions.tasks.TaskSpec.primary_metrics`); and whether that was done."""
     from sessions.tasks import task_spec
 
-    if settings.metrics is not None or "task" not in table.columns:
-        return settings, False
-    tasks = sorted(map(str, pd.unique(table["task"])))
-    task = settings.task if settings.task is not None else (tasks[0] if len(tasks) == 1 else None)
-    if task is None:
-        return settings, False  # several tasks and none chosen: the analysis says to choose one
+    task = analysed_task(settings, table)
+    if settings.metrics is not None or "task" not in table.columns or task is None:
+        return settings, False  # declared, or several tasks and none chosen (the analysis says so)
     try:
         primaries = task_spec(task).primary_metrics
     except VascsimError:  # a user's task since removed: every metric, as before
@@ -362,8 +367,7 @@ def participants_left_out(catalog: Catalog, study_name: str, analysis: StudyAnal
 
     settings = analysis.settings
     analysed = set(map(str, analysis.sessions[settings.cluster_col]))
-    tasks = sorted(map(str, pd.unique(analysis.sessions["task"]))) if "task" in analysis.sessions else []
-    task = settings.task or (tasks[0] if len(tasks) == 1 else "the analysed task")
+    task = analysed_task(settings, analysis.sessions) or "the analysed task"
     out = []
     for person in CatalogStore(catalog).participants(study_name):
         if person.code in analysed:

@@ -104,16 +104,17 @@ class SessionReview:
         return dataclasses.asdict(self)
 
 
-def review_session(catalog: Catalog, uid: str) -> SessionReview:
+def review_session(catalog: Catalog, uid: str, rows: list[dict] | None = None) -> SessionReview:
     """The session against its study's standard on its task (the study's declared analysis, with this
     session's task) and against the experts' band: one function, so the station's feedback screen and
-    ``vascsim run`` say the same thing (what to work on is the same function as ``sessions show``'s)."""
+    ``vascsim run`` say the same thing (what to work on is the same function as ``sessions show``'s).
+    ``rows``: the session against the experts' band when the caller has read it already."""
     from metrics.feedback import session_feedback
 
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
         study, task, trial = row.participant.study.name, row.task.name, row.trial
-    rows = session_against_experts(catalog, uid)
+    rows = session_against_experts(catalog, uid) if rows is None else rows
     verdict, standard, benchmarks, marks = _against_standard(catalog, study, task, uid, rows)
     feedback = session_feedback(rows, benchmarks=marks)
     return SessionReview(

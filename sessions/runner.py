@@ -31,7 +31,7 @@ from sessions.models import (
     StreamFile,
 )
 from sessions.running.live import LiveView
-from sessions.status import SCORABLE, SessionStatus
+from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
 from sessions.store import CatalogStore
 from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import region_presets, session_tissue, task_preset, task_simulation, task_spec
@@ -180,7 +180,7 @@ def run_session(
 
             left = view is not None and view.mapping.handedness == "left"
             device = mapped_onto_task(device, spec, left_handed=left)
-        if natural is not None and plan.device == "scripted":  # a script's hand stops where it ends
+        if natural is not None and plan.device == SCRIPTED_DEVICE:  # a script's hand stops where it ends
             duration = natural if duration is None else min(duration, natural)
         duration = duration if duration is not None else natural
         if duration is None:  # a live device: until done or stopped, within a bound the arena needs
@@ -194,7 +194,7 @@ def run_session(
         with catalog.session() as orm:
             orm.delete(catalog.recorded_session(orm, uid))
         raise
-    synthetic = synthetic or plan.device == "scripted"  # a script, not this person's hand
+    synthetic = synthetic or plan.device == SCRIPTED_DEVICE  # a script, not this person's hand
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
     options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
     simulated = task_simulation(plan.task, device, cache_dir(home), **options)

@@ -20,3 +20,6 @@ class SessionStatus(StrEnum):
 SESSION_STATUSES = tuple(status.value for status in SessionStatus)
 SCORABLE = (SessionStatus.COMPLETE, SessionStatus.RECOVERED)
 """Statuses whose streams are finished: what is scored, analysed, replayed and compared."""
+
+SCRIPTED_DEVICE = "scripted"
+"""A session recorded with this device followed a script, not a person's hand: synthetic data."""

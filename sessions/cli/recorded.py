@@ -114,7 +114,7 @@ def sessions_show(uid: str, as_json: bool) -> None:
     data["versus_experts"] = {r["metric"]: r["versus_experts"] for r in rows}
     data["stitches"] = session_stitches(catalog, uid)
     if row.status in SCORABLE:  # judged as the station judges it: the marks it misses lead
-        review = review_session(catalog, uid)
+        review = review_session(catalog, uid, rows)  # the rows just read, not read again
         data.update(verdict=review.verdict, standard=review.standard)
         data.update(work_on=review.work_on, strengths=review.strengths)
     else:

@@ -66,6 +66,7 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     """
     from sessions.review import experts_on_task, review_session
     from sessions.runner import SessionPlan, run_session
+    from sessions.status import SCRIPTED_DEVICE
     from sessions.store import CatalogStore
     from sessions.synthetic import pass_parameters
 
@@ -79,7 +80,7 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
             "recorded and scored, with no standard to judge it against",
             err=True,
         )
-    if device == "scripted":
+    if device == SCRIPTED_DEVICE:
         click.echo("note: a scripted pass, not a person's hand: the session is marked synthetic", err=True)
     clock = "realtime" if realtime or device in LIVE_DEVICES else "simulated"
     plan = SessionPlan(study, participant, task, None, phase, device, clock)  # next trial, allocated

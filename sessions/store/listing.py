@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session as OrmSession
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from sessions.catalog import Catalog, WrongState
 from sessions.models import MetricResult, Participant, Rating, Session, Study, Task, User
-from sessions.status import SCORABLE
+from sessions.status import SCORABLE, SCRIPTED_DEVICE
 from sessions.store.records import ParticipantRecord, SessionRecord, StudyRecord, StudySummary
 from sessions.store.scope import EVERYTHING, Scope, visible
 
@@ -39,10 +39,6 @@ LISTED = (
     Session.ended_at,
 )
 """The columns of a :class:`SessionRecord`, in its order."""
-
-
-SCRIPTED_DEVICE = "scripted"
-"""A session recorded with this device followed a script, not a person's hand: synthetic data."""
 
 
 def synthetic_session():

@@ -19,8 +19,8 @@ from sessions.models import (
     Standard,
     Task,
 )
-from sessions.status import SessionStatus
-from sessions.store.listing import SCRIPTED_DEVICE, listed_sessions, participant_records, sessions_with
+from sessions.status import SCRIPTED_DEVICE, SessionStatus
+from sessions.store.listing import listed_sessions, participant_records, sessions_with
 from sessions.store.records import (
     AnnotationRecord,
     FileRecord,
