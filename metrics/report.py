@@ -252,8 +252,9 @@ def trainee_summary(analysis: StudyAnalysis) -> pd.DataFrame:
 
 FEEDBACK_BASIS = (
     f"Each trainee's last {RECENT_SESSIONS} practice sessions (the median of each metric) against the "
-    "experts' middle half on this task: the never events first, then safety, the quality of the stitch "
-    "and efficiency, each by how far outside the experts' band; the same lines as the participant page."
+    "experts' middle half on this task: the pass marks missed first, then the never events, safety, the "
+    "quality of the stitch and efficiency, each by how far outside the experts' band; the same lines as "
+    "the participant page."
 )
 
 
