@@ -4,7 +4,10 @@ Blinded rating (``/studies/{id}/rate``): the rater sees a queue of the study's s
 opaque names and, for each, the replay and the task only: no participant, group, trial, date or
 session id (the session id names the participant). A blinded session is addressed by a token, an
 HMAC of its id under a key the server draws at start-up, so the id cannot be read from the
-address, the video's address or the page. Open rating (``/sessions/{uid}/rate``) shows who it is.
+address, the video's address or the page. The video is the blind render
+(:mod:`metrics.replay.blind`: the session alone, without names, ghost, judging colours or readouts),
+never the replay a supervisor reviews; without one, the page offers to render it. Open rating
+(``/sessions/{uid}/rate``) shows who it is.
 Every rating goes through :func:`sessions.ratings.add_rating` with the signed-in user as the rater.
 """
 
@@ -21,10 +24,11 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from dashboard.auth import Viewer, require
 from dashboard.errors import DashboardError, not_found, said, status_of
 from dashboard.pages import render
-from dashboard.signals import replay_video
+from dashboard.signals import inside, replay_video
 from metrics.instruments import INSTRUMENTS, instrument
 from metrics.streams import MetricsError
 from sessions.ratings import add_rating, session_ratings
+from sessions.replaying import blind_replay_path
 from sessions.store import STAFF
 from sim.errors import VascsimError
 
@@ -79,10 +83,16 @@ class _Target:
     who: dict | None = None  # participant, group and trial (open rating only)
 
 
+def _blind_video(request: Request, uid: str):
+    """The session's blind render, or None while there is none."""
+    home = request.app.state.settings.home
+    path = blind_replay_path(home, uid)
+    return inside(home, path) if path.is_file() else None
+
+
 def _blinded(request: Request, viewer: Viewer, token: str) -> _Target:
     uid, study_id, task = _unblind(request, viewer, token)
-    has_video = replay_video(request.app.state.settings.home, uid) is not None
-    video = f"/rate/{token}/video" if has_video else None
+    video = f"/rate/{token}/video" if _blind_video(request, uid) is not None else None
     return _Target(uid, True, f"/rate/{token}", f"/studies/{study_id}/rate", task, video)
 
 
@@ -179,10 +189,28 @@ async def blinded_submit(
 @router.get("/rate/{token}/video")
 def blinded_video(request: Request, token: str, viewer: Staff) -> FileResponse:
     uid, _, _ = _unblind(request, viewer, token)
-    path = replay_video(request.app.state.settings.home, uid)
+    path = _blind_video(request, uid)
     if path is None:
-        raise not_found("video")
-    return FileResponse(path, media_type="video/mp4" if path.suffix == ".mp4" else "video/webm")
+        raise not_found("blind replay")
+    return FileResponse(path, media_type="video/mp4")
+
+
+@router.get("/rate/{token}/replay")
+def blind_render_status(request: Request, token: str, viewer: Staff) -> dict:
+    """Whether the session's blind render is ready, rendering or failed (the rating page polls it)."""
+    uid, _, _ = _unblind(request, viewer, token)
+    job = request.app.state.replays.status(uid, blind=True)
+    if job is not None and job.state != "done":
+        return job.as_dict()
+    ready = _blind_video(request, uid) is not None
+    return {"state": "ready" if ready else "none", "frames_done": 0, "frames": 0, "error": ""}
+
+
+@router.post("/rate/{token}/replay", status_code=202)
+def start_blind_render(request: Request, token: str, viewer: Staff) -> dict:
+    """Render the session's blind replay (one render at a time on a server)."""
+    uid, _, _ = _unblind(request, viewer, token)
+    return request.app.state.replays.start(uid, blind=True).as_dict()
 
 
 @router.get("/sessions/{uid}/rate", response_class=HTMLResponse)

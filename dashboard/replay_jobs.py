@@ -5,11 +5,14 @@ A supervisor who opens a session without a replay can have it rendered here inst
 study's expert sessions on the task) and the same file (``VASCSIM_HOME/replays/SESSION-vs.mp4``), so
 the page and the CLI show the same video. Rendering runs in a worker thread (VTK renders offscreen,
 PyAV encodes; both release the interpreter for most of the work); one job at a time, so a server
-never renders two videos at once.
+never renders two videos at once. A blind render for the rating page (``blind=True``) is a job of
+its own (:func:`sessions.replaying.render_blind_replay`); its failure is reported without its cause,
+which can name the session, and the cause goes to the server's log.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,11 +20,13 @@ from pathlib import Path
 from sessions.catalog import Catalog, WrongState
 
 REPLAY_SIZE = (640, 360)
+log = logging.getLogger("vascsim.dashboard")
 
 
 @dataclass
 class ReplayJob:
     uid: str
+    blind: bool = False
     state: str = "rendering"  # rendering, done, failed
     done: int = 0
     total: int = 0
@@ -37,30 +42,48 @@ class ReplayJobs:
 
     def __init__(self, catalog: Catalog, home: Path) -> None:
         self.catalog, self.home = catalog, home
-        self._jobs: dict[str, ReplayJob] = {}
+        self._jobs: dict[tuple[str, bool], ReplayJob] = {}
         self._lock = threading.Lock()
 
-    def start(self, uid: str) -> ReplayJob:
-        """Start rendering ``uid``'s replay against the experts (refused while another renders)."""
+    def start(self, uid: str, blind: bool = False) -> ReplayJob:
+        """Start rendering ``uid``'s replay against the experts, or its blind render (refused while
+        another renders)."""
         from sessions.replaying import replay_inputs
 
         with self._lock:
             busy = [j for j in self._jobs.values() if j.state == "rendering"]
             if busy:
-                if busy[0].uid == uid:
+                if (busy[0].uid, busy[0].blind) == (uid, blind):
                     return busy[0]
-                raise WrongState(
-                    f"the replay of session {busy[0].uid} is rendering; try again when it is done"
-                )
-            inputs = replay_inputs(self.catalog, self.home, uid, versus_group="experts")  # checked first
-            job = ReplayJob(uid)
-            job.thread = threading.Thread(target=self._render, args=(job, inputs), daemon=True)
-            self._jobs[uid] = job
+                which = "another replay" if busy[0].blind or blind else f"the replay of session {busy[0].uid}"
+                raise WrongState(f"{which} is rendering; try again when it is done")
+            job = ReplayJob(uid, blind)
+            if blind:
+                replay_inputs(self.catalog, self.home, uid)  # checked before the job starts
+                job.thread = threading.Thread(target=self._render_blind, args=(job,), daemon=True)
+            else:
+                inputs = replay_inputs(self.catalog, self.home, uid, versus_group="experts")
+                job.thread = threading.Thread(target=self._render, args=(job, inputs), daemon=True)
+            self._jobs[uid, blind] = job
             job.thread.start()
             return job
 
-    def status(self, uid: str) -> ReplayJob | None:
-        return self._jobs.get(uid)
+    def status(self, uid: str, blind: bool = False) -> ReplayJob | None:
+        return self._jobs.get((uid, blind))
+
+    def _render_blind(self, job: ReplayJob) -> None:
+        from metrics.replay.export import ReplaySettings
+        from sessions.replaying import render_blind_replay
+
+        def advance(done: int, total: int) -> None:
+            job.done, job.total = done, total
+
+        try:
+            render_blind_replay(self.catalog, self.home, job.uid, ReplaySettings(size=REPLAY_SIZE), advance)
+            job.state = "done"
+        except Exception:  # the rater is told it failed, not why (the cause can name the session)
+            log.exception("blind render of session %s failed", job.uid)
+            job.state, job.error = "failed", "the blind render failed; the server's log says why"
 
     def _render(self, job: ReplayJob, inputs) -> None:
         from metrics.replay.export import ReplaySettings, export_replay

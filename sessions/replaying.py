@@ -92,6 +92,24 @@ def replay_inputs(
     return open_session(directory), tissue, [open_session(d) for d in expert_dirs]
 
 
+def blind_replay_path(home: Path, uid: str) -> Path:
+    """Where session ``uid``'s blind render lives (served to raters only under an opaque address)."""
+    return home / "replays" / "blind" / f"{uid}.mp4"
+
+
+def render_blind_replay(catalog: Catalog, home: Path, uid: str, settings=None, progress=None) -> Path:
+    """Render session ``uid`` for blinded rating (:mod:`metrics.replay.blind`: the session alone, no
+    identity, ghost, colours that judge, or readouts) to :func:`blind_replay_path` (the video writer
+    moves the file into place only once it is whole)."""
+    from dataclasses import replace
+
+    from metrics.replay.export import ReplaySettings, export_replay
+
+    settings = replace(settings or ReplaySettings(), blind=True, mode="ghost")
+    recorded, tissue, _ = replay_inputs(catalog, home, uid)
+    return export_replay(recorded, tissue, blind_replay_path(home, uid), [], settings, progress=progress).path
+
+
 def replay_against_experts(catalog: Catalog, home: Path, uid: str) -> Path:
     """Render session ``uid``'s replay against its study's experts on the same task (the most typical
     one ghosted in; the trainee alone when there is none) to ``home/replays/UID-vs.mp4``."""

@@ -289,7 +289,7 @@ function renderReplay() {
   if (!button) return;
   const bar = document.getElementById("render-progress");
   const said = document.getElementById("render-state");
-  const address = "/api/sessions/" + encodeURIComponent(pageData.uid) + "/replay";
+  const address = button.dataset.address || "/api/sessions/" + encodeURIComponent(pageData.uid) + "/replay";
   async function poll() {
     const answer = await (await fetch(address)).json();
     if (answer.state === "rendering") {
@@ -323,6 +323,7 @@ document.addEventListener("DOMContentLoaded", () => {
   const page = document.body.dataset.page;
   if (page === "participant") drawCurves();
   if (page === "session") { drawSession(); renderReplay(); }
+  if (page === "rate") renderReplay();
   if (page === "validity") drawValidity();
   if (page === "live") drawLive();
 });

@@ -12,7 +12,7 @@ from __future__ import annotations
 import collections
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TypeVar
 
@@ -20,6 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.alignment import PHASES, phase_starts
+from metrics.replay import blind
+from metrics.replay.blind import blind_keys
 from metrics.replay.hud import FrameLayout, HudLine, Key, draw_key, value_line
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
@@ -40,10 +42,13 @@ class ReplaySettings:
     mode: str = "ghost"
     anti_aliasing: bool = False
     zoom: float = 1.4
+    blind: bool = False  # the session alone, for a blinded rater (metrics.replay.blind)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise MetricsError(f"replay mode must be one of {', '.join(MODES)}; got {self.mode!r}")
+        if self.blind and self.mode != "ghost":
+            raise MetricsError("a blind replay shows the session alone; it cannot be side by side")
         if not 1 <= self.fps <= 120:
             raise MetricsError(f"frame rate must be 1-120 frames/s; got {self.fps}")
         width, height = self.size
@@ -210,6 +215,8 @@ def export_replay(
     from metrics.replay.video import VideoWriter, check_video_path
 
     settings = settings or ReplaySettings()
+    if settings.blind and experts:
+        raise MetricsError("a blind replay shows the session alone; give it no expert sessions")
     check_video_path(out)
     started = time.perf_counter()
     timings: dict[str, float] = {}
@@ -236,6 +243,8 @@ def export_replay(
     timings["re-simulation"] = time.perf_counter() - started
     split = settings.mode == "side-by-side"
     marks = BiteMarks.of(streams, tissue.mesh)
+    if marks is not None and settings.blind:  # where the bites went, not how far off their marks
+        marks = replace(marks, colours=blind.neutral_bites(len(marks.colours)))
     total = len(scene.track)
     # the expert's moment matching each frame, in one pass over the alignment
     expert_ks: list[int | None] = [None] * total
@@ -245,7 +254,10 @@ def export_replay(
     # every frame's readouts first: the strips are sized for the widest of them
     trainee = f"trainee {streams.participant_id or ''}  " if split else ""
     expert = f"expert {reference.medoid.participant_id or ''}  " if split else ""
-    readouts = [_titled(trainee, _hud_lines(scene, k, bands, marks)) for k in range(total)]
+    if settings.blind:
+        readouts = [blind.readout()] * total
+    else:
+        readouts = [_titled(trainee, _hud_lines(scene, k, bands, marks)) for k in range(total)]
     beside_readouts = (
         [_titled(expert, _hud_lines(expert_scene, expert_k, bands)) for expert_k in expert_ks]
         if split
@@ -258,6 +270,7 @@ def export_replay(
         ghost=expert_scene is not None and not split,
         marks=marks,
         readouts=readouts + beside_readouts,
+        blind=settings.blind,
     )
     ghost_path = expert_scene.track.tip if expert_scene is not None and not split else None
     insertion = insertion_frame_index(streams, scene.track.times) if stills is not None else None
@@ -267,6 +280,8 @@ def export_replay(
     def scene_frames(k: int):
         """Frame k's scene (and the expert's beside it): the tissue state solved for that frame."""
         expert_k = expert_ks[k]
+        if settings.blind:
+            return blind.blind_frame(scene.frame(k)), None
         if split:
             return scene.frame(k), expert_scene.frame(expert_k)
         ghost_needle = expert_scene.track.needle[expert_k] if expert_k is not None else None
@@ -313,6 +328,7 @@ class ReplayCanvas:
         ghost: bool,
         marks=None,
         readouts: list[tuple[str, list[HudLine]]] = (),
+        blind: bool = False,
     ) -> None:
         from sim.render import TissueRenderer, stress_colours
 
@@ -338,8 +354,9 @@ class ReplayCanvas:
         wound = wound_outline(streams, mesh)
         for renderer in self.renderers:
             renderer.show_outline(wound)
-        stress_kpa = tuple(v / 1e3 for v in self.renderers[0].stress_range)
-        keys = replay_keys(ghost=ghost, marks=marks is not None, wound=len(wound) > 0)
+        stress_kpa = None if blind else tuple(v / 1e3 for v in self.renderers[0].stress_range)
+        shown = {"marks": marks is not None, "wound": len(wound) > 0}
+        keys = blind_keys(**shown) if blind else replay_keys(ghost=ghost, **shown)
         layout = self.layout
         self.key = draw_key(layout.height, layout.panel, layout.scale, stress_kpa, stress_colours(), keys)
         self._camera_shared = False

@@ -185,12 +185,13 @@ def draw_key(
     height: int,
     width: int,
     scale: float,
-    stress_range_kpa: tuple[float, float],
+    stress_range_kpa: tuple[float, float] | None,
     colours,
     keys: list[Key],
 ) -> NDArray[np.uint8]:
     """The key beside the views: the wall's stress scale (``colours``: a matplotlib colour map over
-    ``stress_range_kpa``) and one line per :class:`Key`, wrapped to the panel's width."""
+    ``stress_range_kpa``; none when that is None) and one line per :class:`Key`, wrapped to the
+    panel's width."""
     import cv2
 
     panel = np.full((height, width, 3), 255, dtype=np.uint8)
@@ -198,6 +199,27 @@ def draw_key(
     size = 0.72 * TEXT * scale
     margin = int(12 * scale)
     y = int(34 * scale)
+    if stress_range_kpa is not None:
+        y = _draw_stress_scale(panel, y, height, scale, stress_range_kpa, colours)
+    glyph = int(36 * scale)
+    for key in keys:
+        _draw_glyph(panel, key, margin, y - int(7 * scale), glyph, scale)
+        for part in _wrap(key.text, width - 2 * margin - glyph - int(8 * scale), size, thick):
+            cv2.putText(
+                panel, part, (margin + glyph + int(8 * scale), y), _font(), size, INK, thick, cv2.LINE_AA
+            )
+            y += int(25 * scale)
+        y += int(7 * scale)
+    return panel
+
+
+def _draw_stress_scale(panel, y: int, height: int, scale: float, stress_range_kpa, colours) -> int:
+    """The stress colour bar with its ticks and heading from ``y`` down; where the key goes on."""
+    import cv2
+
+    thick = _thickness(scale)
+    size = 0.72 * TEXT * scale
+    margin = int(12 * scale)
     for text in ("wall stress", "von Mises, kPa"):
         cv2.putText(panel, text, (margin, y), _font(), size, INK, thick, cv2.LINE_AA)
         y += int(28 * scale)
@@ -215,17 +237,7 @@ def draw_key(
             panel, label, (margin + bar_width + int(10 * scale), tick_y + int(8 * scale)),
             _font(), size, INK, thick, cv2.LINE_AA,
         )  # fmt: skip
-    y = top + bar_height + int(44 * scale)
-    glyph = int(36 * scale)
-    for key in keys:
-        _draw_glyph(panel, key, margin, y - int(7 * scale), glyph, scale)
-        for part in _wrap(key.text, width - 2 * margin - glyph - int(8 * scale), size, thick):
-            cv2.putText(
-                panel, part, (margin + glyph + int(8 * scale), y), _font(), size, INK, thick, cv2.LINE_AA
-            )
-            y += int(25 * scale)
-        y += int(7 * scale)
-    return panel
+    return top + bar_height + int(44 * scale)
 
 
 def _draw_glyph(panel: NDArray[np.uint8], key: Key, x: int, y: int, length: int, scale: float) -> None:

@@ -45,9 +45,15 @@ from sessions.cli.base import (
     "--stills", type=click.Path(file_okay=False), default=None,
     help="Also write insertion.png, stress_insertion.exr (Pa) and signals.png/.svg to this folder.",
 )  # fmt: skip
+@click.option(
+    "--blind", is_flag=True,
+    help="The render for blinded rating: the session alone, the wall in one colour, bites in grey, no "
+    "names, expert, force arrow or readouts. Default file: VASCSIM_HOME/replays/blind/SESSION.mp4, "
+    "which the dashboard's blinded rating page plays.",
+)  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @user_errors
-def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json) -> None:
+def replay(session, versus, versus_group, mode, out, fps, size, stills, blind, as_json) -> None:
     """Render a session's replay video, optionally against an expert.
 
     The 3-D scene (deformed wall with its stress colour map, needle, reaction-force
@@ -58,15 +64,22 @@ def replay(session, versus, versus_group, mode, out, fps, size, stills, as_json)
     from metrics.replay.export import ReplaySettings, export_replay
     from metrics.replay.video import check_video_path
     from sessions.catalog import CatalogError
-    from sessions.replaying import replay_inputs
+    from sessions.replaying import blind_replay_path, replay_inputs
 
     if versus and versus_group:
         raise CatalogError("give either --vs SESSION or --vs-group GROUP, not both")
+    if blind and (versus or versus_group or mode != "ghost" or stills):
+        raise CatalogError(
+            "--blind shows the session alone: drop --vs, --vs-group, --mode side-by-side and --stills"
+        )
     catalog, home = open_catalog()
-    settings = ReplaySettings(fps=fps, size=size, mode=mode)
-    target = (
-        Path(out) if out else home / "replays" / f"{session}{'-vs' if versus or versus_group else ''}.mp4"
-    )
+    settings = ReplaySettings(fps=fps, size=size, mode=mode, blind=blind)
+    if out:
+        target = Path(out)
+    elif blind:
+        target = blind_replay_path(home, session)
+    else:
+        target = home / "replays" / f"{session}{'-vs' if versus or versus_group else ''}.mp4"
     check_video_path(target)
     recorded, tissue, experts = replay_inputs(catalog, home, session, versus, versus_group)
     with progress_bar() as progress:

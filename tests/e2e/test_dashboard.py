@@ -3,6 +3,8 @@ session review (video plays, the plot cursor follows, events seek), validity plo
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from sqlalchemy import select
 
@@ -14,6 +16,7 @@ from sessions.catalog import Catalog
 from sessions.demo import DEMO_STUDY
 from sessions.models import MetricResult, Participant, Session, Study
 from sessions.replaying import replay_inputs
+from tests.blind_video import blind_problems, decoded_frames
 from tests.dashboard.conftest import running_server
 from tests.e2e.browser import chromium
 
@@ -192,8 +195,22 @@ def test_a_blinded_rater_rates_a_session_without_learning_whose_it_is(demo_site)
         assert "0 of" in page.inner_text("main")
         page.locator("#queue a").first.click()
         page.wait_for_load_state("networkidle")
+        # seen 6: the supervisor's replay (names, ghost, readouts) is never played here; the blind
+        # render is made on request and read frame by frame
+        assert page.locator("video").count() == 0 and "/api/sessions/" not in page.content()
+        page.click("#render-button")
+        page.wait_for_selector("video#replay", timeout=120_000)
+        source = page.get_attribute("video#replay", "src")
+        assert re.fullmatch(r"/rate/[0-9a-f]{24}/video", source), source
+        video = page.request.get(base + source)
+        assert video.ok and "content-disposition" not in video.headers
+        data = video.body()
+        assert not any(word.encode() in data for word in (*hidden, DEMO_STUDY))
+        assert blind_problems(decoded_frames(data)) == []
         form_page = page.content()
-        assert not any(word in form_page for word in hidden), [w for w in hidden if w in form_page]
+        shown = (*hidden, "mN", "mm/s", "deg", "off mark")
+        assert not any(word in form_page for word in shown), [w for w in shown if w in form_page]
+        assert not re.search(r"trial \d", form_page, re.IGNORECASE)
         assert page.locator("#rating-form fieldset").count() == 6  # GRS: six items
         for fieldset in page.locator("#rating-form fieldset").all():
             fieldset.locator("input[value='4']").check()

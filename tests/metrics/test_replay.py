@@ -222,3 +222,29 @@ def test_stress_map_known_answer_and_exr_round_trip(tmp_path):
     path = write_stress_map(tmp_path / "map.exr", image)
     back = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)[:, :, 0]
     np.testing.assert_array_equal(back, image)
+
+
+@pytest.mark.slow
+def test_blind_render_shows_the_session_alone_in_every_frame(recorded, tmp_path):
+    """Issue 44, seen 6: every decoded frame of the blind render carries the blind strip and key and
+    no ghost green, stress orange or judging bite colour; the supervisor's replay of the same session
+    fails the same reading (so the reading can fail); the file names no participant."""
+    from tests.blind_video import blind_problems, decoded_frames
+
+    tissue, trainee, experts = recorded
+    settings = ReplaySettings(fps=15, size=(320, 180), blind=True)
+    blind = export_replay(trainee, tissue, tmp_path / "blind.mp4", [], settings)
+    frames = decoded_frames(blind.path)
+    assert len(frames) == blind.frames > 10
+    assert blind_problems(frames, marks=False, wound=False) == []
+    assert b"T01" not in blind.path.read_bytes() and b"trainee" not in blind.path.read_bytes()
+    shown = export_replay(
+        trainee, tissue, tmp_path / "open.mp4", experts, ReplaySettings(fps=15, size=(320, 180))
+    )
+    problems = blind_problems(decoded_frames(shown.path), marks=False, wound=False)
+    assert any("strip differs" in p for p in problems) and any("key differs" in p for p in problems)
+    assert any("green pixels" in p for p in problems) and any("orange pixels" in p for p in problems)
+    with pytest.raises(MetricsError, match="session alone"):
+        export_replay(trainee, tissue, tmp_path / "x.mp4", experts, settings)
+    with pytest.raises(MetricsError, match="side by side"):
+        ReplaySettings(blind=True, mode="side-by-side")

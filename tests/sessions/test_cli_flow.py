@@ -139,7 +139,12 @@ def test_replay_against_the_expert_group(home, tmp_path):
         "replay", trainee, "--vs", "E1", "--size", "320x180", "-o", str(tmp_path / "e1.mp4"), "--json"
     )
     assert by_code.exit_code == 0 and json.loads(by_code.stdout)["experts"] == 1, by_code.output
+    # issue 44 seen 6: the blind render goes where the rating page looks for it
+    blind = invoke("replay", trainee, "--blind", "--size", "320x180", "--fps", "10", "--json")
+    assert blind.exit_code == 0, blind.output
+    assert json.loads(blind.stdout)["video"] == str(home / "replays" / "blind" / f"{trainee}.mp4")
     for args, message in (
+        (("replay", trainee, "--blind", "--vs-group", "experts"), "--blind shows the session alone"),
         (
             ("replay", trainee, "--vs", "NOBODY"),
             "no session or participant with a session on this task 'NOBODY'",
