@@ -112,11 +112,46 @@ def home(request: Request) -> Response:
 
 
 @router.get("/studies/{study_id}", response_class=HTMLResponse)
-def study_page(request: Request, study_id: Id, viewer: Staff) -> Response:
+def study_page(request: Request, study_id: Id, viewer: Staff, standard: int | None = None) -> Response:
     state = request.app.state
     overview = queries.study_overview(state.store, state.analyses, viewer, study_id)
     after = queries.ATTENTION_AFTER_TRIALS
-    return render(request, "study.html", viewer, overview, overview=overview, attention_after=after)
+    done = None if standard is None else f"Standard v{standard} set."
+    return render(
+        request, "study.html", viewer, overview, overview=overview, attention_after=after, done=done
+    )
+
+
+@router.post("/studies/{study_id}/standards", response_class=HTMLResponse)
+def set_study_standard(
+    request: Request,
+    study_id: Id,
+    viewer: Watcher,
+    task: Annotated[str, Form(max_length=100)],
+    note: Annotated[str, Form(max_length=500)] = "",
+) -> Response:
+    """A supervisor sets a new version of the study's standard on ``task`` (as `vascsim standards
+    set` does, signed with their name); refused, the study page again with why."""
+    from sessions.standards import set_standard
+
+    state = request.app.state
+    study = state.store.study(study_id, viewer, whole=True)
+    try:
+        record = set_standard(state.catalog, study.name, task, viewer.username, note.strip())
+    except VascsimError as error:
+        overview = queries.study_overview(state.store, state.analyses, viewer, study_id)
+        page = render(
+            request,
+            "study.html",
+            viewer,
+            overview,
+            overview=overview,
+            attention_after=queries.ATTENTION_AFTER_TRIALS,
+            message=said(error),
+        )
+        page.status_code = status_of(error)
+        return page
+    return RedirectResponse(f"/studies/{study_id}?standard={record.version}", status_code=303)
 
 
 @router.get("/studies/{study_id}/validity", response_class=HTMLResponse)

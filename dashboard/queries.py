@@ -91,7 +91,11 @@ def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
         row["attention"] = reasons
         if reasons:
             attention.append({"participant_id": row["id"], "code": row["code"], "reasons": reasons})
+    task = analysis.settings.task or (
+        str(analysis.sessions["task"].iloc[0]) if len(analysis.sessions) else None
+    )
     overview.update(
+        task=task,
         benchmarks=benchmark_rows(analysis),
         benchmark_heading=benchmarks_heading(
             analysis.benchmarks, analysis.settings.min_experts, analysis.standard_label

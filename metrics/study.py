@@ -8,6 +8,7 @@ participant's sessions) and optionally ``phase`` (``"practice"`` or ``"retention
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -80,6 +81,9 @@ class StudyAnalysis:
     # the stored standard judged against ("standard v2, set 2026-12-05 from 4 experts (12 sessions)");
     # "" when the marks were computed from this table (candidates)
     standard_label: str = ""
+    # each standard version a session's verdict was given under: version -> (label, its marks); the
+    # proficiency table's ``standard_version`` says which (sessions.verdicts); empty for candidates
+    judged_under: dict[int, tuple[str, pd.DataFrame]] = field(default_factory=dict)
 
 
 def practice_mask(table: pd.DataFrame) -> pd.Series:
@@ -274,6 +278,19 @@ def analyse_study(
         reliability,
         standards,
     )
+
+
+def with_verdicts(analysis: StudyAnalysis, proficiency: pd.DataFrame) -> StudyAnalysis:
+    """``analysis`` with its per-session judgements replaced by ``proficiency`` (the same rows: the
+    verdicts each session keeps, :mod:`sessions.verdicts`), and the trainees' passes, proficiency,
+    retention and CUSUM derived again from them."""
+    if not proficiency["session_id"].equals(analysis.proficiency["session_id"]):
+        raise MetricsError("verdicts must be given for the analysis' sessions, in its order")
+    table = analysis.sessions
+    trainees, curves = _per_trainee(
+        table, practice_mask(table), proficiency, analysis.benchmarks, analysis.settings
+    )
+    return dataclasses.replace(analysis, proficiency=proficiency, trainees=trainees, learning_curves=curves)
 
 
 def _per_trainee(table, practice, proficiency, benchmarks, settings):

@@ -280,6 +280,9 @@ def analyse_catalog_study(
     analysis.standard_label = stored.label() if stored is not None else ""
     if stored is not None:
         analysis.notes.append(f"Judged against the study's {stored.label()} on {task}, its marks as set.")
+        from sessions.verdicts import kept_verdicts
+
+        analysis = kept_verdicts(catalog, study_name, task, analysis)
     elif task is not None and standard == "current" and not analysis.benchmarks.empty:
         analysis.notes.append(
             f"No standard is set for {task}: these marks are candidates computed from today's sessions "

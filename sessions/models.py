@@ -82,6 +82,32 @@ class Standard(Base):
     note: Mapped[str] = mapped_column(Text, default="")
 
 
+class Verdict(Base):
+    """A session's verdict under one version of its study's standard, kept as it was given: setting a
+    newer version does not change it; only an explicit re-judging (a :class:`Rejudgement`) does."""
+
+    __tablename__ = "verdicts"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id", ondelete="CASCADE"), unique=True)
+    standard_id: Mapped[int] = mapped_column(ForeignKey("standards.id", ondelete="CASCADE"), index=True)
+    passed: Mapped[bool] = mapped_column(Boolean)
+    judged_at: Mapped[datetime] = mapped_column(DateTime)
+    how: Mapped[str] = mapped_column(String(300))  # e.g. "recorded under v2", "re-judged under v3 by ..."
+
+
+class Rejudgement(Base):
+    """The log of re-judging a task's sessions under a newer standard: who, when, why, how many."""
+
+    __tablename__ = "rejudgements"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    standard_id: Mapped[int] = mapped_column(ForeignKey("standards.id", ondelete="CASCADE"), index=True)
+    judged_by: Mapped[str] = mapped_column(String(100))
+    judged_at: Mapped[datetime] = mapped_column(DateTime)
+    reason: Mapped[str] = mapped_column(Text)
+    sessions: Mapped[int] = mapped_column(Integer)
+    changed: Mapped[int] = mapped_column(Integer)  # verdicts that flipped
+
+
 class Participant(Base):
     """A pseudonymous participant: ``code`` is the only identifier stored."""
 

@@ -155,8 +155,11 @@ def _against_standard(
         return "no standard", why, [], None
     index = found[0]
     by_metric = {r["metric"]: r for r in rows}
+    marks, label = analysis.benchmarks, ""
+    if "standard_version" in analysis.proficiency.columns:  # the version this session was judged under
+        label, marks = analysis.judged_under[int(analysis.proficiency.at[index, "standard_version"])]
     benchmarks = []
-    for bench in analysis.benchmarks.itertuples():
+    for bench in marks.itertuples():
         if bench.benchmark != bench.benchmark:  # NaN: no expert values
             continue
         column = f"pass_{bench.metric}"
@@ -178,13 +181,17 @@ def _against_standard(
             }
         )
     passed = bool(analysis.proficiency.at[index, "passed"])
-    experts = int(analysis.benchmarks["experts"].max())
-    standard = (
-        f"the study's benchmarks on {task}: {len(benchmarks)} metric(s), rule "
-        f"{analysis.settings.benchmark_rule}, from {experts} expert(s)"
-        + (", provisional" if experts < analysis.settings.min_experts else "")
-    )
-    return ("pass" if passed else "not yet"), standard, benchmarks, analysis.benchmarks
+    if label:
+        rule = analysis.settings.benchmark_rule
+        standard = f"the study's {label} on {task}: {len(benchmarks)} metric(s), rule {rule}"
+    else:
+        experts = int(marks["experts"].max())
+        standard = (
+            f"the study's candidate benchmarks on {task} (no standard set): {len(benchmarks)} metric(s), "
+            f"rule {analysis.settings.benchmark_rule}, from {experts} expert(s)"
+            + (", provisional" if experts < analysis.settings.min_experts else "")
+        )
+    return ("pass" if passed else "not yet"), standard, benchmarks, marks
 
 
 def experts_on_task(catalog: Catalog, study: str, task: str) -> bool:

@@ -23,9 +23,11 @@ def standards_set(study: str, task: str, author: str | None, note: str, as_json:
     """Set a new version of STUDY's standard on TASK from its declared analysis today.
 
     Only metrics on which the experts do better (AUC interval above 0.5, or a declared reason) get a
-    mark; with none, no standard is set and the message says why. From now on every verdict, page
-    and report on the task judges against these marks as stored; sessions added later do not move
-    them. Setting again makes a new version; the older ones stay listed (`vascsim standards show`).
+    mark; with none, no standard is set and the message says why. Sessions added later do not move
+    the marks. The first version judges the task's sessions so far; a later one judges the sessions
+    recorded from when it is set, and every session keeps the verdict it was given (re-judge the
+    history under the newest with `vascsim standards rejudge`). The older versions stay listed
+    (`vascsim standards show`).
     """
     import getpass
 
@@ -57,12 +59,46 @@ def standards_show(study: str, task: str | None, as_json: bool) -> None:
     if not history:
         click.echo(f"study {study!r}: no standard set" + (f" for {task}" if task else ""))
         return
+    from sessions.verdicts import rejudgements
+
     for record in history:
         click.echo(
             f"{record.task}: {record.label()}, by {record.set_by}"
             + (f": {record.note}" if record.note else "")
         )
         _print_marks(record)
+        for entry in rejudgements(catalog, study, record.task):
+            if entry["version"] == record.version:
+                when = entry["at"][:16].replace("T", " ")
+                click.echo(
+                    f"  re-judged {when} UTC by {entry['by']}: {entry['sessions']} sessions, "
+                    f"{entry['changed']} verdict(s) changed; why: {entry['reason']}"
+                )
+
+
+@standards.command("rejudge")
+@click.option("--study", required=True, help="The study whose history is re-judged.")
+@click.option("--task", required=True, help="The task whose sessions are re-judged.")
+@click.option("--reason", required=True, help="Why (kept in the standard's log, shown by `standards show`).")
+@click.option("--by", "author", default=None, help="Who re-judges (default: the login name).")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@user_errors
+def standards_rejudge(study: str, task: str, reason: str, author: str | None, as_json: bool) -> None:
+    """Judge every scored session of TASK in STUDY under the newest standard, replacing the verdicts
+    they kept from earlier versions. Logged: who, when, why, and how many verdicts changed."""
+    import getpass
+
+    from sessions.verdicts import rejudge
+
+    catalog, _ = open_catalog()
+    result = rejudge(catalog, study, task, author or getpass.getuser(), reason)
+    if as_json:
+        print_json({"version": result.version, "sessions": result.sessions, "changed": result.changed})
+        return
+    click.echo(
+        f"study {study!r}, {task}: {result.sessions} sessions judged under v{result.version}; "
+        f"{result.changed} verdict(s) changed"
+    )
 
 
 def _print_marks(record) -> None:

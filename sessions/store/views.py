@@ -15,6 +15,7 @@ from sessions.models import (
     MetricResult,
     Participant,
     Rating,
+    Rejudgement,
     Session,
     Standard,
     Task,
@@ -164,7 +165,7 @@ class ScopedReads:
 
     def study_fingerprint(self, study_id: int) -> tuple:
         """What changes whenever a study's analysis could: its sessions, results, participants,
-        declaration and standards, and the metric registry's version."""
+        declaration, standards and re-judgings, and the metric registry's version."""
         with self.catalog.session() as orm:
             sessions = orm.execute(
                 select(func.count(Session.id), func.max(Session.id), func.max(Session.ended_at))
@@ -181,4 +182,9 @@ class ScopedReads:
                 select(func.max(AnalysisDeclaration.id)).where(AnalysisDeclaration.study_id == study_id)
             )
             standard = orm.scalar(select(func.max(Standard.id)).where(Standard.study_id == study_id))
-        return (*sessions, *results, *participants, declared, standard, REGISTRY_VERSION)
+            rejudged = orm.scalar(
+                select(func.max(Rejudgement.id))
+                .join(Standard, Standard.id == Rejudgement.standard_id)
+                .where(Standard.study_id == study_id)
+            )
+        return (*sessions, *results, *participants, declared, standard, rejudged, REGISTRY_VERSION)

@@ -78,11 +78,29 @@ def test_the_study_page_names_the_standard_in_force_and_follows_a_new_version(tm
     with catalog.session() as orm:
         create_user(orm, "supervisor", "correct horse battery", "supervisor")
     app = create_app(DashboardSettings(home=home, database_url=url), catalog)
+    with catalog.session() as orm:
+        create_user(orm, "researcher", "correct horse battery", "researcher")
     with TestClient(app) as client:
-        sign_in(client, "supervisor", "correct horse battery")
+        csrf = sign_in(client, "supervisor", "correct horse battery")
         assert "Proficiency benchmarks: standard v1, set " in client.get("/studies/1").text
         assert _cli(home, url, "standards", "set", "--study", DEMO_STUDY, "--task", TASK).exit_code == 0
         assert "Proficiency benchmarks: standard v2, set " in client.get("/studies/1").text
+        # the supervisor's action on the page: a third version, signed with their name
+        form = {"csrf_token": csrf, "task": TASK, "note": "two more experts recorded"}
+        made = client.post("/studies/1/standards", data=form, follow_redirects=False)
+        assert made.status_code == 303 and made.headers["location"] == "/studies/1?standard=3"
+        page = client.get(made.headers["location"]).text
+        assert "Standard v3 set." in page and "Proficiency benchmarks: standard v3, set " in page
+        third = current_standard(catalog, DEMO_STUDY, TASK)
+        assert (third.set_by, third.note) == ("supervisor", "two more experts recorded")
+        refused = client.post("/studies/1/standards", data={**form, "task": "no-such-task"})
+        assert refused.status_code >= 400 and 'id="standard-error"' in refused.text
+        assert current_standard(catalog, DEMO_STUDY, TASK).version == 3
+    with TestClient(app) as other:
+        csrf = sign_in(other, "researcher", "correct horse battery")
+        assert 'id="set-standard"' not in other.get("/studies/1").text
+        denied = other.post("/studies/1/standards", data={"csrf_token": csrf, "task": TASK})
+        assert denied.status_code == 403 and current_standard(catalog, DEMO_STUDY, TASK).version == 3
     catalog.close()
 
 

@@ -1,0 +1,128 @@
+"""Verdicts that stay (issue 44, seen 1): a session keeps the verdict it was given and names the
+standard version that gave it; a newer version judges only what is recorded after it is set; judging
+history again is an explicit act, logged with who, why and how many verdicts changed."""
+
+from __future__ import annotations
+
+import json
+
+from click.testing import CliRunner
+from sqlalchemy import select, update
+
+from metrics.proficiency import assess_proficiency
+from sessions.analysis import analyse_catalog_study
+from sessions.catalog import Catalog
+from sessions.cli import main
+from sessions.demo import DEMO_STUDY, TASK
+from sessions.models import MetricResult, Participant, Session, Verdict
+from sessions.review import review_session
+from sessions.standards import current_standard
+
+
+def _cli(home, url, *args):
+    env = {"VASCSIM_HOME": str(home), "VASCSIM_DATABASE_URL": url}
+    return CliRunner().invoke(main, list(args), env=env)
+
+
+def _experts_rescored_worse(catalog: Catalog, metrics: list[str]) -> None:
+    """More expert data that would move the marks: E01's sessions rescored worse on every mark."""
+    with catalog.session() as orm:
+        ids = orm.scalars(select(Session.id).join(Participant).where(Participant.code == "E01")).all()
+        orm.execute(
+            update(MetricResult)
+            .where(MetricResult.session_id.in_(ids), MetricResult.metric.in_(metrics))
+            .values(value=MetricResult.value * 3 + 1)
+        )
+
+
+def test_verdicts_stay_under_their_version_until_history_is_rejudged(tmp_path, copy_demo):
+    home = tmp_path / "home"
+    url = copy_demo(home)
+    catalog = Catalog(url)
+    first = current_standard(catalog, DEMO_STUDY, TASK)
+    before, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert set(before.proficiency["standard_version"]) == {1}
+    with catalog.session() as orm:  # the demo's own analysis stored every verdict, naming v1
+        stored = orm.scalars(select(Verdict)).all()
+        assert len(stored) == len(before.sessions)
+        assert {v.how for v in stored} == {"recorded before v1 was set; judged under it"}
+    marked = [m["metric"] for m in first.marks]
+    _experts_rescored_worse(catalog, marked)
+    assert _cli(home, url, "standards", "set", "--study", DEMO_STUDY, "--task", TASK).exit_code == 0
+    second = current_standard(catalog, DEMO_STUDY, TASK)
+    after, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    # the marks moved, but no recorded session's verdict did: each still names v1
+    assert after.standard_label == second.label()
+    assert set(after.proficiency["standard_version"]) == {1}
+    assert after.proficiency["passed"].equals(before.proficiency["passed"])
+    assert after.trainees["passes"].tolist() == before.trainees["passes"].tolist()
+    rejudge = f"vascsim standards rejudge --study {DEMO_STUDY} --task {TASK} --reason ..."
+    assert any(rejudge in note for note in after.notes)
+    # a trainee's session's page says which version judged it
+    trainee = after.sessions.loc[after.sessions["label"] == "trainee", "session_id"].iloc[0]
+    assert review_session(catalog, trainee).standard.startswith(f"the study's {first.label()} on {TASK}")
+    # what re-judging would change, worked out independently from v2's marks as stored
+    would = assess_proficiency(after.sessions, second.benchmarks())["passed"]
+    expected = int((would != after.proficiency["passed"]).sum())
+    assert expected > 0  # the rescored experts made v2 more lenient: the test can see a change
+    assert _cli(home, url, "standards", "rejudge", "--study", DEMO_STUDY, "--task", TASK).exit_code == 2
+    blank = _cli(home, url, "standards", "rejudge", "--study", DEMO_STUDY, "--task", TASK, "--reason", " ")
+    assert blank.exit_code == 1 and "say why" in blank.output and blank.output.count("\n") == 1
+    done = _cli(
+        home, url, "standards", "rejudge", "--study", DEMO_STUDY, "--task", TASK,
+        "--reason", "course board: v2 applies to the whole cohort", "--by", "Dr A", "--json",
+    )  # fmt: skip
+    assert done.exit_code == 0, done.output
+    assert json.loads(done.stdout) == {"version": 2, "sessions": len(after.sessions), "changed": expected}
+    rejudged, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert set(rejudged.proficiency["standard_version"]) == {2}
+    assert rejudged.proficiency["passed"].tolist() == would.tolist()
+    assert review_session(catalog, trainee).standard.startswith(f"the study's {second.label()} on {TASK}")
+    shown = _cli(home, url, "standards", "show", "--study", DEMO_STUDY).output
+    assert f"by Dr A: {len(after.sessions)} sessions, {expected} verdict(s) changed" in shown
+    assert "why: course board: v2 applies to the whole cohort" in shown
+    catalog.close()
+
+
+def test_a_session_keeps_its_verdict_when_its_metrics_are_rescored(tmp_path, copy_demo):
+    """A verdict given is kept as given: a later change to the session's stored values (a rescore under
+    the same registry) does not turn a recorded pass into a fail (the pass is written as stored, the
+    values are moved to the wrong side of every mark)."""
+    home = tmp_path / "home"
+    url = copy_demo(home)
+    catalog = Catalog(url)
+    before, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    first = current_standard(catalog, DEMO_STUDY, TASK)
+    uid = before.sessions["session_id"].iloc[0]
+    with catalog.session() as orm:
+        sid = orm.scalar(select(Session.id).where(Session.uid == uid))
+        for mark in first.marks:  # every benchmarked value moved to the wrong side of its mark
+            worse = mark["benchmark"] * (10 if mark["better"] == "lower" else 0.1) + (
+                1 if mark["better"] == "lower" else -1
+            )
+            orm.execute(
+                update(MetricResult)
+                .where(MetricResult.session_id == sid, MetricResult.metric == mark["metric"])
+                .values(value=worse)
+            )
+        orm.execute(update(Verdict).where(Verdict.session_id == sid).values(passed=True))
+    after, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert bool(after.proficiency["passed"].iloc[0]) is True  # the stored verdict, not today's values
+    catalog.close()
+
+
+def test_the_version_in_force_is_the_newest_set_before_the_session():
+    from datetime import datetime
+
+    from sessions.standards import StandardRecord
+    from sessions.verdicts import version_in_force
+
+    def version(n: int, day: int) -> StandardRecord:
+        return StandardRecord("s", "t", n, "mean", [], [], [], 5, "1", None, "x", datetime(2026, 12, day), "")
+
+    versions = [version(1, 3), version(2, 5), version(3, 9)]
+    assert version_in_force(versions, datetime(2026, 12, 1)).version == 1  # history before v1: v1
+    assert version_in_force(versions, datetime(2026, 12, 3)).version == 1
+    assert version_in_force(versions, datetime(2026, 12, 6)).version == 2
+    assert version_in_force(versions, datetime(2026, 12, 9, 1)).version == 3
+    assert version_in_force(versions, None).version == 1
