@@ -89,14 +89,7 @@ def proficiency_benchmarks(
 ) -> pd.DataFrame:
     """One row per metric: ``metric``, ``benchmark``, ``better``, ``pass_if`` (e.g. "<= 3.04 deg"),
     ``rule``, ``experts`` (count)."""
-    experts = table[table[group_col] == expert_group]
-    if experts.empty:
-        raise MetricsError(f"no sessions with {group_col} == {expert_group!r} to set benchmarks from")
-    per_expert = experts.groupby(cluster_col)[list(metrics)].median()
-    first = table[table[group_col] != expert_group]
-    if "trial" in first.columns:  # the unskilled group of contrasting groups: each trainee's first session
-        first = first.sort_values("trial", kind="stable").groupby(cluster_col).head(1)
-    per_novice = first.groupby(cluster_col)[list(metrics)].median()
+    per_expert, per_novice = _per_participant(table, metrics, group_col, expert_group, cluster_col)
     rows = []
     for name in metrics:
         if name not in REGISTRY:
@@ -116,6 +109,102 @@ def proficiency_benchmarks(
             }
         )
     return pd.DataFrame(rows, columns=BENCHMARK_COLUMNS)
+
+
+def _per_participant(
+    table: pd.DataFrame, metrics: Sequence[str], group_col: str, expert_group: str, cluster_col: str
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Each expert's median per metric, and each other participant's first session (the unskilled
+    group of contrasting groups)."""
+    experts = table[table[group_col] == expert_group]
+    if experts.empty:
+        raise MetricsError(f"no sessions with {group_col} == {expert_group!r} to set benchmarks from")
+    per_expert = experts.groupby(cluster_col)[list(metrics)].median()
+    first = table[table[group_col] != expert_group]
+    if "trial" in first.columns:  # the unskilled group of contrasting groups: each trainee's first session
+        first = first.sort_values("trial", kind="stable").groupby(cluster_col).head(1)
+    return per_expert, first.groupby(cluster_col)[list(metrics)].median()
+
+
+def mark_intervals(
+    table: pd.DataFrame,
+    metrics: Sequence[str],
+    group_col: str = "label",
+    expert_group: str = "expert",
+    cluster_col: str = "participant_id",
+    rule: str = "mean",
+    n_boot: int = 2000,
+    seed: int = 0,
+    level: float = 0.95,
+) -> dict[str, tuple[float, float]]:
+    """Per metric, the ``level`` percentile bootstrap interval of its pass mark, resampling experts
+    (and, for contrasting groups, the unskilled participants) with replacement: how far the mark
+    could move with another draw of the same number of experts. NaN bounds with fewer than two."""
+    per_expert, per_novice = _per_participant(table, metrics, group_col, expert_group, cluster_col)
+    rng = np.random.default_rng(seed)
+    tail = (1 - level) / 2
+    found = {}
+    for name in metrics:
+        better = REGISTRY[name].better
+        values = per_expert[name].dropna().to_numpy()
+        novices = per_novice[name].dropna().to_numpy()
+        if values.size < 2:
+            found[name] = (math.nan, math.nan)
+            continue
+        draws = rng.integers(0, values.size, size=(n_boot, values.size))
+        others = rng.integers(0, max(novices.size, 1), size=(n_boot, novices.size))
+        marks = np.array(
+            [
+                rule_value(values[d], rule, better, novices[o] if novices.size else None)
+                for d, o in zip(draws, others, strict=True)
+            ]
+        )
+        marks = marks[np.isfinite(marks)]
+        low, high = np.quantile(marks, [tail, 1 - tail]) if marks.size else (math.nan, math.nan)
+        found[name] = (float(low), float(high))
+    return found
+
+
+def mark_drift(marks: Sequence[dict], today: pd.DataFrame) -> list[dict]:
+    """Marks as set (each with its ``interval`` when it was set) whose value computed from today's
+    experts (``today``: a :func:`proficiency_benchmarks` table) lies outside that interval: the
+    metric, the mark as set and as it would be now, the interval, the unit, and whether the move
+    would make passing harder ("stricter") or easier ("more lenient")."""
+    now = dict(zip(today["metric"], today["benchmark"], strict=True))
+    moved = []
+    for mark in marks:
+        low, high = mark.get("interval") or (math.nan, math.nan)
+        value = now.get(mark["metric"], math.nan)
+        if not (np.isfinite(low) and np.isfinite(high) and np.isfinite(value)) or low <= value <= high:
+            continue
+        lower = value < mark["benchmark"]
+        stricter = lower if mark["better"] == "lower" else not lower
+        moved.append(
+            {
+                "metric": mark["metric"],
+                "set": float(mark["benchmark"]),
+                "now": float(value),
+                "low": float(low),
+                "high": float(high),
+                "unit": REGISTRY[mark["metric"]].unit if mark["metric"] in REGISTRY else "",
+                "direction": "stricter" if stricter else "more lenient",
+            }
+        )
+    return moved
+
+
+def drift_line(entry: dict) -> str:
+    """One drift entry in words and display units: "peak force: today's experts would put the mark at
+    <= 0.52 N (set at <= 0.4 N, interval 0.36 N to 0.45 N): more lenient"."""
+    from metrics.registry import display_name
+
+    sign = "<=" if REGISTRY[entry["metric"]].better == "lower" else ">="
+    return (
+        f"{display_name(entry['metric'])}: today's experts would put the mark at {sign} "
+        f"{shown(entry['now'], entry['unit'])} (set at {sign} {shown(entry['set'], entry['unit'])}, "
+        f"interval {shown(entry['low'], entry['unit'])} to {shown(entry['high'], entry['unit'])}): "
+        f"{entry['direction']}"
+    )
 
 
 def benchmarks_heading(benchmarks: pd.DataFrame, min_experts: int, standard: str = "") -> str:

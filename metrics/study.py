@@ -84,6 +84,9 @@ class StudyAnalysis:
     # each standard version a session's verdict was given under: version -> (label, its marks); the
     # proficiency table's ``standard_version`` says which (sessions.verdicts); empty for candidates
     judged_under: dict[int, tuple[str, pd.DataFrame]] = field(default_factory=dict)
+    # the standard's marks that today's experts would move beyond their interval at setting
+    # (metrics.proficiency.mark_drift entries); empty when none would, or for candidates
+    standard_drift: list[dict] = field(default_factory=list)
 
 
 def practice_mask(table: pd.DataFrame) -> pd.Series:

@@ -280,9 +280,19 @@ def analyse_catalog_study(
     analysis.standard_label = stored.label() if stored is not None else ""
     if stored is not None:
         analysis.notes.append(f"Judged against the study's {stored.label()} on {task}, its marks as set.")
+        from metrics.proficiency import drift_line
+        from sessions.standards import standard_drift
         from sessions.verdicts import kept_verdicts
 
         analysis = kept_verdicts(catalog, study_name, task, analysis)
+        analysis.standard_drift = standard_drift(analysis, stored)
+        if analysis.standard_drift:
+            analysis.notes.append(
+                f"Newer expert data would move {len(analysis.standard_drift)} mark(s) of the "
+                f"{stored.label()} beyond the interval each had when set: "
+                + "; ".join(drift_line(e) for e in analysis.standard_drift)
+                + f". Consider setting a new version: `{set_command(study_name, task)}`."
+            )
     elif task is not None and standard == "current" and not analysis.benchmarks.empty:
         analysis.notes.append(
             f"No standard is set for {task}: these marks are candidates computed from today's sessions "

@@ -21,8 +21,9 @@ from datetime import datetime
 import pandas as pd
 from sqlalchemy import select
 
-from metrics.proficiency import BENCHMARK_COLUMNS
+from metrics.proficiency import BENCHMARK_COLUMNS, mark_drift, mark_intervals, proficiency_benchmarks
 from metrics.registry import REGISTRY_VERSION
+from metrics.study import StudyAnalysis, practice_mask
 from sessions.catalog import Catalog, WrongState, now
 from sessions.models import Standard, Study
 
@@ -137,8 +138,17 @@ def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note
         )
         raise WrongState(f"no standard can be set for {task} in study {study_name!r}: {why}")
     settings = analysis.settings
-    practice = analysis.sessions
+    practice = analysis.sessions[practice_mask(analysis.sessions)]
     skilled = practice[practice[settings.group_col] == settings.skilled_group]
+    intervals = mark_intervals(
+        practice,
+        list(benchmarks["metric"]),
+        settings.group_col,
+        settings.skilled_group,
+        settings.cluster_col,
+        settings.benchmark_rule,
+        seed=settings.seed,
+    )
     marks = [
         {
             "metric": row.metric,
@@ -146,6 +156,7 @@ def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note
             "better": row.better,
             "pass_if": row.pass_if,
             "experts": int(row.experts),
+            "interval": list(intervals[row.metric]),
         }
         for row in benchmarks.itertuples()
     ]
@@ -175,6 +186,20 @@ def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note
         orm.add(row)
         orm.flush()
         return _record(study, row)
+
+
+def standard_drift(analysis: StudyAnalysis, record: StandardRecord) -> list[dict]:
+    """The marks of ``record`` that the experts in ``analysis`` (today's data) would move beyond the
+    interval each had when it was set (:func:`metrics.proficiency.mark_drift`)."""
+    settings = analysis.settings
+    practice = analysis.sessions[practice_mask(analysis.sessions)]
+    metrics = [m["metric"] for m in record.marks if m.get("interval") and m["metric"] in practice.columns]
+    if not metrics or not (practice[settings.group_col] == settings.skilled_group).any():
+        return []
+    today = proficiency_benchmarks(
+        practice, metrics, settings.group_col, settings.skilled_group, settings.cluster_col, record.rule
+    )
+    return mark_drift([m for m in record.marks if m["metric"] in metrics], today)
 
 
 def set_command(study_name: str, task: str) -> str:

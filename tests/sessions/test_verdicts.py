@@ -35,6 +35,21 @@ def _experts_rescored_worse(catalog: Catalog, metrics: list[str]) -> None:
         )
 
 
+def _study_page(home, url, catalog: Catalog) -> str:
+    from fastapi.testclient import TestClient
+
+    from dashboard.app import create_app
+    from dashboard.settings import DashboardSettings
+    from sessions.accounts import create_user
+    from tests.dashboard.conftest import sign_in
+
+    with catalog.session() as orm:
+        create_user(orm, "supervisor", "correct horse battery", "supervisor")
+    with TestClient(create_app(DashboardSettings(home=home, database_url=url), catalog)) as client:
+        sign_in(client, "supervisor", "correct horse battery")
+        return client.get("/studies/1").text
+
+
 def test_verdicts_stay_under_their_version_until_history_is_rejudged(tmp_path, copy_demo):
     home = tmp_path / "home"
     url = copy_demo(home)
@@ -47,12 +62,22 @@ def test_verdicts_stay_under_their_version_until_history_is_rejudged(tmp_path, c
         assert len(stored) == len(before.sessions)
         assert {v.how for v in stored} == {"recorded before v1 was set; judged under it"}
     marked = [m["metric"] for m in first.marks]
+    assert all(len(m["interval"]) == 2 for m in first.marks)  # each mark's interval when set
     _experts_rescored_worse(catalog, marked)
+    # today's experts would move every mark beyond its interval: said, with the command, not applied
+    moved, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert [(e["metric"], e["direction"]) for e in moved.standard_drift] == [
+        (m, "more lenient") for m in marked
+    ]
+    assert moved.proficiency["passed"].equals(before.proficiency["passed"])
+    command = f"Consider setting a new version: `vascsim standards set --study {DEMO_STUDY} --task {TASK}`"
+    assert any(command in note for note in moved.notes)
+    assert 'id="standard-drift"' in _study_page(home, url, catalog)
     assert _cli(home, url, "standards", "set", "--study", DEMO_STUDY, "--task", TASK).exit_code == 0
     second = current_standard(catalog, DEMO_STUDY, TASK)
     after, _ = analyse_catalog_study(catalog, DEMO_STUDY)
     # the marks moved, but no recorded session's verdict did: each still names v1
-    assert after.standard_label == second.label()
+    assert after.standard_label == second.label() and after.standard_drift == []
     assert set(after.proficiency["standard_version"]) == {1}
     assert after.proficiency["passed"].equals(before.proficiency["passed"])
     assert after.trainees["passes"].tolist() == before.trainees["passes"].tolist()
