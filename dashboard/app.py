@@ -18,6 +18,7 @@ from dashboard.errors import install_error_handlers
 from dashboard.replay_jobs import ReplayJobs
 from dashboard.settings import DashboardSettings
 from dashboard.signals import SignalCache
+from metrics.registry import display_name
 from metrics.units import significant
 from recorder.ingest import IngestStore
 from recorder.ingest import create_app as create_ingest_app
@@ -77,6 +78,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
     app.state.login_limiter = LoginRateLimiter(settings.login_attempts, settings.login_window_s)
     app.state.templates = Jinja2Templates(directory=str(HERE / "templates"))
     app.state.templates.env.filters["sig"] = significant  # 3 significant figures, no exponent
+    app.state.templates.env.filters["metric_name"] = display_name  # "entry angle error", not the key
     app.state.blind_key = secrets.token_bytes(32)  # blinded rating's session names (dashboard.rating_pages)
     install_error_handlers(app)
 

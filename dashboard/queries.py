@@ -14,7 +14,7 @@ import pandas as pd
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
 from metrics.feedback import metric_groups, participant_feedback, session_feedback
-from metrics.proficiency import benchmarks_heading
+from metrics.proficiency import benchmarks_heading, drift_line
 from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.report import (
     composite_summary,
@@ -30,6 +30,7 @@ from metrics.units import display_unit, in_display_units
 from recorder.layout import SAMPLES_JOURNAL
 from sessions.analysis import analysed_task
 from sessions.review import against_band, expert_band, session_stitches
+from sessions.standards import set_command
 from sessions.status import SCORABLE
 from sessions.store import CatalogStore, ParticipantRecord, SessionRecord
 from sim.errors import VascsimError
@@ -102,6 +103,8 @@ def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
         ),
         attention=attention,
         synthetic=analysis.synthetic,
+        drift=[drift_line(entry) for entry in analysis.standard_drift],
+        set_command=set_command(info["name"], task) if task else "",
     )
     return overview
 
