@@ -22,7 +22,7 @@ from metrics.feedback import RECENT_SESSIONS, participant_feedback
 from metrics.figures import new_figure
 from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.proficiency import benchmarks_heading
-from metrics.registry import REGISTRY, REGISTRY_VERSION
+from metrics.registry import REGISTRY, REGISTRY_VERSION, display_name
 from metrics.reliability import agreement_shown
 from metrics.study import StudyAnalysis, metric_unit, oriented, practice_mask
 from metrics.units import display_unit, in_display_units, interval_text, significant
@@ -242,7 +242,7 @@ def trainee_summary(analysis: StudyAnalysis) -> pd.DataFrame:
                 metric = name[len("retention_change_") :]
                 unit = display_unit(metric_unit(metric))
                 better = REGISTRY[metric].better if metric in REGISTRY else ""
-                header = f"{metric} change ({unit + ', ' if unit else ''}{better} is better)"
+                header = f"{display_name(metric)} change ({unit + ', ' if unit else ''}{better} is better)"
                 record[header] = (
                     in_display_units(row[name], metric_unit(metric)) if not pd.isna(row[name]) else None
                 )
@@ -266,9 +266,9 @@ def trainee_feedback(analysis: StudyAnalysis) -> list[tuple[str, dict]]:
 
 
 def _retention_words(at_benchmark: bool, worse: float | None) -> str:
-    """ "below the benchmark; worse than practice on 1 metric(s)": the session against the benchmark,
+    """ "worse than the benchmark; worse than practice on 1 metric(s)": the session against the benchmark,
     then against the trainee's own practice (the study's retention rule)."""
-    text = "at the benchmark" if at_benchmark else "below the benchmark"
+    text = "at the benchmark" if at_benchmark else "worse than the benchmark"
     if worse is None or pd.isna(worse):
         return text
     count = int(worse)
@@ -328,6 +328,34 @@ def validity_download(analysis: StudyAnalysis) -> pd.DataFrame:
             "p_holm": "p (Holm-adjusted)",
         }
     )
+
+
+def validity_for_reading(analysis: StudyAnalysis) -> pd.DataFrame:
+    """The construct-validity table as the report shows it: metrics named in words, medians in the
+    units a surgeon reads, the AUC beside its interval, headers a reader needs no glossary for, and
+    narrow enough for a 1366 px screen (the full table, in SI, is tables/construct_validity.csv)."""
+    table = summary_in_display_units(analysis)
+    groups = [str(g) for g in analysis.settings.groups]
+    shown = pd.DataFrame(
+        {
+            "metric": [display_name(m) for m in table["metric"]],
+            "unit": table["unit"],
+            "better": table["better"],
+            **{f"{g} median": table[f"median_{g}"] for g in groups},
+            "AUC": table["auc"],
+            "AUC 95% CI": [
+                ("" if a != a else NO_INTERVAL) if low != low else f"{low:.2f}-{high:.2f}"
+                for a, low, high in table[["auc", "auc_ci_low", "auc_ci_high"]].to_numpy()
+            ],
+            "Cliff's delta": table["cliffs_delta"],
+            "p": table["p_value"],
+            "Holm p": table["p_holm"],
+            "discriminates": table["discriminates"],
+        }
+    )
+    if "as_expected" in table.columns:
+        shown["as expected"] = table["as_expected"]
+    return shown
 
 
 NO_INTERVAL = "n/a"
@@ -614,7 +642,15 @@ def _curves_for_reading(curves: pd.DataFrame) -> pd.DataFrame:
         f"{p:.3g}" if ok and p is not None else "not determined by these trials"
         for p, ok in zip(shown["plateau"], curves["plateau_determined"], strict=True)
     ]
-    return shown
+    shown["metric"] = [display_name(m) for m in curves["metric"]]
+    return shown.rename(
+        columns={
+            "participant_id": "trainee",
+            "r_squared": "R²",
+            "first_observed_at_benchmark": "first trial at the mark",
+            "first_predicted_at_benchmark": "trial the fit reaches the mark",
+        }
+    )
 
 
 def concurrent_for_reading(table: pd.DataFrame) -> pd.DataFrame:
@@ -736,7 +772,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
         weights = composite.weights.rename_axis("metric").reset_index()
         weights = weights[weights["weight"].abs() > 0].sort_values("weight", key=np.abs, ascending=False)
     notes = [*analysis.validity.notes[1:], *analysis.notes]
-    summary = summary_in_display_units(analysis)
+    summary = validity_for_reading(analysis)
     registry = REGISTRY.describe()[["name", "unit", "better", "definition", "reference"]]
     curves = analysis.learning_curves
 

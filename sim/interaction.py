@@ -314,7 +314,7 @@ class NeedleInteraction(GraphicsRateTracking):
                         -1 if contact is None else contact.triangle,
                         (math.nan,) * 3 if contact is None else tuple(contact.barycentric),
                         tip_speed=self.tip_speed,
-                        detail=f"{what} {stress / 1e6:.2f} MPa over {limit / 1e6:.2f} MPa",
+                        detail=f"{what} {stress / 1e3:.0f} kPa over {limit / 1e3:.0f} kPa",
                     )
                 )
             setattr(self, flag, over)

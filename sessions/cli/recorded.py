@@ -199,7 +199,7 @@ def _show_stitches(stitches: list[dict]) -> None:
     if all(s.get("track_offset") is None for s in stitches):
         return
     click.echo("passage      how the needle went through the wall (lower is better)")
-    click.echo("  stitch  off its track (mm)  swept (mm^2)  wound-edge stress (MPa)")
+    click.echo("  stitch  off its track (mm)  swept (mm^2)  wound-edge stress (kPa)")
 
     def scaled(value, factor: float, digits: int) -> str:
         return "-" if value is None else f"{factor * value:.{digits}f}"
@@ -207,7 +207,7 @@ def _show_stitches(stitches: list[dict]) -> None:
     for s in stitches:
         click.echo(
             f"  {s['stitch']:>6d}  {scaled(s.get('track_offset'), 1e3, 2):>18s}  "
-            f"{scaled(s.get('swept_area'), 1e6, 1):>12s}  {scaled(s.get('wound_edge_stress'), 1e-6, 2):>23s}"
+            f"{scaled(s.get('swept_area'), 1e6, 1):>12s}  {scaled(s.get('wound_edge_stress'), 1e-3, 0):>23s}"
         )
 
 

@@ -148,7 +148,7 @@ def test_beating_the_experts_on_a_lower_is_better_metric_reads_better(demo_site)
         page = browser.new_page(viewport={"width": 1280, "height": 900})
         _sign_in(page, base, "supervisor")
         page.goto(f"{base}/sessions/{own}")
-        row = page.locator("#metrics tbody tr", has_text="task_time").first
+        row = page.locator("#metrics tbody tr", has=page.locator("td[title='task_time']")).first
         verdict = row.locator("td.verdict span")
         assert verdict.inner_text() == "better"
         colour = verdict.evaluate("(e) => getComputedStyle(e).color")

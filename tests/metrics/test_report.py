@@ -65,8 +65,10 @@ def test_the_trainee_table_reads_in_words_and_display_units(analysis):
         proficient = f"yes, at trial {int(row['trials_to_proficiency'])}" if row["proficient"] else "not yet"
         assert shown["proficient"] == proficient and shown["at the benchmark"] == row["passes"]
         session = shown["retention session"]
-        assert session.startswith("at the benchmark" if row["retention_passed"] else "below the benchmark")
-    header = "path_length change (mm, lower is better)"
+        assert session.startswith(
+            "at the benchmark" if row["retention_passed"] else "worse than the benchmark"
+        )
+    header = "path length change (mm, lower is better)"
     assert table[header].to_numpy() == pytest.approx(1e3 * raw["retention_change_path_length"].to_numpy())
 
 

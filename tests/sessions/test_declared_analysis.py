@@ -115,7 +115,7 @@ def test_cli_report_api_and_pages_agree_on_benchmarks_and_every_pass(demo):
         assert api_passed == cli_passed
         page = client.get(f"/studies/{study_id}").text
         table = page[page.index('id="benchmarks"') : page.index("</table>", page.index('id="benchmarks"'))]
-        shown = re.findall(r"<tr><td>(\w+)</td><td class=\"num\">([^<]+)</td>", table)
+        shown = re.findall(r"<tr><td title=\"(\w+)\">[^<]+</td><td class=\"num\">([^<]+)</td>", table)
         assert shown == [
             (b["metric"], b["pass_if"].replace(">", "&gt;").replace("<", "&lt;"))
             for b in report["benchmarks"]
