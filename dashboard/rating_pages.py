@@ -21,6 +21,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 
+from dashboard.api import Id
 from dashboard.auth import Viewer, require
 from dashboard.errors import DashboardError, not_found, said, status_of
 from dashboard.pages import render
@@ -163,7 +164,7 @@ async def _submit(
 
 
 @router.get("/studies/{study_id}/rate", response_class=HTMLResponse)
-def rating_queue(request: Request, study_id: int, viewer: Staff, rated: str | None = None) -> Response:
+def rating_queue(request: Request, study_id: Id, viewer: Staff, rated: str | None = None) -> Response:
     sessions = _study_sessions(request, viewer, study_id)
     for number, row in enumerate(sessions, start=1):
         row["name"] = f"Session {number}"

@@ -9,7 +9,6 @@ application's state, so what each route does is read in one place.
 from __future__ import annotations
 
 import asyncio
-import json
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -21,8 +20,9 @@ from starlette.responses import JSONResponse
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from recorder.ingest import IngestStore, _no_constant, _RemoteSession, log
+from recorder.ingest import IngestStore, _RemoteSession, log
 from recorder.ingest_journal import outcome_unread
+from recorder.json_input import JSONInputError, parse_json
 from recorder.remote import MAX_BATCH_BYTES, MAX_HEADER_BYTES, RemoteError, stream_schema, unpack_frame
 
 UNKNOWN_STATION = "missing or unknown station token"
@@ -67,11 +67,12 @@ async def read_body(request: Request, limit: int) -> bytes:
 
 
 async def read_json(request: Request) -> Any:
-    """The body as JSON (no NaN or infinities), at most :data:`MAX_HEADER_BYTES`."""
+    """The body as JSON (no NaN or infinities, :data:`recorder.json_input.MAX_DEPTH` levels at most),
+    at most :data:`MAX_HEADER_BYTES`."""
     try:
-        return json.loads(await read_body(request, MAX_HEADER_BYTES), parse_constant=_no_constant)
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise RemoteError(422, f"body is not JSON: {error}") from error
+        return parse_json(await read_body(request, MAX_HEADER_BYTES), "body")
+    except JSONInputError as error:
+        raise RemoteError(422, str(error)) from None
 
 
 async def open_session(store: IngestStore, station: str, session_id: str) -> _RemoteSession:
@@ -112,7 +113,7 @@ async def batches(request: Request) -> JSONResponse:
     async def work(station: str) -> dict[str, Any]:
         stream, sequence = request.path_params["stream"], request.path_params["sequence"]
         stream_schema(stream)
-        if not sequence.isdigit():
+        if not (sequence.isascii() and sequence.isdigit()):  # "²" is a digit to isdigit(), not to int()
             raise RemoteError(422, f"sequence {sequence!r} is not a non-negative integer")
         body = await read_body(request, MAX_BATCH_BYTES)
         session_id = request.path_params["session_id"]
@@ -146,9 +147,9 @@ async def _with_json_body(
 async def text_frame(store: IngestStore, station: str, session_id: str, text: str | None) -> dict[str, Any]:
     """A WebSocket text frame: {"op": "header", "header": {...}} or {"op": "close", ...}."""
     try:
-        request = json.loads(text or "", parse_constant=_no_constant)
-    except json.JSONDecodeError as error:
-        raise RemoteError(422, f"text frame is not JSON: {error}") from error
+        request = parse_json(text or "", "text frame")
+    except JSONInputError as error:
+        raise RemoteError(422, str(error)) from None
     op = request.get("op") if isinstance(request, dict) else None
     if op == "header":
         done = await run_in_threadpool(store.set_header, station, session_id, request.get("header"))

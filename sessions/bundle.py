@@ -21,7 +21,6 @@ failure at that stage removes the moved files again, so a bad bundle changes not
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import shutil
 import uuid
@@ -32,6 +31,7 @@ from typing import Any
 
 from sqlalchemy import select
 
+from recorder.json_input import JSONInputError, parse_json
 from sessions.bundle_export import export_study
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
 from sessions.manifest import (
@@ -101,9 +101,9 @@ def read_manifest(bundle: str | Path, trust: str | Path | None = None) -> Manife
     if trust is not None:
         verify_signature(text, signature, trust, bundle)
     try:
-        found = json.loads(text)
-    except ValueError:
-        found = None
+        found = parse_json(text, "its manifest")
+    except JSONInputError as error:
+        raise CatalogError(f"bundle {bundle} is not a readable vascsim study bundle ({error})") from None
     stated = (found.get("format"), found.get("version")) if isinstance(found, dict) else None
     if stated is not None and stated != (BUNDLE_FORMAT, BUNDLE_VERSION):
         raise CatalogError(

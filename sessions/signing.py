@@ -15,6 +15,7 @@ import json
 import os
 from pathlib import Path
 
+from recorder.json_input import parse_json
 from sessions.catalog import CatalogError
 
 SIGNATURE = "manifest.sig"
@@ -109,7 +110,7 @@ def verify(manifest: bytes, signature: bytes | None, trusted: str | Path, bundle
     if signature is None:
         raise CatalogError(f"bundle {bundle} is not signed; the trusted key {expected} requires a signature")
     try:
-        record = json.loads(signature)
+        record = parse_json(signature, "manifest.sig")
         stated = base64.b64decode(record["signature"], validate=True)
         algorithm, signer = record["algorithm"], record["key"]
     except (ValueError, KeyError, TypeError):

@@ -178,3 +178,12 @@ def test_station_ingest_accepts_only_live_tokens(site):
             headers={"Authorization": f"Bearer {issued['token']}"},
         )
         assert again.status_code == 401
+
+
+def test_an_id_beyond_the_database_integer_is_not_found_not_a_server_error(client_for):
+    """Issue 45, seen 10: GET /studies/99999999999999999999/rate answered 500 (OverflowError in the
+    SQLite driver) and reset the connection."""
+    client, _ = client_for("supervisor")
+    for path in ("/studies/99999999999999999999/rate", "/studies/99999999999999999999", "/studies/0/rate"):
+        answer = client.get(path)
+        assert answer.status_code in (404, 422), (path, answer.status_code)

@@ -118,6 +118,9 @@ def test_console_script_exists():
 
 
 @pytest.mark.slow
+# rendering does not depend on the catalog's backend; its queries are the ORM's plain selects, which
+# the catalog tests run on both (one backend here keeps 20 s of the suite's 15 minutes)
+@pytest.mark.parametrize("catalog_url", ["sqlite"], indirect=True)
 def test_replay_against_the_expert_group(home, tmp_path):
     invoke("studies", "add", "course")
     for code, level, skill in (("E1", "expert", "1.0"), ("E2", "expert", "0.95"), ("T1", "trainee", "0.2")):

@@ -1,0 +1,72 @@
+"""Hostile input, round 3 (issue 45): nesting that exhausted the JSON parser's recursion, and a
+Unicode digit as a sequence number. Each answered 500 or dropped the connection before."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from starlette.testclient import TestClient
+
+from recorder.ingest import IngestStore, create_app
+from recorder.json_input import MAX_DEPTH, JSONInputError, parse_json
+from recorder.remote import encode_batch
+from tests.recorder.test_remote import AUTH, TOKENS, batch, post
+
+DEEP = "[" * 5000 + "]" * 5000
+
+
+@pytest.fixture
+def http(tmp_path):
+    store = IngestStore(tmp_path, TOKENS)
+    yield TestClient(create_app(store))
+    store.close()
+
+
+def test_deep_json_in_a_header_or_close_body_is_a_422_in_one_line(http):
+    """Seen 1: 500 {"error": "internal error: RecursionError"}."""
+    for path, method in (("/api/sessions/s1/header", http.put), ("/api/sessions/s1/close", http.post)):
+        answer = method(path, content=DEEP.encode(), headers=AUTH)
+        assert answer.status_code == 422, (path, answer.text)
+        assert "nests arrays or objects deeper than" in answer.json()["error"]
+    assert post(http, 0, encode_batch(batch(0), 0)).status_code == 200  # the session is unharmed
+
+
+def test_deep_json_in_a_websocket_text_frame_is_answered_and_the_socket_stays_open(http):
+    """Seen 2: the connection dropped without a close frame after one acknowledged batch."""
+    from recorder.remote import pack_frame
+
+    with http.websocket_connect("/api/sessions/w1/ws", headers=AUTH) as socket_:
+        socket_.send_bytes(pack_frame("samples", 0, encode_batch(batch(0), 0)))
+        socket_.send_text(DEEP)
+        socket_.send_text(json.dumps({"op": "close", "batches": {"samples": 1, "events": 0}}))
+        answers = [socket_.receive_json() for _ in range(3)]
+    assert [a["status"] for a in answers] == [200, 422, 200]
+    assert "nests arrays or objects deeper than" in answers[1]["error"]
+
+
+@pytest.mark.parametrize(
+    "sequence", ["%C2%B2", "%D9%A3", "%EF%BC%91"]
+)  # superscript two, Arabic-Indic three, fullwidth one
+def test_a_sequence_number_of_unicode_digits_is_refused(http, sequence):
+    """Seen 3: "²".isdigit() is true and int() refuses it: 500 ValueError."""
+    answer = http.post(
+        f"/api/sessions/s1/samples/{sequence}", content=encode_batch(batch(0), 0), headers=AUTH
+    )
+    assert answer.status_code == 422 and "is not a non-negative integer" in answer.json()["error"]
+
+
+def test_parse_json_limits_depth_and_refuses_non_numbers():
+    assert parse_json(json.dumps({"a": [[1]]}), "x") == {"a": [[1]]}
+    nested = "[" * MAX_DEPTH + "]" * MAX_DEPTH
+    assert parse_json(nested, "x") == parse_json(nested, "x")  # exactly the limit is accepted
+    for text, said in (
+        ("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), "deeper than"),
+        (DEEP, "deeper than"),
+        ('{"a": NaN}', "holds NaN"),
+        ("[Infinity]", "holds Infinity"),
+        ("{", "is not JSON"),
+        (b"\xff\xfe", "is not JSON"),
+    ):
+        with pytest.raises(JSONInputError, match=said):
+            parse_json(text, "body")
