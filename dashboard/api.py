@@ -293,7 +293,8 @@ def video(request: Request, uid: str, viewer: Anyone) -> FileResponse:
 )
 def session_ratings(request: Request, uid: str, viewer: Staff) -> list[dict]:
     _directory(request, viewer, uid)
-    return ratings.session_ratings(_state(request).catalog, uid)
+    # researchers never see account names: raters as stable pseudonyms
+    return ratings.session_ratings(_state(request).catalog, uid, pseudonymous=not viewer.sees_accounts)
 
 
 @router.post(

@@ -180,7 +180,11 @@ def session_page(request: Request, uid: str, viewer: Anyone) -> Response:
         "has_samples": has_samples,
         "signal_bands": detail.get("signal_bands", {}),
     }
-    ratings = session_ratings(state.catalog, uid) if viewer.role in STAFF else []
+    ratings = (
+        session_ratings(state.catalog, uid, pseudonymous=not viewer.sees_accounts)
+        if viewer.role in STAFF
+        else []
+    )
     return render(
         request,
         "session.html",

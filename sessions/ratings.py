@@ -18,7 +18,7 @@ from datetime import datetime
 from pathlib import Path
 
 import pandas as pd
-from sqlalchemy import delete, select
+from sqlalchemy import delete, func, select
 
 from metrics.instruments import TOTAL, Instrument, instrument
 from metrics.streams import MetricsError
@@ -202,8 +202,19 @@ def study_ratings(catalog: Catalog, study_name: str, instrument_name: str | None
     return pd.DataFrame(rows, columns=columns)
 
 
-def session_ratings(catalog: Catalog, session_uid: str) -> list[dict]:
-    """One row per rater and instrument of a session: rater, instrument, when, total, items."""
+def rater_pseudonyms(catalog: Catalog) -> dict[str, str]:
+    """Each rater's stable pseudonym ("rater 1", "rater 2", ...), numbered by their first rating in the
+    catalog: what a reader who must not see account names (a researcher) sees instead."""
+    with catalog.session() as orm:
+        rows = orm.execute(
+            select(Rating.rater, func.min(Rating.id)).group_by(Rating.rater).order_by(func.min(Rating.id))
+        ).all()
+    return {rater: f"rater {k}" for k, (rater, _) in enumerate(rows, start=1)}
+
+
+def session_ratings(catalog: Catalog, session_uid: str, pseudonymous: bool = False) -> list[dict]:
+    """One row per rater and instrument of a session: rater, instrument, when, total, items; the rater
+    as their stable pseudonym (:func:`rater_pseudonyms`) when ``pseudonymous``."""
     with catalog.session() as orm:
         session = catalog.recorded_session(orm, session_uid)
         rows = orm.execute(
@@ -221,4 +232,9 @@ def session_ratings(catalog: Catalog, session_uid: str) -> list[dict]:
         else:
             entry["items"][item] = score
         entry["rated_at"] = max(entry["rated_at"], created) if isinstance(created, datetime) else created
-    return list(grouped.values())
+    found = list(grouped.values())
+    if pseudonymous and found:
+        names = rater_pseudonyms(catalog)
+        for entry in found:
+            entry["rater"] = names[entry["rater"]]
+    return found

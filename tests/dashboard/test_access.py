@@ -272,3 +272,22 @@ def test_needs_attention_says_why_and_tells_retention_from_practice():
         "not proficient after 6 practice sessions",
         "the latest practice session (trial 6) was worse than the benchmark",
     ]
+
+
+def test_researchers_see_raters_as_stable_pseudonyms(seeded, client_for):
+    """Issue 45, seen 8: after a supervisor rated a session in the dashboard, the researcher's
+    /api/sessions/{uid}/ratings and the session page named the rater's account ("supervisor")."""
+    supervisor, csrf = client_for("supervisor")
+    from metrics.instruments import INSTRUMENTS
+
+    uid = seeded.other_sessions[0]
+    scores = {"instrument": "GRS", "scores": {name: 3 for name in INSTRUMENTS["GRS"].item_names}}
+    stored = supervisor.post(f"/api/sessions/{uid}/ratings", json=scores, headers={"X-CSRF-Token": csrf})
+    assert stored.status_code == 201, stored.text
+    assert [r["rater"] for r in supervisor.get(f"/api/sessions/{uid}/ratings").json()] == ["supervisor"]
+    researcher, _ = client_for("researcher")
+    for _ in range(2):  # the same name every time it is asked
+        seen = researcher.get(f"/api/sessions/{uid}/ratings").json()
+        assert [r["rater"] for r in seen] == ["rater 1"]
+    page = researcher.get(f"/sessions/{uid}").text
+    assert "rater 1" in page and ">supervisor<" not in page
