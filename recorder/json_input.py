@@ -17,6 +17,10 @@ class JSONInputError(RecorderError, ValueError):
     """Outside JSON refused: not JSON, NaN or an infinity, or nested deeper than allowed."""
 
 
+class JSONTooDeep(JSONInputError):
+    """Outside JSON nested deeper than allowed (what no schema check could even be run on)."""
+
+
 def _no_constant(name: str) -> Any:
     raise JSONInputError(f"holds {name}, which is not a JSON number")
 
@@ -40,11 +44,11 @@ def parse_json(data: bytes | str, what: str, max_depth: int = MAX_DEPTH) -> Any:
     try:
         value = json.loads(data, parse_constant=_no_constant)
     except RecursionError:
-        raise JSONInputError(f"{what} nests arrays or objects deeper than {max_depth} levels") from None
+        raise JSONTooDeep(f"{what} nests arrays or objects deeper than {max_depth} levels") from None
     except JSONInputError as error:
         raise JSONInputError(f"{what} {error}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as error:
         raise JSONInputError(f"{what} is not JSON: {error}") from None
     if _depth(value) > max_depth:
-        raise JSONInputError(f"{what} nests arrays or objects deeper than {max_depth} levels")
+        raise JSONTooDeep(f"{what} nests arrays or objects deeper than {max_depth} levels")
     return value

@@ -31,7 +31,7 @@ from typing import Any
 
 from sqlalchemy import select
 
-from recorder.json_input import JSONInputError, parse_json
+from recorder.json_input import JSONInputError, JSONTooDeep, parse_json
 from sessions.bundle_export import export_study
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
 from sessions.manifest import (
@@ -102,8 +102,10 @@ def read_manifest(bundle: str | Path, trust: str | Path | None = None) -> Manife
         verify_signature(text, signature, trust, bundle)
     try:
         found = parse_json(text, "its manifest")
-    except JSONInputError as error:
+    except JSONTooDeep as error:  # nothing to validate: refused here, in one line
         raise CatalogError(f"bundle {bundle} is not a readable vascsim study bundle ({error})") from None
+    except JSONInputError:
+        found = None  # the schema check below names what is wrong and where
     stated = (found.get("format"), found.get("version")) if isinstance(found, dict) else None
     if stated is not None and stated != (BUNDLE_FORMAT, BUNDLE_VERSION):
         raise CatalogError(
