@@ -92,15 +92,14 @@ def sign_in(request: Request, response: Response, username: str, password: str) 
     state = _state(request)
     limiter: LoginRateLimiter = state.login_limiter
     key = limiter_key(request, username)
-    wait = limiter.retry_after(key)
+    wait = limiter.claim(key)  # counted before the (slow) password check: concurrent guesses cannot race it
     if wait > 0:
         error = DashboardError(429, f"too many failed sign-ins for {username!r}; try again in {wait:.0f} s")
         error.retry_after = int(wait) + 1
         raise error
     signed = state.store.sign_in(username, password, timedelta(seconds=state.settings.login_lifetime_s))
     if signed is None:
-        limiter.failed(key)
-        raise DashboardError(401, "wrong user name or password")
+        raise DashboardError(401, "wrong user name or password")  # the claimed attempt stays counted
     user, token, csrf = signed
     limiter.succeeded(key)
     response.set_cookie(

@@ -54,6 +54,18 @@ class LoginRateLimiter:
                 return 0.0
             return failures[0] + self.window_s - at
 
+    def claim(self, key: str, at: float | None = None) -> float:
+        """Take one attempt for ``key`` before the password is checked: 0 when it may try (the attempt
+        counts as failed until :meth:`succeeded` clears it), else the seconds to wait. Counted under
+        the lock, so concurrent attempts cannot all pass the check before any failure is recorded."""
+        at = time.monotonic() if at is None else at
+        with self._lock:
+            failures = self._recent(key, at)
+            if len(failures) >= self.attempts:
+                return failures[0] + self.window_s - at
+            failures.append(at)
+            return 0.0
+
     def failed(self, key: str, at: float | None = None) -> None:
         at = time.monotonic() if at is None else at
         with self._lock:

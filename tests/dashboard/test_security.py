@@ -187,3 +187,32 @@ def test_an_id_beyond_the_database_integer_is_not_found_not_a_server_error(clien
     for path in ("/studies/99999999999999999999/rate", "/studies/99999999999999999999", "/studies/0/rate"):
         answer = client.get(path)
         assert answer.status_code in (404, 422), (path, answer.status_code)
+
+
+def test_concurrent_guesses_cannot_race_the_sign_in_limit(tmp_path, open_catalog):
+    """Issue 45, seen 9: 30 concurrent sign-ins for one account (29 wrong, 1 right) were all checked:
+    the limit was read before the slow password hash and the failure written after it. Now at most
+    the limit's attempts reach the password check; the rest are refused with 429 at once."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import httpx
+
+    from tests.dashboard.conftest import running_server
+
+    site = seed_dashboard(
+        open_catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}"),
+        tmp_path / "home",
+        {"login_attempts": 3, "login_window_s": 60.0},
+    )
+    passwords = ["wrong password"] * 29 + [PASSWORD]
+    with running_server(site.app) as base:
+
+        def attempt(password: str) -> int:
+            body = {"username": "admin", "password": password}
+            return httpx.post(f"{base}/api/login", json=body, timeout=60).status_code
+
+        with ThreadPoolExecutor(30) as pool:
+            statuses = list(pool.map(attempt, passwords))
+    checked = statuses.count(401) + statuses.count(200)
+    assert checked <= 3 and statuses.count(429) >= 27, statuses
+    assert set(statuses) <= {200, 401, 429}
