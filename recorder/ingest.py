@@ -191,14 +191,13 @@ class IngestStore:
                 raise RemoteError(
                     409, f"{stream} batch {sequence} arrived, expected {journal.last_sequence + 1}"
                 )
-            if stream == "samples":
-                times = float_values(batch.column(0))
-                if times.size and (np.any(np.diff(times) < 0) or times[0] < journal.last_time):
-                    raise RemoteError(
-                        409,
-                        f"samples batch {sequence} goes back in time (starts at {times[0]:.6f} s, "
-                        f"last stored {journal.last_time:.6f} s)",
-                    )
+            times = float_values(batch.column(0))  # time order across batches, events as samples
+            if times.size and (np.any(np.diff(times) < 0) or times[0] < journal.last_time):
+                raise RemoteError(
+                    409,
+                    f"{stream} batch {sequence} goes back in time (starts at {times[0]:.6f} s, "
+                    f"last stored {journal.last_time:.6f} s)",
+                )
             journal.append(sequence, batch, message)
         return {"stream": stream, "ack": sequence, "duplicate": False}, journal
 
@@ -214,6 +213,13 @@ class IngestStore:
         _refuse_non_finite(header, "the session header")
         if "ring" in header:  # names a local writer's memory: a central recorder never reads one
             raise RemoteError(422, "the session header's 'ring' is a local recording's own key; leave it out")
+        owned = sorted(set(header) & (_SERVER_HEADER_KEYS - {"schema_version"}))
+        if owned:  # written by this server; a station's value would be overwritten, or believed
+            raise RemoteError(
+                422,
+                f"the session header's {', '.join(map(repr, owned))}: the central recorder writes "
+                "these; leave them out",
+            )
         session = self.session(station, session_id)
         with session.lock:
             if session.closed_counts is not None:

@@ -70,3 +70,25 @@ def test_parse_json_limits_depth_and_refuses_non_numbers():
     ):
         with pytest.raises(JSONInputError, match=said):
             parse_json(text, "body")
+
+
+def test_events_that_go_back_in_time_across_batches_are_refused(http):
+    """Seen 3: docs/reliability.md promises time order across batches; events were not held to it."""
+    from tests.recorder.test_remote import events
+
+    assert post(http, 0, encode_batch(events((0.5, "contact_start")), 0), stream="events").status_code == 200
+    back = post(http, 1, encode_batch(events((0.2, "contact_end")), 1), stream="events")
+    assert back.status_code == 409 and "goes back in time" in back.json()["error"]
+    assert post(http, 1, encode_batch(events((0.6, "contact_end")), 1), stream="events").status_code == 200
+
+
+def test_server_owned_header_keys_are_refused_and_an_identical_header_is_a_duplicate(http):
+    """Seen 3: a header carrying station, status, received_unix or journal_checksum was stored with
+    them overwritten, and re-sending the identical header then answered 409."""
+    for key in ("station", "status", "received_unix", "journal_checksum", "session"):
+        answer = http.put("/api/sessions/s1/header", json={"participant": "P1", key: "x"}, headers=AUTH)
+        assert answer.status_code == 422 and "the central recorder writes these" in answer.json()["error"]
+    header = {"participant": "P1", "task": "cube"}
+    assert http.put("/api/sessions/s1/header", json=header, headers=AUTH).json() == {"header": True}
+    again = http.put("/api/sessions/s1/header", json=header, headers=AUTH)
+    assert again.status_code == 200 and again.json()["duplicate"] is True
