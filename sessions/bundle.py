@@ -25,6 +25,7 @@ import math
 import shutil
 import uuid
 import zipfile
+from collections import Counter
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -88,6 +89,12 @@ def read_manifest(bundle: str | Path, trust: str | Path | None = None) -> Manife
         raise CatalogError(f"bundle {bundle} does not exist")
     try:
         with zipfile.ZipFile(bundle) as archive:
+            names = Counter(archive.namelist())
+            twice = sorted(name for name, count in names.items() if count > 1)
+            if twice:  # zipfile reads the last copy; which one a checker read is anyone's guess
+                raise CatalogError(
+                    f"bundle {bundle} holds {twice[0]} more than once; a bundle names each file once"
+                )
             text = _read_member(archive, MANIFEST, MAX_MANIFEST_BYTES, bundle)
             recorded = _read_member(archive, MANIFEST_CHECKSUM, 1024, bundle)
             signature = _read_member(archive, SIGNATURE, 4096, bundle)

@@ -36,3 +36,17 @@ def test_nested_manifest_or_signature_is_a_one_line_refusal(home, tmp_path):
     assert result.exit_code == 1 and "Traceback" not in result.output, result.output
     assert "its signature file is not a vascsim signature" in result.output
     assert result.output.count("\n") == 1
+
+
+def test_a_member_named_twice_is_refused_before_anything_is_read(home, tmp_path):
+    """Seen 4: duplicate zip member names were accepted (the last copy was read)."""
+    import warnings
+
+    manifest = b'{"format": "vascsim-study-bundle"}'
+    path = _bundle(tmp_path / "twice.zip", manifest)
+    with warnings.catch_warnings(), zipfile.ZipFile(path, "a") as archive:
+        warnings.simplefilter("ignore")  # zipfile warns about the duplicate name it is asked to write
+        archive.writestr("manifest.json", b'{"format": "something else"}')
+    result = CliRunner().invoke(main, ["import-bundle", str(path)])
+    assert result.exit_code == 1 and "holds manifest.json more than once" in result.output, result.output
+    assert result.output.count("\n") == 1
