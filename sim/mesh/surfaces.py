@@ -127,11 +127,49 @@ def read_surface(path: str | Path, units: str = "mm"):
         raise MeshError(f"surface file {path} could not be read: {error}") from error
     if not isinstance(surface, pv.PolyData):
         surface = surface.extract_surface()
+    check_surface(surface, path)  # before any filter or mesher sees it: a NaN crashed TetGen
     surface = surface.triangulate().clean()
     if surface.n_cells == 0:
         raise MeshError(f"surface file {path} has no faces")
     surface.points = np.asarray(surface.points, dtype=np.float64) * UNITS[units]
     return surface
+
+
+def check_surface(surface, path: str | Path) -> None:
+    """MeshError, in one line naming the element, unless every vertex of ``surface`` (pyvista
+    PolyData as read) is finite and every face has at least three corners, each an existing vertex."""
+    points = np.asarray(surface.points, dtype=np.float64)
+    if points.size == 0:
+        raise MeshError(f"surface file {path} has no vertices")
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():
+        vertex = int(np.flatnonzero(~finite)[0])
+        raise MeshError(f"surface file {path}: vertex {vertex} has a coordinate that is not a finite number")
+    faces = np.asarray(surface.faces, dtype=np.int64)
+    if faces.size and faces.size % 4 == 0 and np.all(faces[::4] == 3):  # all triangles: at once
+        corners, sizes = faces.reshape(-1, 4)[:, 1:], None
+    else:  # any polygons: walk the cell array
+        rows, k = [], 0
+        while k < faces.size:
+            count = int(faces[k])
+            if count < 3 or k + 1 + count > faces.size:
+                raise MeshError(
+                    f"surface file {path}: face {len(rows)} has {count} corner(s); a face needs 3 or more"
+                )
+            rows.append(faces[k + 1 : k + 1 + count])
+            k += 1 + count
+        corners, sizes = (
+            (np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)),
+            [len(r) for r in rows],
+        )
+    bad = (corners < 0) | (corners >= len(points))
+    if np.any(bad):
+        flat = int(np.flatnonzero(bad.ravel())[0])
+        face = flat // 3 if sizes is None else int(np.searchsorted(np.cumsum(sizes), flat, side="right"))
+        raise MeshError(
+            f"surface file {path}: face {face} names vertex {int(corners.ravel()[flat])}, which does not "
+            f"exist (the file has vertices 0 to {len(points) - 1})"
+        )
 
 
 def _triangles(surface) -> NDArray[np.int64]:
