@@ -269,6 +269,24 @@ class Catalog:
         )
         return (highest or 0) + 1
 
+    def ensure_task(self, name: str, scenario: str, parameters: dict | None = None) -> int:
+        """The id of task ``name``, its row created in a transaction of its own when it is missing.
+        Processes that run a new task for the first time at once all get the one row: the unique
+        name turns a concurrent creation into a retry that finds it."""
+        for attempt in range(TRIAL_ATTEMPTS):
+            try:
+                with self.session() as orm:
+                    return self.task(orm, name, scenario, parameters).id
+            except (IntegrityError, OperationalError) as error:
+                if not (
+                    _lost_a_race(error) or "tasks.name" in str(error.orig) or "tasks_name" in str(error.orig)
+                ):
+                    raise
+                time.sleep(random.uniform(0.0, 0.01 * (attempt + 1)))
+        raise WrongState(
+            f"task {name!r} could not be created after {TRIAL_ATTEMPTS} attempts; too many runs at once"
+        )
+
     def task(
         self, orm: OrmSession, name: str, scenario: str | None = None, parameters: dict | None = None
     ) -> Task:

@@ -151,12 +151,13 @@ def run_session(
     spec = task_spec(plan.task)
     uid = new_uid()
     directory = home / "sessions" / uid
-    with catalog.session() as orm:
+    with catalog.session() as orm:  # checked before the task row is made: a typo creates nothing
         study = catalog.study(orm, plan.study)
         participant = catalog.participant(orm, study, plan.participant)
-        task = catalog.task(orm, spec.name, spec.scenario, spec.parameters)
-        fields = {"participant_id": participant.id, "task_id": task.id}
+        participant_id = participant.id
         code, label, synthetic = participant.code, participant.group_label, participant.synthetic
+    task_id = catalog.ensure_task(spec.name, spec.scenario, spec.parameters)  # first runs of a task race
+    fields = {"participant_id": participant_id, "task_id": task_id}
     row = catalog.add_session(
         dict(
             fields,

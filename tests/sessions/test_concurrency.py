@@ -150,3 +150,34 @@ def test_the_migration_renumbers_trials_that_earlier_races_duplicated(catalog_ur
         ]
         assert orm.scalar(select(Participant.code)) == "T01" and orm.scalar(select(Task.name)) == "w"
     catalog.close()
+
+
+def _first_runs_of_tasks(url, start, index, results, names, barrier):
+    catalog = Catalog(url)
+    start.wait(60)
+    try:
+        ids = []
+        for name in names:  # all four at the same task's first run each time
+            barrier.wait(60)
+            ids.append(catalog.ensure_task(name, "wall-stitch", {}))
+        results.put((index, ids))
+    except BaseException as error:
+        results.put((index, f"{type(error).__name__}: {error}"))
+    finally:
+        catalog.close()
+
+
+@pytest.mark.slow
+def test_first_runs_of_a_new_task_at_once_share_one_task_row(catalog_url, open_catalog):
+    """Issue 45, seen 5: creating a task row was select-then-insert: four processes behind a barrier
+    raised IntegrityError (UNIQUE tasks.name) in 4 of 6 rounds, reached from the first `vascsim run`
+    of a task. Twelve new tasks, four processes creating each at once."""
+    open_catalog(catalog_url)  # migrated once, so the race is the task rows', not the schema's
+    names = [f"task-{k}" for k in range(12)]
+    barrier = multiprocessing.get_context("spawn").Barrier(4)
+    outcome = _together(_first_runs_of_tasks, catalog_url, 4, names, barrier)
+    assert all(isinstance(ids, list) for ids in outcome.values()), outcome
+    assert len({tuple(ids) for ids in outcome.values()}) == 1  # everyone got the same six rows
+    catalog = open_catalog(catalog_url)
+    with catalog.session() as orm:
+        assert sorted(orm.scalars(select(Task.name))) == sorted(names)
