@@ -15,6 +15,7 @@ from dashboard import api, pages, rating_pages
 from dashboard.analysis import AnalysisCache
 from dashboard.auth import LoginRateLimiter
 from dashboard.errors import install_error_handlers
+from dashboard.limits import BodyLimit
 from dashboard.replay_jobs import ReplayJobs
 from dashboard.settings import DashboardSettings
 from dashboard.signals import SignalCache
@@ -91,6 +92,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
             response.headers["Cache-Control"] = "no-store"
         return response
 
+    app.add_middleware(BodyLimit)  # every route's body limit (dashboard.limits); ingest keeps its own
     app.include_router(api.router)
     app.include_router(pages.router)
     app.include_router(rating_pages.router)

@@ -94,7 +94,9 @@ def status_of(error: VascsimError) -> int:
     return 400
 
 
-async def _answer(request: Request, status: int, message: str, headers: dict | None = None) -> Response:
+async def error_response(
+    request: Request, status: int, message: str, headers: dict | None = None
+) -> Response:
     if request.url.path.startswith("/api") or request.url.path.startswith("/ingest"):
         return JSONResponse(error_body(status, message), status_code=status, headers=headers)
     if status == 401:
@@ -113,24 +115,24 @@ async def _answer(request: Request, status: int, message: str, headers: dict | N
 def install_error_handlers(app) -> None:
     async def dashboard_error(request: Request, error: DashboardError) -> Response:
         headers = {"Retry-After": str(getattr(error, "retry_after", 1))} if error.status == 429 else None
-        return await _answer(request, error.status, error.message, headers)
+        return await error_response(request, error.status, error.message, headers)
 
     async def vascsim_error(request: Request, error: VascsimError) -> Response:
         api = request.url.path.startswith(("/api", "/ingest"))
-        return await _answer(request, status_of(error), said(error, api))
+        return await error_response(request, status_of(error), said(error, api))
 
     async def http_error(request: Request, error: StarletteHTTPException) -> Response:
-        return await _answer(request, error.status_code, str(error.detail))
+        return await error_response(request, error.status_code, str(error.detail))
 
     async def invalid(request: Request, error: RequestValidationError) -> Response:
         problems = "; ".join(
             f"{'.'.join(str(p) for p in item.get('loc', ()))}: {item.get('msg', '')}"
             for item in error.errors()
         )
-        return await _answer(request, 422, f"invalid request: {problems}"[:500])
+        return await error_response(request, 422, f"invalid request: {problems}"[:500])
 
     async def crashed(request: Request, error: Exception) -> Response:
-        return await _answer(request, 500, "internal error; the server log has the details")
+        return await error_response(request, 500, "internal error; the server log has the details")
 
     app.add_exception_handler(DashboardError, dashboard_error)
     app.add_exception_handler(VascsimError, vascsim_error)

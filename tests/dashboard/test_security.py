@@ -216,3 +216,31 @@ def test_concurrent_guesses_cannot_race_the_sign_in_limit(tmp_path, open_catalog
     checked = statuses.count(401) + statuses.count(200)
     assert checked <= 3 and statuses.count(429) >= 27, statuses
     assert set(statuses) <= {200, 401, 429}
+
+
+def test_request_bodies_are_limited_on_every_route(client_for):
+    """Issue 45, seen 11: an unauthenticated sign-in with a 256 MiB password was read whole, and a
+    64 MiB form part answered 200. Bodies over a route's limit are now refused with 413, whether
+    their length is declared or streamed."""
+    from dashboard.limits import API_BYTES, FORM_BYTES, SIGN_IN_BYTES
+
+    client, csrf = client_for("admin")
+    huge = {"username": "admin", "password": "x" * (SIGN_IN_BYTES + 1)}
+    answer = client.post("/api/login", json=huge)
+    assert answer.status_code == 413 and "byte limit" in answer.json()["error"]["message"]
+
+    def streamed(size: int):
+        for _ in range(size // 65536 + 1):
+            yield b"x" * 65536
+
+    answer = client.post(
+        "/api/login", content=streamed(SIGN_IN_BYTES), headers={"content-type": "application/json"}
+    )
+    assert answer.status_code == 413
+    form = {"csrf_token": csrf, "name": "big", "description": "x" * FORM_BYTES}
+    answer = client.post("/admin/studies", data=form)
+    assert answer.status_code == 413
+    note = {"text": "y" * API_BYTES}
+    answer = client.post("/api/studies", json=note, headers={"X-CSRF-Token": csrf})
+    assert answer.status_code == 413
+    assert client.post("/api/login", json={"username": "admin", "password": "nope"}).status_code == 401
