@@ -178,3 +178,35 @@ def display():
     yield name
     server.terminate()
     server.wait(10)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Issue 45, seen 13: the suite leaves no process behind. Anything still running that was started
+    with this run's temporary folder in its command line or environment (a killed run's worker, a
+    server a test forgot) fails the run, and is stopped."""
+    import signal
+
+    from tests.processes import started_under, still_running
+
+    if getattr(session.config, "workerinput", None) is not None:
+        return
+    factory = getattr(session.config, "_tmp_path_factory", None)
+    if factory is None:
+        return
+    base = str(factory.getbasetemp())
+    left = still_running(started_under(base), within=10.0)
+    if left:
+        names = []
+        for pid in left:
+            try:
+                with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+                    words = cmdline.read().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:
+                words = ""
+            names.append(f"{pid} {words[:120]}")
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        print(f"\nprocesses left running by the tests (now killed): {'; '.join(names)}")
+        session.exitstatus = 1

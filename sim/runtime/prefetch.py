@@ -80,7 +80,7 @@ class ColumnWorker:
         context = multiprocessing.get_context("fork")
         self._pipe, child_end = context.Pipe()
         self._process = context.Process(
-            target=_serve, args=(model, child_end), name="vascsim-columns", daemon=True
+            target=_serve, args=(model, child_end, self._owner), name="vascsim-columns", daemon=True
         )
         self._process.start()
         child_end.close()
@@ -118,9 +118,11 @@ class ColumnWorker:
             self._process.join()
 
 
-def _serve(model: TissueModel, pipe) -> None:
+def _serve(model: TissueModel, pipe, parent: int) -> None:
     """The worker's loop: node ids in, columns out (row-major (3k, 3N) float64); empty request = stop."""
     from threadpoolctl import threadpool_limits
+
+    _end_with(parent)
 
     # Ctrl-C in the terminal reaches the whole process group: the run stops itself and then this
     # worker (an empty request), so the worker leaves the signal to its parent instead of dying with
@@ -145,6 +147,19 @@ def _serve(model: TissueModel, pipe) -> None:
                 pipe.send_bytes(b"E" + f"{type(error).__name__}: {error}".encode())
                 continue
             pipe.send_bytes(b"O" + np.ascontiguousarray(columns.T).tobytes())
+
+
+def _end_with(parent: int) -> None:
+    """Die when ``parent`` dies, killed included (Linux: PR_SET_PDEATHSIG). Its pipe never reports the
+    parent gone while a sibling (the haptic or display process) holds the parent's end, so an orphaned
+    worker would otherwise wait for a request for ever."""
+    from sim.runtime.osrt import PR_SET_PDEATHSIG, libc_functions
+
+    libc = libc_functions()
+    if libc is not None:
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before the request was in place
+        os._exit(0)
 
 
 def _own_inverse_models(tissue: Tissue) -> list[TissueModel]:

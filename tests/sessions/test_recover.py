@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from recorder import SessionWriter
 from recorder.writer import sha256_of
 from sessions.cli import main
+from tests.processes import descendants, still_running
 from tests.recorder.test_recorder import rows
 
 
@@ -40,9 +41,12 @@ def test_a_killed_session_is_recovered_scored_and_checksummed(home):
             journal = journals[0]
             break
         time.sleep(0.05)
+    tree = descendants(child.pid)
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
     assert journal is not None, "the live session never wrote its journal"
+    # issue 45, seen 13: killed runs left their column worker and display process behind for ever
+    assert tree and still_running(tree, within=10.0) == []
     running = json.loads(invoke("sessions", "list", "--status", "running", "--json").stdout)
     assert len(running) == 1
     uid = running[0]["session"]

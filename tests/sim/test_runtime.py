@@ -408,7 +408,8 @@ def _ended(pid: int) -> bool:
 @pytest.mark.slow
 def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
     """SIGKILL the process running the session: its haptic process, which would go on commanding
-    the device, brings the force to zero within the rate limit and exits; the idle limit is gone."""
+    the device, brings the force to zero within the rate limit and exits; the idle limit is gone;
+    no process the run started is left."""
     import os
     import signal
     import subprocess
@@ -416,6 +417,7 @@ def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
     import time
 
     from sim.runtime.cpu import cpu_latency_limit
+    from tests.processes import descendants, still_running
 
     before = cpu_latency_limit()
     base = tmp_path / "run"
@@ -436,12 +438,16 @@ def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
         time.sleep(0.01)
     haptic = int(pid_file.read_text())
     assert cpu_latency_limit() == 0  # the run holds it
+    tree = descendants(child.pid)
+    assert haptic in tree and len(tree) >= 2  # the haptic process and the column worker at least
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
     deadline = time.monotonic() + 10
     while not _ended(haptic):
         assert time.monotonic() < deadline, "the haptic process outlived its session"
         time.sleep(0.05)
+    # issue 45, seen 13: every process the run started ends with it (the column worker stayed)
+    assert still_running(tree, within=10.0) == []
     forces = np.fromfile(forces_file, dtype=np.float64).reshape(-1, 3)
     assert len(forces) < 20_000  # it stopped, it did not run out its 60 s
     assert np.all(forces[-1] == 0)  # brought to zero, not dropped from where it was
