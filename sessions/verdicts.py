@@ -74,7 +74,9 @@ def kept_verdicts(catalog: Catalog, study_name: str, task: str, analysis: StudyA
         else:
             chosen.append((version, bool(passed)))
     judged = {v: _judged(analysis, by_version[v]) for v in sorted({v for v, _ in chosen})}
-    columns = sorted({c for frame in judged.values() for c in frame.columns if c.startswith("pass_")})
+    # each check as the session's own version reads it (pass_<metric>, and safety_<metric> and safe
+    # in non-compensatory mode); the verdict itself is the one kept
+    columns = sorted({c for frame in judged.values() for c in frame.columns if c != "passed"})
     proficiency = pd.DataFrame({"session_id": analysis.proficiency["session_id"]})
     for column in columns:
         proficiency[column] = pd.array(
