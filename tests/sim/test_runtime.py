@@ -397,14 +397,6 @@ simulation.run_realtime(60.0)
 """
 
 
-def _ended(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/status") as status:
-            return any(line.startswith("State:") and "Z" in line.split()[1] for line in status)
-    except FileNotFoundError:
-        return True
-
-
 @pytest.mark.slow
 def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
     """SIGKILL the process running the session: its haptic process, which would go on commanding
@@ -417,7 +409,7 @@ def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
     import time
 
     from sim.runtime.cpu import cpu_latency_limit
-    from tests.processes import descendants, still_running
+    from tests.processes import descendants, ended, still_running
 
     before = cpu_latency_limit()
     base = tmp_path / "run"
@@ -443,7 +435,7 @@ def test_a_killed_run_winds_its_haptic_process_down(tmp_path):
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
     deadline = time.monotonic() + 10
-    while not _ended(haptic):
+    while not ended(haptic):
         assert time.monotonic() < deadline, "the haptic process outlived its session"
         time.sleep(0.05)
     # issue 45, seen 13: every process the run started ends with it (the column worker stayed)
