@@ -113,13 +113,17 @@ def home(request: Request) -> Response:
 
 @router.get("/studies/{study_id}", response_class=HTMLResponse)
 def study_page(request: Request, study_id: Id, viewer: Staff, standard: int | None = None) -> Response:
+    return _study_view(
+        request, viewer, study_id, done=None if standard is None else f"Standard v{standard} set."
+    )
+
+
+def _study_view(request: Request, viewer: Viewer, study_id: int, **shown) -> Response:
+    """The study page, with ``shown`` (``done``, ``message``) beside the overview."""
     state = request.app.state
     overview = queries.study_overview(state.store, state.analyses, viewer, study_id)
     after = queries.ATTENTION_AFTER_TRIALS
-    done = None if standard is None else f"Standard v{standard} set."
-    return render(
-        request, "study.html", viewer, overview, overview=overview, attention_after=after, done=done
-    )
+    return render(request, "study.html", viewer, overview, overview=overview, attention_after=after, **shown)
 
 
 @router.post("/studies/{study_id}/standards", response_class=HTMLResponse)
@@ -139,16 +143,7 @@ def set_study_standard(
     try:
         record = set_standard(state.catalog, study.name, task, viewer.username, note.strip())
     except VascsimError as error:
-        overview = queries.study_overview(state.store, state.analyses, viewer, study_id)
-        page = render(
-            request,
-            "study.html",
-            viewer,
-            overview,
-            overview=overview,
-            attention_after=queries.ATTENTION_AFTER_TRIALS,
-            message=said(error),
-        )
+        page = _study_view(request, viewer, study_id, message=said(error))
         page.status_code = status_of(error)
         return page
     return RedirectResponse(f"/studies/{study_id}?standard={record.version}", status_code=303)

@@ -92,9 +92,7 @@ def study_overview(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
         row["attention"] = reasons
         if reasons:
             attention.append({"participant_id": row["id"], "code": row["code"], "reasons": reasons})
-    task = analysis.settings.task or (
-        str(analysis.sessions["task"].iloc[0]) if len(analysis.sessions) else None
-    )
+    task = analysed_task(analysis.settings, analysis.sessions)
     overview.update(
         task=task,
         benchmarks=benchmark_rows(analysis),

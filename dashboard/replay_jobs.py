@@ -58,12 +58,10 @@ class ReplayJobs:
                 which = "another replay" if busy[0].blind or blind else f"the replay of session {busy[0].uid}"
                 raise WrongState(f"{which} is rendering; try again when it is done")
             job = ReplayJob(uid, blind)
-            if blind:
-                replay_inputs(self.catalog, self.home, uid)  # checked before the job starts
-                job.thread = threading.Thread(target=self._render_blind, args=(job,), daemon=True)
-            else:
-                inputs = replay_inputs(self.catalog, self.home, uid, versus_group="experts")
-                job.thread = threading.Thread(target=self._render, args=(job, inputs), daemon=True)
+            # checked before the job starts, and read once: the render uses them
+            inputs = replay_inputs(self.catalog, self.home, uid, versus_group=None if blind else "experts")
+            render = self._render_blind if blind else self._render
+            job.thread = threading.Thread(target=render, args=(job, inputs), daemon=True)
             self._jobs[uid, blind] = job
             job.thread.start()
             return job
@@ -71,7 +69,7 @@ class ReplayJobs:
     def status(self, uid: str, blind: bool = False) -> ReplayJob | None:
         return self._jobs.get((uid, blind))
 
-    def _render_blind(self, job: ReplayJob) -> None:
+    def _render_blind(self, job: ReplayJob, inputs) -> None:
         from metrics.replay.export import ReplaySettings
         from sessions.replaying import render_blind_replay
 
@@ -79,7 +77,8 @@ class ReplayJobs:
             job.done, job.total = done, total
 
         try:
-            render_blind_replay(self.catalog, self.home, job.uid, ReplaySettings(size=REPLAY_SIZE), advance)
+            settings = ReplaySettings(size=REPLAY_SIZE)
+            render_blind_replay(self.catalog, self.home, job.uid, settings, advance, inputs)
             job.state = "done"
         except Exception:  # the rater is told it failed, not why (the cause can name the session)
             log.exception("blind render of session %s failed", job.uid)

@@ -97,7 +97,9 @@ def blind_replay_path(home: Path, uid: str) -> Path:
     return home / "replays" / "blind" / f"{uid}.mp4"
 
 
-def render_blind_replay(catalog: Catalog, home: Path, uid: str, settings=None, progress=None) -> Path:
+def render_blind_replay(
+    catalog: Catalog, home: Path, uid: str, settings=None, progress=None, inputs=None
+) -> Path:
     """Render session ``uid`` for blinded rating (:mod:`metrics.replay.blind`: the session alone, no
     identity, ghost, colours that judge, or readouts) to :func:`blind_replay_path` (the video writer
     moves the file into place only once it is whole)."""
@@ -106,7 +108,7 @@ def render_blind_replay(catalog: Catalog, home: Path, uid: str, settings=None, p
     from metrics.replay.export import ReplaySettings, export_replay
 
     settings = replace(settings or ReplaySettings(), blind=True, mode="ghost")
-    recorded, tissue, _ = replay_inputs(catalog, home, uid)
+    recorded, tissue, _ = inputs if inputs is not None else replay_inputs(catalog, home, uid)
     return export_replay(recorded, tissue, blind_replay_path(home, uid), [], settings, progress=progress).path
 
 

@@ -202,6 +202,11 @@ def standard_drift(analysis: StudyAnalysis, record: StandardRecord) -> list[dict
     return mark_drift([m for m in record.marks if m["metric"] in metrics], today)
 
 
+def standards_command(action: str, study_name: str, task: str) -> str:
+    """``vascsim standards ACTION`` for a study's task, quoted so it pastes as shown."""
+    return f"vascsim standards {action} --study {shlex.quote(study_name)} --task {shlex.quote(task)}"
+
+
 def set_command(study_name: str, task: str) -> str:
-    """The command that sets a standard, quoted so it pastes as shown."""
-    return f"vascsim standards set --study {shlex.quote(study_name)} --task {shlex.quote(task)}"
+    """The command that sets a standard."""
+    return standards_command("set", study_name, task)

@@ -11,7 +11,6 @@ same table (:func:`kept_verdicts`, called by :func:`sessions.analysis.analyse_ca
 
 from __future__ import annotations
 
-import shlex
 from dataclasses import dataclass
 from datetime import datetime
 
@@ -22,7 +21,7 @@ from sqlalchemy.exc import IntegrityError
 from metrics.study import StudyAnalysis, session_judge, with_verdicts
 from sessions.catalog import Catalog, CatalogError, WrongState, now
 from sessions.models import Rejudgement, Session, Standard, Verdict
-from sessions.standards import StandardRecord, set_command, standard_history
+from sessions.standards import StandardRecord, set_command, standard_history, standards_command
 
 
 def version_in_force(versions: list[StandardRecord], started_at: datetime | None) -> StandardRecord:
@@ -126,7 +125,7 @@ def kept_verdicts(catalog: Catalog, study_name: str, task: str, analysis: StudyA
         result.notes.append(
             f"{older} session(s) keep the verdicts they were given under an earlier version of the "
             f"standard (each says which); judge them under v{newest} with "
-            f"`{rejudge_command(study_name, task)} --reason ...`."
+            f"`{standards_command('rejudge', study_name, task)} --reason ...`."
         )
     return result
 
@@ -210,8 +209,3 @@ def rejudgements(catalog: Catalog, study_name: str, task: str) -> list[dict]:
             }
             for version, r in rows
         ]
-
-
-def rejudge_command(study_name: str, task: str) -> str:
-    """The command that re-judges a task's history, quoted so it pastes as shown."""
-    return f"vascsim standards rejudge --study {shlex.quote(study_name)} --task {shlex.quote(task)}"
