@@ -143,7 +143,8 @@ def run_session(
 
     The row is added first (with the next trial number when ``plan.trial`` is None);
     ``parameters`` may be a function of that trial number (a scripted pass seeded by it).
-    If the device cannot be opened, nothing was recorded and the row is removed again.
+    If the device cannot be opened or the task's simulation cannot be built, nothing was recorded
+    and the row is removed again (the recording starts only after both).
     A live device with no ``duration`` runs until the task is done, the trainee stops it, or
     :data:`sessions.running.scene.LIVE_TIME_FACTOR` times the task's budget. ``view``: a real-time
     session's window on the station's display (:class:`LiveView`); stopping it early (Escape,
@@ -191,14 +192,14 @@ def run_session(
         window = None
         if view is not None and plan.clock == "realtime":
             window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid), uid)
-    except BaseException:
+        options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
+        simulated = task_simulation(plan.task, device, cache_dir(home), **options)
+    except BaseException:  # nothing was recorded: no row, journal or ring is left behind
         with catalog.session() as orm:
             orm.delete(catalog.recorded_session(orm, uid))
         raise
     synthetic = synthetic or plan.device == SCRIPTED_DEVICE  # a script, not this person's hand
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
-    options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
-    simulated = task_simulation(plan.task, device, cache_dir(home), **options)
     simulation = RuntimeRecorder(writer).attach(simulated)
     if window is not None:
         from sessions.running.scene import stop_when_done

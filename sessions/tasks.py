@@ -314,11 +314,7 @@ def add_mesh_task(
     if name in TASKS or (user_tasks_dir() / name).exists():
         raise VascsimError(f"task {name!r} already exists")
     tissue_preset(tissue)  # an unknown preset is refused before anything is written
-    missing = [k for k in fixed if k not in mesh.node_sets]
-    if missing:
-        raise VascsimError(
-            f"the mesh has no node set {', '.join(missing)}; its sets: {', '.join(mesh.node_sets)}"
-        )
+    check_task_mesh(mesh, fixed, entry, stitch_radius)
     outer = mesh.node_sets.get("outer", mesh.surface_nodes)
     point, normal = _surface_point(mesh, np.asarray(entry, dtype=np.float64), outer)
     if bite_direction is None:
@@ -350,6 +346,58 @@ def add_mesh_task(
     )
     (folder / USER_TASK_FILE).write_text(json.dumps(dataclasses.asdict(spec), indent=1))
     return spec
+
+
+# A vessel wall model spans between these (m): a mesh outside was written in other units, or is no
+# vessel (a 1e-30 m cube meshed fine and then gave a singular wall).
+MESH_SPAN_M = (1e-3, 1.0)
+# Contact needs a patch of free outer-surface nodes about the entry, not one element's corners.
+MIN_CONTACT_NODES = 4
+
+
+def check_task_mesh(mesh, fixed: Sequence[str], entry: Sequence[float], stitch_radius: float) -> None:
+    """VascsimError, in one line naming what to change, unless ``mesh`` can carry a one-bite task:
+    a vessel's size in metres, held on at least one named node set that pins it in space (3 nodes
+    not on one line), and at least :data:`MIN_CONTACT_NODES` outer-surface nodes within
+    ``stitch_radius`` of ``entry`` that are not held (the needle's contact candidates)."""
+    span = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
+    low, high = MESH_SPAN_M
+    if not low <= span <= high:
+        raise VascsimError(
+            f"the mesh spans {span:.3g} m corner to corner; a vessel wall spans {low * 1e3:g} mm to "
+            f"{high:g} m (tetrahedral meshes are read in metres: rescale the file)"
+        )
+    if not fixed:
+        sets = ", ".join(mesh.node_sets) or "none"
+        raise VascsimError(
+            "the mesh has no node set to hold (point data 'set:end0', 'set:end1', ...: the cut ends); "
+            f"a wall held on nothing floats away (its sets: {sets})"
+        )
+    missing = [k for k in fixed if k not in mesh.node_sets]
+    if missing:
+        raise VascsimError(
+            f"the mesh has no node set {', '.join(missing)}; its sets: {', '.join(mesh.node_sets) or 'none'}"
+        )
+    held = np.unique(np.concatenate([np.asarray(mesh.node_sets[k], dtype=np.int64) for k in fixed]))
+    if held.size < 3 or np.linalg.matrix_rank(mesh.points[held] - mesh.points[held[0]], tol=1e-9 * span) < 2:
+        raise VascsimError(
+            f"the held node sets ({', '.join(fixed)}) have {held.size} node(s) on one line; the wall "
+            "would turn about them: hold at least three nodes not on a line"
+        )
+    outer = np.asarray(mesh.node_sets.get("outer", mesh.surface_nodes))
+    distance = np.linalg.norm(mesh.points[outer] - np.asarray(entry, dtype=np.float64), axis=1)
+    if distance.min() > stitch_radius:
+        raise VascsimError(
+            f"the entry point is {distance.min() * 1e3:.3g} mm from the mesh's outer surface; give a "
+            f"point within {stitch_radius * 1e3:g} mm of it (--entry, in mm)"
+        )
+    free = np.setdiff1d(outer[distance <= stitch_radius], held)
+    if free.size < MIN_CONTACT_NODES:
+        raise VascsimError(
+            f"only {free.size} free outer-surface node(s) lie within {stitch_radius * 1e3:g} mm of the "
+            f"entry; the needle needs {MIN_CONTACT_NODES} or more: refine the mesh there (edges of about "
+            "0.5 mm) or move the entry away from the held ends"
+        )
 
 
 def _surface_point(mesh, entry: NDArray[np.float64], candidates) -> tuple[NDArray, NDArray]:
@@ -453,6 +501,8 @@ def tissue_for(task: str, cache_dir: Path | None = None):
 
     spec = task_spec(task)
     mesh = task_mesh(spec)
+    if spec.scenario == "mesh_file":  # a stored task file can be edited by hand after `tasks add`
+        check_task_mesh(mesh, spec.parameters["fixed"], spec.entry, spec.parameters["stitch_radius_m"])
     fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
     candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
     regions = {region: preset.biphase for region, preset in region_presets(task).items()}

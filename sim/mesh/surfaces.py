@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import MeshError
 from sim.mesh.generators import default_layer_names
+from sim.mesh.io import quiet_reading
 from sim.mesh.tetmesh import TetMesh, signed_volumes
 
 UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6}
@@ -122,7 +123,8 @@ def read_surface(path: str | Path, units: str = "mm"):
     if not path.is_file():
         raise MeshError(f"surface file {path} does not exist")
     try:
-        surface = pv.read(path)
+        with quiet_reading():
+            surface = pv.read(path)
     except Exception as error:  # VTK's readers raise many types
         raise MeshError(f"surface file {path} could not be read: {error}") from error
     if not isinstance(surface, pv.PolyData):
