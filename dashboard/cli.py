@@ -52,6 +52,7 @@ def serve(host: str, port: int, secure_cookies: bool, setting_pairs: tuple[str, 
     from click.core import ParameterSource
 
     from dashboard.app import create_app
+    from dashboard.serving import ClientLimits, guarded_protocol
     from dashboard.settings import DashboardSettings, SettingError, parse_settings
     from sessions.config import settings_from_environment
 
@@ -75,8 +76,17 @@ def serve(host: str, port: int, secure_cookies: bool, setting_pairs: tuple[str, 
     if host not in ("127.0.0.1", "localhost", "::1"):
         click.echo(f"warning: binding {host}: the dashboard is reachable from other machines", err=True)
     click.echo(f"vascsim dashboard on http://{host}:{port}/ (data: {home}; Ctrl-C stops)")
-    with listening:
-        uvicorn.run(app, fd=listening.fileno(), log_level="warning", proxy_headers=False)
+    limits = ClientLimits(
+        settings.header_timeout_s, settings.body_timeout_s, settings.body_min_rate, settings.max_connections
+    )
+    with listening:  # slow or too many clients are cut off (dashboard.serving)
+        uvicorn.run(
+            app,
+            fd=listening.fileno(),
+            log_level="warning",
+            proxy_headers=False,
+            http=guarded_protocol(limits),
+        )
 
 
 def _listen(host: str, port: int) -> socket.socket:

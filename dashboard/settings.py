@@ -34,6 +34,14 @@ class DashboardSettings:
     login_window_s: float = _setting(300.0, "the rate-limit window for failed sign-ins, in seconds")
     live_poll_s: float = _setting(0.2, "how often the live view reads a running station's journal, seconds")
     live_rate_hz: float = _setting(50.0, "samples per second sent to a live view (decimated)")
+    header_timeout_s: float = _setting(
+        10.0, "a request's headers must arrive within this, seconds (else 408)"
+    )
+    body_timeout_s: float = _setting(
+        10.0, "a request's body must arrive within this plus 1 s per body_min_rate bytes (else 408)"
+    )
+    body_min_rate: float = _setting(500.0, "bytes per second a slow body must keep up, after body_timeout_s")
+    max_connections: int = _setting(256, "connections served at once, WebSockets included (more: 503)")
 
     @property
     def ingest_root(self) -> Path:

@@ -107,14 +107,24 @@ def client_for(seeded):
 
 @contextlib.contextmanager
 def running_server(app):
-    """The app under a real uvicorn server on 127.0.0.1 (a free port), in a thread; yields its base URL."""
+    """The app under a real uvicorn server with the slow-client guard, on 127.0.0.1 (a free port), in a
+    thread; yields its base URL."""
     import uvicorn
+
+    from dashboard.serving import ClientLimits, guarded_protocol
 
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     server = uvicorn.Server(
-        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", lifespan="on")
+        uvicorn.Config(
+            app,
+            host="127.0.0.1",
+            port=port,
+            log_level="warning",
+            lifespan="on",
+            http=guarded_protocol(ClientLimits()),  # as `vascsim serve` runs it
+        )
     )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
