@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import time
 from datetime import timedelta
 from pathlib import Path
 from typing import Annotated, Literal
@@ -13,7 +14,7 @@ from fastapi.responses import FileResponse, StreamingResponse
 from pydantic import BaseModel, Field
 
 from dashboard import queries
-from dashboard.auth import COOKIE, LoginRateLimiter, Viewer, current_viewer, limiter_key, require
+from dashboard.auth import COOKIE, LoginRateLimiter, Viewer, current_viewer, require, sign_in_keys
 from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
@@ -91,17 +92,21 @@ def sign_in(request: Request, response: Response, username: str, password: str) 
     """Check the credentials under the rate limit, set the sign-in cookie; (user, CSRF token)."""
     state = _state(request)
     limiter: LoginRateLimiter = state.login_limiter
-    key = limiter_key(request, username)
-    wait = limiter.claim(key)  # counted before the (slow) password check: concurrent guesses cannot race it
+    keys, at = sign_in_keys(request, username, limiter.attempts), time.monotonic()
+    wait = limiter.claim(
+        keys, at
+    )  # counted before the (slow) password check: concurrent guesses cannot race it
     if wait > 0:
-        error = DashboardError(429, f"too many failed sign-ins for {username!r}; try again in {wait:.0f} s")
+        error = DashboardError(
+            429, f"too many failed sign-ins for {username!r} or from this address; try again in {wait:.0f} s"
+        )
         error.retry_after = int(wait) + 1
         raise error
     signed = state.store.sign_in(username, password, timedelta(seconds=state.settings.login_lifetime_s))
     if signed is None:
         raise DashboardError(401, "wrong user name or password")  # the claimed attempt stays counted
     user, token, csrf = signed
-    limiter.succeeded(key)
+    limiter.succeeded(keys, at)
     response.set_cookie(
         COOKIE,
         token,

@@ -6,6 +6,7 @@ import secrets
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from fastapi import Depends, Request
@@ -31,8 +32,17 @@ class Viewer(Scope):
     csrf_token: str
 
 
+ACCOUNT_SPREAD = 4
+"""Failed sign-ins for one account from all addresses together: this many times the per-address limit
+(guessing from many addresses at once is throttled per account)."""
+ADDRESS_SPREAD = 10
+"""Failed sign-ins from one address over all accounts together: this many times the per-account
+limit (one address trying many names; generous, as a course's lab shares one address)."""
+
+
 class LoginRateLimiter:
-    """At most ``attempts`` failed sign-ins per key within ``window_s`` seconds (a sliding window)."""
+    """At most ``attempts`` failed sign-ins per key within ``window_s`` seconds (a sliding window);
+    a sign-in claims several keys at once (:func:`sign_in_keys`), each with its own limit."""
 
     def __init__(self, attempts: int, window_s: float) -> None:
         self.attempts, self.window_s = attempts, window_s
@@ -45,25 +55,36 @@ class LoginRateLimiter:
             failures.popleft()
         return failures
 
-    def retry_after(self, key: str, at: float | None = None) -> float:
-        """Seconds until ``key`` may try again (0 when it may now)."""
-        at = time.monotonic() if at is None else at
-        with self._lock:
-            failures = self._recent(key, at)
-            if len(failures) < self.attempts:
-                return 0.0
-            return failures[0] + self.window_s - at
+    def _limited(self, keys: str | Sequence[tuple[str, int]]) -> list[tuple[str, int]]:
+        return [(keys, self.attempts)] if isinstance(keys, str) else list(keys)
 
-    def claim(self, key: str, at: float | None = None) -> float:
-        """Take one attempt for ``key`` before the password is checked: 0 when it may try (the attempt
-        counts as failed until :meth:`succeeded` clears it), else the seconds to wait. Counted under
-        the lock, so concurrent attempts cannot all pass the check before any failure is recorded."""
+    def retry_after(self, keys: str | Sequence[tuple[str, int]], at: float | None = None) -> float:
+        """Seconds until ``keys`` (one key, or (key, limit) pairs) may try again (0 when they may now)."""
         at = time.monotonic() if at is None else at
         with self._lock:
-            failures = self._recent(key, at)
-            if len(failures) >= self.attempts:
-                return failures[0] + self.window_s - at
-            failures.append(at)
+            return self._wait(self._limited(keys), at)
+
+    def _wait(self, keys: list[tuple[str, int]], at: float) -> float:
+        waits = [
+            failures[len(failures) - limit] + self.window_s - at
+            for key, limit in keys
+            if len(failures := self._recent(key, at)) >= limit
+        ]
+        return max(waits, default=0.0)
+
+    def claim(self, keys: str | Sequence[tuple[str, int]], at: float | None = None) -> float:
+        """Take one attempt on every key before the password is checked: 0 when it may try (the
+        attempt counts as failed until :meth:`succeeded` clears it), else the seconds to wait.
+        Counted under the lock, so concurrent attempts cannot all pass the check before any
+        failure is recorded, and no key is charged for an attempt another key refused."""
+        at = time.monotonic() if at is None else at
+        limited = self._limited(keys)
+        with self._lock:
+            wait = self._wait(limited, at)
+            if wait > 0:
+                return wait
+            for key, _ in limited:
+                self._recent(key, at).append(at)
             return 0.0
 
     def failed(self, key: str, at: float | None = None) -> None:
@@ -71,14 +92,28 @@ class LoginRateLimiter:
         with self._lock:
             self._recent(key, at).append(at)
 
-    def succeeded(self, key: str) -> None:
+    def succeeded(self, keys: str | Sequence[tuple[str, int]], at: float | None = None) -> None:
+        """A right password: the first key (this name from this address) starts afresh; the wider
+        keys only lose the attempt claimed ``at`` (a success must not clear others' guesses)."""
+        limited = self._limited(keys)
         with self._lock:
-            self._failures.pop(key, None)
+            self._failures.pop(limited[0][0], None)
+            for key, _ in limited[1:]:
+                failures = self._failures.get(key)
+                if failures is not None and at is not None and at in failures:
+                    failures.remove(at)
 
 
-def limiter_key(request: Request, username: str) -> str:
+def sign_in_keys(request: Request, username: str, attempts: int) -> tuple[tuple[str, int], ...]:
+    """The limiter keys a sign-in claims, with their limits: this name from this address
+    (``attempts``), this name from anywhere, and this address for any name."""
     address = request.client.host if request.client else "?"
-    return f"{username.lower()}|{address}"
+    name = username.lower()
+    return (
+        (f"{name}|{address}", attempts),
+        (f"account:{name}", attempts * ACCOUNT_SPREAD),
+        (f"address:{address}", attempts * ADDRESS_SPREAD),
+    )
 
 
 def optional_viewer(request: Request) -> Viewer | None:

@@ -30,7 +30,9 @@ class DashboardSettings:
     port: int = _setting(8000, "TCP port")
     secure_cookies: bool = _setting(False, "mark cookies Secure (set when served behind HTTPS)")
     login_lifetime_s: float = _setting(8 * 3600.0, "how long a sign-in lasts, in seconds")
-    login_attempts: int = _setting(5, "failed sign-ins allowed per user name and address in the window")
+    login_attempts: int = _setting(
+        5, "failed sign-ins per user name and address in the window (4x per name, 10x per address)"
+    )
     login_window_s: float = _setting(300.0, "the rate-limit window for failed sign-ins, in seconds")
     live_poll_s: float = _setting(0.2, "how often the live view reads a running station's journal, seconds")
     live_rate_hz: float = _setting(50.0, "samples per second sent to a live view (decimated)")

@@ -50,13 +50,15 @@ def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
 
 def read_header(directory: Path) -> dict[str, Any]:
     """A session directory's ``header.json``; RecorderError if it is missing, damaged or not an object."""
+    from recorder.json_input import JSONInputError, parse_json
+
     path = directory / HEADER_FILE
     try:
-        header = json.loads(path.read_bytes().decode("utf-8"))
+        header = parse_json(path.read_bytes(), str(path))  # a bundle's or a station's: outside input
     except FileNotFoundError:
         raise RecorderError(f"{directory} is not a session directory (no {HEADER_FILE})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise RecorderError(f"{path} is not valid JSON (damaged?): {error}") from error
+    except JSONInputError as error:
+        raise RecorderError(f"{error} (damaged?)") from None
     if not isinstance(header, dict):
         raise RecorderError(f"{path} holds a JSON {type(header).__name__}, not a session header object")
     return header

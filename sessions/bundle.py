@@ -199,6 +199,7 @@ def import_bundle(
     placed: list[Path] = []
     try:
         _extract(bundle, manifest, staging)
+        _check_headers(manifest, staging)
         computed = _recompute(manifest, staging, home, progress) if recompute else {}
         with catalog.session() as orm:
             differing = _add_rows(catalog, orm, manifest, home, computed)
@@ -223,6 +224,39 @@ def import_bundle(
         "metric_values_differing": differing,
         "signed_by": None if trust is None else trusted_fingerprint(trust),
     }
+
+
+HEADER_AGREES = (
+    ("session_id", "uid"),
+    ("task", "task"),
+    ("participant_id", "participant"),
+    ("device", "device"),
+)
+"""A recorded session's header.json key -> the manifest entry's field that must say the same: the
+header's task picks the tissue model the session is scored with, so a header that contradicts its
+manifest would score one task's motion on another's wall."""
+
+
+def _check_headers(manifest: Manifest, staging: Path) -> None:
+    """CatalogError naming the session and the key unless every recorded session's own header
+    (those with a header.json: the simulator's) agrees with its manifest entry."""
+    from recorder import RecorderError
+    from recorder.layout import HEADER_FILE, read_header
+
+    for entry in manifest.sessions:
+        folder = staging / entry.uid
+        if entry.single_file or not (folder / HEADER_FILE).is_file():
+            continue  # a bench video's track or a JIGSAWS kinematics file: no header of its own
+        try:
+            header = read_header(folder)
+        except RecorderError as error:
+            raise CatalogError(f"session {entry.uid} of the bundle: {error}; nothing was imported") from None
+        for key, field in HEADER_AGREES:
+            if key in header and header[key] != getattr(entry, field):
+                raise CatalogError(
+                    f"session {entry.uid} of the bundle: its {HEADER_FILE} says {key} {header[key]!r} but "
+                    f"the manifest says {getattr(entry, field)!r}; nothing was imported"
+                )
 
 
 def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> dict[str, tuple]:

@@ -218,6 +218,39 @@ def test_concurrent_guesses_cannot_race_the_sign_in_limit(tmp_path, open_catalog
     assert set(statuses) <= {200, 401, 429}
 
 
+def test_guesses_from_many_addresses_are_limited_per_account_and_per_address(tmp_path, open_catalog):
+    """Issue 45: the sign-in limit was per name *and* address, so guessing one account's password
+    from a new address each time was never limited. Now the account is limited over all addresses
+    (4x the limit) and an address over all names (10x), each counted before the password check;
+    real connections from 127.0.0.2, 127.0.0.3, ... to a real server."""
+    import httpx
+
+    from dashboard.auth import ACCOUNT_SPREAD, ADDRESS_SPREAD
+    from tests.dashboard.conftest import running_server
+
+    site = seed_dashboard(
+        open_catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}"),
+        tmp_path / "home",
+        {"login_attempts": 2, "login_window_s": 60.0},
+    )
+
+    def attempt(base: str, address: str, username: str, password: str) -> int:
+        transport = httpx.HTTPTransport(local_address=address)
+        with httpx.Client(transport=transport, timeout=60) as client:
+            body = {"username": username, "password": password}
+            return client.post(f"{base}/api/login", json=body).status_code
+
+    with running_server(site.app) as base:
+        spread = [attempt(base, f"127.0.1.{k}", "admin", "wrong password") for k in range(1, 12)]
+        assert spread == [401] * (2 * ACCOUNT_SPREAD) + [429] * 3, spread  # one guess per address
+        assert attempt(base, "127.0.1.99", "admin", PASSWORD) == 429  # the account waits, whoever asks
+        assert attempt(base, "127.0.1.99", "researcher", PASSWORD) == 200  # other accounts do not
+        names = [f"user{k}" for k in range(2 * ADDRESS_SPREAD + 2)]
+        sprayed = [attempt(base, "127.0.2.1", name, "wrong password") for name in names]
+        assert sprayed == [401] * (2 * ADDRESS_SPREAD) + [429] * 2, sprayed  # one address, many names
+        assert attempt(base, "127.0.2.2", "trainee", PASSWORD) == 200  # another address is not held
+
+
 def test_request_bodies_are_limited_on_every_route(client_for):
     """Issue 45, seen 11: an unauthenticated sign-in with a 256 MiB password was read whole, and a
     64 MiB form part answered 200. Bodies over a route's limit are now refused with 413, whether

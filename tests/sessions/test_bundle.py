@@ -471,3 +471,59 @@ def test_signed_bundles_verify_against_the_trusted_key_only(small_study, tmp_pat
     catalog.close()
     result = invoke("import-bundle", str(signed), "--trust", public)
     assert result.exit_code == 0 and f"signed by trusted key {fingerprint}" in result.output, result.output
+
+
+@pytest.mark.slow
+def test_a_header_that_contradicts_its_manifest_is_refused(small_study, tmp_path, monkeypatch):
+    """Issue 45, seen 4: a session's header.json whose task contradicts the manifest was accepted
+    (and the task in the header picks the wall the session is scored on); a header.json of nested
+    brackets was a RecursionError. The forger re-hashes the file and the manifest: no checksum helps."""
+    import hashlib
+
+    bundle = tmp_path / "course.zip"
+    assert invoke("export", "--study", "course", "-o", str(bundle)).exit_code == 0
+    monkeypatch.setenv("VASCSIM_HOME", str(tmp_path / "elsewhere"))  # a fresh site imports it
+    monkeypatch.setenv("VASCSIM_DATABASE_URL", f"sqlite:///{tmp_path / 'elsewhere.sqlite'}")
+    with zipfile.ZipFile(bundle) as archive:
+        manifest = json.loads(archive.read("manifest.json"))
+    entry = manifest["sessions"][0]
+    member = f"files/{entry['uid']}/header.json"
+
+    def forged(header_bytes: bytes) -> bytes:
+        record = next(f for f in entry["files"] if f["name"] == "header.json")
+        record.update(sha256=hashlib.sha256(header_bytes).hexdigest(), bytes=len(header_bytes))
+        raw = json.dumps(manifest).encode()
+
+        def change(name, data):
+            if name == member:
+                return header_bytes
+            if name == "manifest.json":
+                return raw
+            return hashlib.sha256(raw).hexdigest().encode() if name == "manifest.sha256" else data
+
+        return change
+
+    with zipfile.ZipFile(bundle) as archive:
+        header = json.loads(archive.read(member))
+    cases = {
+        "task": ({**header, "task": "interrupted-stitch"}, "its header.json says task 'interrupted-stitch'"),
+        "session": ({**header, "session_id": "someone-else"}, "says session_id 'someone-else'"),
+        "participant": ({**header, "participant_id": "E1"}, "says participant_id 'E1'"),
+    }
+    runner = CliRunner()
+    for name, (changed, message) in cases.items():
+        out = tmp_path / f"{name}.zip"
+        if header.get("participant_id") == "E1" and name == "participant":
+            changed["participant_id"] = "T1"
+            message = "says participant_id 'T1'"
+        _rewrite(bundle, out, forged(json.dumps(changed).encode()))
+        result = runner.invoke(main, ["import-bundle", str(out)])
+        assert result.exit_code == 1 and message in result.output, (name, result.output)
+        assert result.output.count("\n") == 1 and "nothing was imported" in result.output
+    deep = tmp_path / "deep.zip"
+    _rewrite(bundle, deep, forged(b"[" * 5000 + b"]" * 5000))
+    result = runner.invoke(main, ["import-bundle", str(deep)])
+    assert result.exit_code == 1 and "nests arrays or objects deeper than 64" in result.output, result.output
+    assert result.output.count("\n") == 1
+    assert invoke("sessions", "list", "--json").stdout.strip() == "[]"  # nothing half-imported
+    assert runner.invoke(main, ["import-bundle", str(bundle)]).exit_code == 0  # the true bundle still goes in
