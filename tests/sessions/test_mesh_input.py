@@ -166,15 +166,14 @@ def test_a_tet_mesh_run_cannot_use_is_refused_in_one_line(tmp_path):
         assert not (tmp_path / "home" / "tasks" / name).exists()
 
 
-def test_a_run_whose_set_up_fails_leaves_nothing_behind(tmp_path):
+def test_a_run_whose_set_up_fails_leaves_nothing_behind(tmp_path, catalog_url):
     """A stored task whose mesh was replaced by hand after `tasks add` (no held ends now): `vascsim
     run` refuses it in one line and leaves no catalogue row, session folder, journal or ring (the
     row was left `running`, with its journals and a 19 MB ring in /dev/shm)."""
-    import sqlite3
+    import sqlalchemy
 
     home = tmp_path / "home"
-    env = {**os.environ, "VASCSIM_HOME": str(home)}
-    env.pop("VASCSIM_DATABASE_URL", None)
+    env = {**os.environ, "VASCSIM_HOME": str(home), "VASCSIM_DATABASE_URL": catalog_url}
 
     def vascsim(*args):
         return subprocess.run([VASCSIM, *args], env=env, capture_output=True, text=True, timeout=300)
@@ -191,8 +190,12 @@ def test_a_run_whose_set_up_fails_leaves_nothing_behind(tmp_path):
     *notes, error = ran.stderr.strip().splitlines()
     assert ran.returncode == 1 and all(line.startswith("note: ") for line in notes), ran.stderr
     assert error == "vascsim: error: the mesh has no node set end0, end1; its sets: none", ran.stderr
-    with sqlite3.connect(home / "catalog.sqlite") as db:
-        assert db.execute("select count(*) from sessions").fetchone() == (0,)
+    engine = sqlalchemy.create_engine(catalog_url.replace("postgresql://", "postgresql+psycopg://"))
+    try:
+        with engine.connect() as db:
+            assert db.execute(sqlalchemy.text("select count(*) from sessions")).scalar() == 0
+    finally:
+        engine.dispose()
     assert not (home / "sessions").exists() or not any((home / "sessions").iterdir())
     assert set(Path("/dev/shm").glob("vascsim-ring-*")) <= rings
 
