@@ -2,6 +2,7 @@
 server; bit-flipped and truncated session files are refused with RecorderError, never anything else."""
 
 import itertools
+import json
 import shutil
 
 import numpy as np
@@ -186,3 +187,47 @@ def test_damaged_journals_recover_or_are_refused(tmp_path_factory, data):
     except RecorderError:  # e.g. a flipped time that now goes backwards: named, not hidden
         return
     assert session.samples.num_rows <= 300
+
+
+JSON_SCALARS = st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=8)
+JSON_VALUES = st.recursive(
+    JSON_SCALARS,
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3),
+    max_leaves=12,
+)
+SERVER_KEYS = ["station", "session", "status", "received_unix", "journal_checksum", "flush_interval_s"]
+
+
+def _nested(depth: int, opener: str) -> str:
+    """``depth`` levels of arrays or of objects."""
+    return "[" * depth + "]" * depth if opener == "[" else '{"a":' * depth + "1" + "}" * depth
+
+
+@FUZZ
+@given(data=st.data())
+def test_hostile_headers_close_bodies_and_sequence_numbers_get_a_4xx(server, data):
+    """Issue 45, seen 1-3 as a fuzz case: any JSON (deep nesting to 6,000 levels, server-owned keys,
+    NaN spelled out), any sequence text (Unicode digits), over HTTP and WebSocket: every answer is
+    one of the declared statuses in the one error shape, never a 500 or a dropped socket."""
+    _, _, client = server
+    session = f"j{next(FRESH)}"
+    kind = data.draw(st.sampled_from(["value", "deep-array", "deep-object", "server-key", "nan"]))
+    if kind == "value":
+        text = json.dumps(data.draw(JSON_VALUES))
+    elif kind.startswith("deep"):
+        text = _nested(data.draw(st.integers(1, 6000)), "[" if kind == "deep-array" else "{")
+    elif kind == "server-key":
+        text = json.dumps({data.draw(st.sampled_from(SERVER_KEYS)): 1, "task": "t"})
+    else:
+        text = '{"trial": NaN}'
+    for method, path in (("put", "header"), ("post", "close")):
+        answer = getattr(client, method)(f"/api/sessions/{session}/{path}", content=text, headers=AUTH)
+        assert answer.status_code in STATUSES, answer.text
+        assert set(answer.json()) <= {"error", "stream", "ack", "duplicate", "session", "status", "header"}
+    sequence = data.draw(st.text(alphabet="0123456789²³¹٣۳߃१১੧୨௩౪೫൬๗໘༩၀", min_size=1, max_size=4))
+    answer = client.post(f"/api/sessions/{session}/samples/{sequence}", content=b"", headers=AUTH)
+    assert answer.status_code in STATUSES and "error" in answer.json(), answer.text
+    with client.websocket_connect(f"/api/sessions/{session}/ws", headers=AUTH) as ws:
+        ws.send_text(text)
+        reply = ws.receive_json()
+        assert reply["status"] in STATUSES
