@@ -195,7 +195,7 @@ def mark_drift(marks: Sequence[dict], today: pd.DataFrame) -> list[dict]:
 
 def drift_line(entry: dict) -> str:
     """One drift entry in words and display units: "peak force: today's experts would put the mark at
-    <= 0.52 N (set at <= 0.4 N, interval 0.36 N to 0.45 N): more lenient"."""
+    <= 520 mN (set at <= 400 mN, interval 360 mN to 450 mN): more lenient"."""
     from metrics.registry import display_name
 
     sign = "<=" if REGISTRY[entry["metric"]].better == "lower" else ">="

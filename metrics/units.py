@@ -1,10 +1,10 @@
 """SI inside, the units a surgeon reads at the edge: one conversion every front-end uses.
 
 Metrics are computed and stored in SI (m, m/s, m^2, Pa, N, s, deg). What a person reads is in
-millimetres, mm/s, mm^2 and kPa; forces stay in newtons (suture-needle forces are 0.1-3 N), times
-in seconds, angles in degrees. :func:`display_unit` and :func:`in_display_units` are the only
-place that says so: the CLI, the dashboard and the report call them, so a value reads the same
-everywhere.
+millimetres, mm/s, mm^2, kPa and millinewtons (suture-needle forces are 100-3000 mN, as the replay,
+the live view and the tissue tools show them), times in seconds, angles in degrees.
+:func:`display_unit` and :func:`in_display_units` are the only place that says so: the CLI, the
+dashboard and the report call them, so a value reads the same everywhere.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ DISPLAY_UNITS: dict[str, tuple[str, float]] = {
     "m/s": ("mm/s", 1e3),
     "m^2": ("mm^2", 1e6),
     "Pa": ("kPa", 1e-3),
-    "N": ("N", 1.0),
-    "N/s": ("N/s", 1.0),
+    "N": ("mN", 1e3),
+    "N/s": ("mN/s", 1e3),
     "s": ("s", 1.0),
     "deg": ("deg", 1.0),
     "1": ("", 1.0),

@@ -192,7 +192,7 @@ def _diseased_wall() -> TaskSpec:
         "diseased-wall",
         "vessel_patch",
         "The arteriotomy closure through a diseased wall: the row's second and third bites go through a "
-        "calcified plaque (four times stiffer, puncture at 1.5 N instead of 0.8 N), where a decisive "
+        "calcified plaque (four times stiffer, puncture at 1500 mN instead of 800 mN), where a decisive "
         "needle at a square angle matters most.",
         row.entry,
         row.normal,

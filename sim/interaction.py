@@ -460,7 +460,7 @@ class NeedleInteraction(GraphicsRateTracking):
                     tuple(contact.barycentric),
                     angle,
                     self.tip_speed,
-                    f"normal force {normal_force:.3f} N",
+                    f"normal force {1e3 * normal_force:.0f} mN",
                 )
             )
         return FemStep(force, nodes, reactions, events)
@@ -650,7 +650,7 @@ class NeedleInteraction(GraphicsRateTracking):
                     contact.triangle,
                     tuple(contact.barycentric),
                     tip_speed=self.tip_speed,
-                    detail=f"the wall gave way {where} at {self.forces.tear_force:.2f} N",
+                    detail=f"the wall gave way {where} at {1e3 * self.forces.tear_force:.0f} mN",
                 )
             )
         return events

@@ -185,9 +185,9 @@ def _print_curve(curve: Any) -> None:
     for header in (
         "strain",
         "stretch λ",
-        "force E1-only (N)",
-        "force biphase (N)",
-        f"force biphase @ {curve.fast_speed * 1e3:.0f} mm/s (N)",
+        "force E1-only (mN)",
+        "force biphase (mN)",
+        f"force biphase @ {curve.fast_speed * 1e3:.0f} mm/s (mN)",
         "volume change E1-only (%)",
         "volume change biphase (%)",
     ):
@@ -196,9 +196,9 @@ def _print_curve(curve: Any) -> None:
         table.add_row(
             f"{strain:.2f}",
             f"{curve.stretch_ratio[i]:.2f}",
-            f"{curve.force_linear[i]:.4f}",
-            f"{curve.force_biphase[i]:.4f}",
-            f"{curve.force_biphase_fast[i]:.4f}",
+            f"{1e3 * curve.force_linear[i]:.1f}",
+            f"{1e3 * curve.force_biphase[i]:.1f}",
+            f"{1e3 * curve.force_biphase_fast[i]:.1f}",
             f"{100 * curve.volume_change_linear[i]:+.2f}",
             f"{100 * curve.volume_change_biphase[i]:+.2f}",
         )

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from metrics.units import display_unit, in_display_units
+
 STATE_WORDS = {
     "free": "needle free",
     "contact": "needle touching the wall",
@@ -77,7 +79,7 @@ class HudTracker:
         if limits.damage_stress_pa is not None and local_stress >= limits.damage_stress_pa:
             self._warn(now, "wall over-stressed near the needle: ease off and follow the needle's curve")
         elif limits.device_max_n > 0 and magnitude >= limits.device_max_n:
-            self._warn(now, f"force at the device's limit ({limits.device_max_n:.2f} N): ease off")
+            self._warn(now, f"force at the device's limit ({_force(limits.device_max_n)}): ease off")
         elif limits.expert_force_n is not None and magnitude > 2.0 * limits.expert_force_n[1]:
             self._warn(now, "more than twice the experts' force: turn the wrist, do not push")
 
@@ -93,7 +95,7 @@ class HudTracker:
             clock=f"{_clock(now)} of {_clock(limits.time_budget_s)}",
             over_time=now > limits.time_budget_s,
             stitch="all stitches placed" if done else f"stitch {stitch} of {limits.stitches}",
-            force=f"force {magnitude:.2f} N" + self._force_context(),
+            force=f"force {_force(magnitude)}" + self._force_context(),
             force_fraction=min(magnitude / limits.gauge_full_n, 1.0),
             state=STATE_WORDS.get(self._state, self._state),
             warning=self._warning if now <= self._warning_until else "",
@@ -104,10 +106,17 @@ class HudTracker:
         limits, parts = self.limits, []
         if limits.expert_force_n is not None:
             low, high = limits.expert_force_n
-            parts.append(f"experts {low:.2f}-{high:.2f}")
+            parts.append(f"experts {_force(low, unit=False)}-{_force(high)}")
         if limits.device_max_n > 0:
-            parts.append(f"device max {limits.device_max_n:.2f}")
-        return f" ({'; '.join(parts)} N)" if parts else ""
+            parts.append(f"device max {_force(limits.device_max_n)}")
+        return f" ({'; '.join(parts)})" if parts else ""
+
+
+def _force(newtons: float, unit: bool = True) -> str:
+    """A force as the trainee reads it everywhere ("830 mN": metrics.units' display unit)."""
+    value = in_display_units(newtons, "N")
+    text = "-" if value is None else f"{value:.0f}"
+    return f"{text} {display_unit('N')}" if unit else text
 
 
 def _clock(seconds: float) -> str:

@@ -32,7 +32,7 @@ def recovered_event(now: float) -> tuple[float, str, str]:
 
 
 def clamped_event(now: float, magnitude: float, limit: float) -> tuple[float, str, str]:
-    return (now, "force_clamped", f"{magnitude:.3f} N clamped to the rated {limit:.3f} N")
+    return (now, "force_clamped", f"{1e3 * magnitude:.0f} mN clamped to the rated {1e3 * limit:.0f} mN")
 
 
 @dataclass(frozen=True)

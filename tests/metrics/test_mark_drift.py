@@ -51,5 +51,5 @@ def test_drift_is_reported_only_beyond_the_interval_with_its_direction():
         ("economy_of_motion", "stricter"),
     ]
     line = drift_line(moved[0])
-    assert line.startswith("peak force: today's experts would put the mark at <= 0.52 N (set at <= 0.4 N")
-    assert line.endswith("interval 0.36 N to 0.45 N): more lenient")
+    assert line.startswith("peak force: today's experts would put the mark at <= 520 mN (set at <= 400 mN")
+    assert line.endswith("interval 360 mN to 450 mN): more lenient")

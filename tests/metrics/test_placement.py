@@ -271,7 +271,7 @@ def test_the_diseased_wall_pierces_its_plaque_at_the_calcified_threshold(tmp_pat
     assert wall.stiff.inverse_source is not None
     streams = recorded_task("diseased-wall", 1.0, 2, tmp_path)
     pierces = streams.events[streams.events.kind == "pierce"]
-    forces = pierces.detail.str.extract(r"normal force ([0-9.]+) N")[0].astype(float).to_numpy()
+    forces = pierces.detail.str.extract(r"normal force ([0-9.]+) mN")[0].astype(float).to_numpy() / 1e3
     assert len(forces) == 3, pierces
     assert 0.8 <= forces[0] < 1.2, forces  # healthy wall
     assert (forces[1:] >= 1.5).all() and (forces[1:] < 2.2).all(), forces  # the plaque

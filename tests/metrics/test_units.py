@@ -19,7 +19,8 @@ def test_known_conversions_by_hand():
     assert in_display_units(0.004, "m/s") == pytest.approx(4.0) and display_unit("m/s") == "mm/s"
     assert in_display_units(6.8e-5, "m^2") == pytest.approx(68.0) and display_unit("m^2") == "mm^2"
     assert in_display_units(4.87e5, "Pa") == pytest.approx(487.0) and display_unit("Pa") == "kPa"
-    assert in_display_units(0.8, "N") == 0.8 and in_display_units(3.0, "deg") == 3.0
+    assert in_display_units(0.8, "N") == pytest.approx(800.0) and display_unit("N") == "mN"
+    assert in_display_units(3.0, "deg") == 3.0 and shown(0.83, "N") == "830 mN"
     assert in_display_units(math.nan, "m") is None and in_display_units(None, "m") is None
     assert shown(0.00146, "m") == "1.46 mm" and shown(4.87e5, "Pa") == "487 kPa"
     assert shown(2.0, "1") == "2" and shown(None, "m") == "-"

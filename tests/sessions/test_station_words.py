@@ -32,12 +32,12 @@ def test_the_strip_counts_stitches_marks_bites_and_says_what_is_unsafe():
     assert reading.stitch == "stitch 2 of 3"
     assert reading.clock == "0:00 of 1:00" and not reading.over_time
     assert reading.warning.startswith("wall over-stressed near the needle")
-    assert reading.force == "force 0.00 N (experts 0.80-1.00; device max 0.88 N)"
+    assert reading.force == "force 0 mN (experts 800-1000 mN; device max 880 mN)"
     assert hud.reading(2.6, np.zeros(3)).warning == ""  # a warning shows for two seconds
     late = hud.reading(75.0, np.array([0.0, 3.0, 4.0]))
     assert late.over_time and late.clock == "1:15 of 1:00" and late.force_fraction == 1.0
     hud.update(76.0, "contact", np.array([0.9, 0.0, 0.0]), tip, 0.0)
-    assert "device's limit (0.88 N)" in hud.reading(76.0, np.zeros(3)).warning
+    assert "device's limit (880 mN)" in hud.reading(76.0, np.zeros(3)).warning
 
 
 def test_the_instruction_screen_says_the_task_marks_budget_controls_and_how_to_start():

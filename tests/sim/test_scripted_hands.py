@@ -44,7 +44,7 @@ def test_a_clumsy_hand_pierces_with_a_felt_force_and_nothing_implausible(task, c
         pierces = [e for e in events if e.kind == "pierce"]
         assert pierces, (task, trial, "no puncture")
         for pierce in pierces:
-            normal = float(pierce.detail.split()[2])  # "normal force X N"
+            normal = float(pierce.detail.split()[2]) / 1e3  # "normal force X mN"
             assert 0.3 <= normal <= 6.0, (task, trial, pierce.detail)
         implausible = [e.detail for e in events if e.kind == "implausible_hit"]
         assert not implausible, (task, trial, implausible)
