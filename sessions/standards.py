@@ -190,16 +190,50 @@ def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note
 
 def standard_drift(analysis: StudyAnalysis, record: StandardRecord) -> list[dict]:
     """The marks of ``record`` that the experts in ``analysis`` (today's data) would move beyond the
-    interval each had when it was set (:func:`metrics.proficiency.mark_drift`)."""
+    interval each had when it was set (:func:`metrics.proficiency.mark_drift`). A mark set before
+    marks kept their interval gets it now, from the very expert sessions the standard names
+    (:func:`set_time_intervals`): the check never skips a mark for its age."""
     settings = analysis.settings
     practice = analysis.sessions[practice_mask(analysis.sessions)]
-    metrics = [m["metric"] for m in record.marks if m.get("interval") and m["metric"] in practice.columns]
+    marks = [m for m in set_time_intervals(analysis, record) if m["metric"] in practice.columns]
+    metrics = [m["metric"] for m in marks if m.get("interval")]
     if not metrics or not (practice[settings.group_col] == settings.skilled_group).any():
         return []
     today = proficiency_benchmarks(
         practice, metrics, settings.group_col, settings.skilled_group, settings.cluster_col, record.rule
     )
-    return mark_drift([m for m in record.marks if m["metric"] in metrics], today)
+    return mark_drift([m for m in marks if m["metric"] in metrics], today)
+
+
+def set_time_intervals(analysis: StudyAnalysis, record: StandardRecord) -> list[dict]:
+    """``record``'s marks, each with its interval: as stored, or, for a mark stored without one
+    (set before marks kept it), the same bootstrap over the expert sessions the standard names
+    (``record.sessions``, as scored in ``analysis``) with the standard's rule; for the contrasting
+    rule the unskilled participants' sessions in ``analysis`` stand in for those of the day."""
+    missing = [m["metric"] for m in record.marks if not m.get("interval")]
+    if not missing:
+        return list(record.marks)
+    settings = analysis.settings
+    practice = analysis.sessions[practice_mask(analysis.sessions)]
+    named = practice["session_id"].astype(str).isin(record.sessions)
+    if record.rule == "contrasting":
+        named |= practice[settings.group_col] != settings.skilled_group
+    scored = [m for m in missing if m in practice.columns]
+    intervals = mark_intervals(
+        practice[named],
+        scored,
+        settings.group_col,
+        settings.skilled_group,
+        settings.cluster_col,
+        record.rule,
+        seed=settings.seed,
+    )
+    return [
+        m
+        if m.get("interval") or m["metric"] not in intervals
+        else {**m, "interval": list(intervals[m["metric"]])}
+        for m in record.marks
+    ]
 
 
 def standards_command(action: str, study_name: str, task: str) -> str:

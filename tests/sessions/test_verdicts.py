@@ -35,6 +35,46 @@ def _experts_rescored_worse(catalog: Catalog, metrics: list[str]) -> None:
         )
 
 
+def _new_experts_worse(catalog: Catalog, metrics: list[str]) -> None:
+    """Two experts recorded after the standard was set (E91, E92), each scoring E01's sessions
+    made worse on every mark (x3 + 1), other metrics as E01's."""
+    from sessions.catalog import now
+
+    with catalog.session() as orm:
+        source = orm.scalar(select(Participant).where(Participant.code == "E01"))
+        for code in ("E91", "E92"):
+            person = catalog.add_participant(
+                orm, source.study, code, level="expert", group_label="expert", synthetic=True
+            )
+            orm.flush()
+            for row in source.sessions:
+                copy = Session(
+                    uid=f"{row.uid}-{code}",
+                    participant_id=person.id,
+                    task_id=row.task_id,
+                    device=row.device,
+                    clock=row.clock,
+                    trial=row.trial,
+                    phase=row.phase,
+                    status=row.status,
+                    started_at=now(),
+                    ended_at=now(),
+                    directory="",
+                    error="",
+                )
+                orm.add(copy)
+                orm.flush()
+                orm.add_all(
+                    MetricResult(
+                        session_id=copy.id,
+                        metric=m.metric,
+                        registry_version=m.registry_version,
+                        value=m.value * 3 + 1 if m.metric in metrics and m.value is not None else m.value,
+                    )
+                    for m in row.metrics
+                )
+
+
 def _study_page(home, url, catalog: Catalog) -> str:
     from fastapi.testclient import TestClient
 
@@ -94,9 +134,20 @@ def test_verdicts_stay_under_their_version_until_history_is_rejudged(tmp_path, c
     blank = _cli(home, url, "standards", "rejudge", "--study", DEMO_STUDY, "--task", TASK, "--reason", " ")
     assert blank.exit_code == 1 and "say why" in blank.output and blank.output.count("\n") == 1
     done = _cli(
-        home, url, "standards", "rejudge", "--study", DEMO_STUDY, "--task", TASK,
-        "--reason", "course board: v2 applies to the whole cohort", "--by", "Dr A", "--json",
-    )  # fmt: skip
+        home,
+        url,
+        "standards",
+        "rejudge",
+        "--study",
+        DEMO_STUDY,
+        "--task",
+        TASK,
+        "--reason",
+        "course board: v2 applies to the whole cohort",
+        "--by",
+        "Dr A",
+        "--json",
+    )
     assert done.exit_code == 0, done.output
     assert json.loads(done.stdout) == {"version": 2, "sessions": len(after.sessions), "changed": expected}
     rejudged, _ = analyse_catalog_study(catalog, DEMO_STUDY)
@@ -151,3 +202,30 @@ def test_the_version_in_force_is_the_newest_set_before_the_session():
     assert version_in_force(versions, datetime(2026, 12, 6)).version == 2
     assert version_in_force(versions, datetime(2026, 12, 9, 1)).version == 3
     assert version_in_force(versions, None).version == 1
+
+
+def test_marks_set_before_intervals_were_kept_are_drift_checked_too(tmp_path, copy_demo):
+    """Issue 44: marks stored before each kept its interval were never checked for drift. Their
+    interval is now rebuilt from the expert sessions the standard names: equal to the one the same
+    bootstrap stored, and today's experts moving a mark beyond it are reported."""
+    from sessions.models import Standard
+    from sessions.standards import set_time_intervals
+
+    home = tmp_path / "home"
+    catalog = Catalog(copy_demo(home))
+    stored = current_standard(catalog, DEMO_STUDY, TASK)
+    with catalog.session() as orm:  # as a catalog from before marks kept their interval holds it
+        row = orm.scalar(select(Standard))
+        row.marks = [{k: v for k, v in m.items() if k != "interval"} for m in row.marks]
+    old = current_standard(catalog, DEMO_STUDY, TASK)
+    assert not any("interval" in m for m in old.marks)
+    analysis, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    rebuilt = set_time_intervals(analysis, old)
+    assert [m["interval"] for m in rebuilt] == [m["interval"] for m in stored.marks]
+    assert analysis.standard_drift == []
+    marked = [m["metric"] for m in old.marks]
+    _new_experts_worse(catalog, marked)  # newer expert data: the standard's own sessions unchanged
+    moved, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    assert [(e["metric"], e["direction"]) for e in moved.standard_drift] == [
+        (m, "more lenient") for m in marked
+    ]
