@@ -173,7 +173,7 @@ def mark_drift(marks: Sequence[dict], today: pd.DataFrame) -> list[dict]:
     now = dict(zip(today["metric"], today["benchmark"], strict=True))
     moved = []
     for mark in marks:
-        low, high = mark.get("interval") or (math.nan, math.nan)
+        low, high = (math.nan if v is None else v for v in mark.get("interval") or (None, None))
         value = now.get(mark["metric"], math.nan)
         if not (np.isfinite(low) and np.isfinite(high) and np.isfinite(value)) or low <= value <= high:
             continue

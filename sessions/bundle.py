@@ -52,10 +52,13 @@ from sessions.models import (
     MetricResult,
     Participant,
     Rating,
+    Rejudgement,
     Session,
+    Standard,
     StreamFile,
     Study,
     Task,
+    Verdict,
 )
 from sessions.signing import SIGNATURE, trusted_fingerprint
 from sessions.signing import verify as verify_signature
@@ -374,6 +377,7 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
         orm.add(people[person.code])
     orm.flush()
     differing = 0
+    sessions: dict[str, Session] = {}
     for entry in manifest.sessions:
         folder = home / "sessions" / entry.uid
         directory = folder / entry.files[0].name if entry.single_file else folder
@@ -395,8 +399,32 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
             differing += _count_differing(entry, fresh, REGISTRY_VERSION)
         orm.add_all(Rating(session_id=session.id, **r.model_dump()) for r in entry.ratings)
         orm.add_all(Annotation(session_id=session.id, **a.model_dump()) for a in entry.annotations)
+        sessions[entry.uid] = session
+    _add_standards(orm, study, manifest, sessions)
     orm.flush()
     return differing
+
+
+def _add_standards(orm, study: Study, manifest: Manifest, sessions: dict[str, Session]) -> None:
+    """The bundle's standards as they were set, their re-judgings, and each session's kept verdict
+    under the version that gave it: a study keeps its standing decisions when it moves site."""
+    ids: dict[tuple[str, int], int] = {}
+    for entry in manifest.standards:
+        fields = entry.model_dump(exclude={"marks", "rejudgements"})
+        marks = [
+            {k: v for k, v in mark.model_dump().items() if k != "interval" or v is not None}
+            for mark in entry.marks
+        ]
+        row = Standard(study_id=study.id, marks=marks, **fields)
+        orm.add(row)
+        orm.flush()
+        ids[(entry.task, entry.version)] = row.id
+        orm.add_all(Rejudgement(standard_id=row.id, **log.model_dump()) for log in entry.rejudgements)
+    for entry in manifest.sessions:
+        if entry.verdict is not None:
+            verdict = entry.verdict.model_dump()
+            standard = ids[(entry.task, verdict.pop("standard_version"))]
+            orm.add(Verdict(session_id=sessions[entry.uid].id, standard_id=standard, **verdict))
 
 
 def _count_differing(entry, fresh: dict[str, float], version: str) -> int:

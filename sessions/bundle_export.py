@@ -1,7 +1,8 @@
 """A study exported as one archive (:mod:`sessions.bundle` reads it back, treating it as hostile).
 
 The ZIP holds ``manifest.json`` (the study, its participants, the tasks they used, every session
-with its files, metric results, ratings and annotations), ``files/<session uid>/<file name>`` for
+with its files, metric results, ratings, annotations and kept verdict, and every version of the
+study's standards with its re-judging log), ``files/<session uid>/<file name>`` for
 each stream file, the manifest's SHA-256 in ``manifest.sha256`` and, with a signing key, its
 Ed25519 signature. Every file is copied with its SHA-256 checked against the catalog's.
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import zipfile
 from datetime import datetime
 from pathlib import Path
@@ -29,8 +31,11 @@ from sessions.manifest import (
 )
 from sessions.models import (
     Participant,
+    Rejudgement,
     Session,
+    Standard,
     StreamFile,
+    Verdict,
 )
 from sessions.signing import SIGNATURE, sign
 from sessions.status import SessionStatus
@@ -46,6 +51,69 @@ def _row(obj: Any, fields: tuple[str, ...]) -> dict[str, Any]:
         value = getattr(obj, name)
         out[name] = _when(value) if isinstance(value, datetime) else value
     return out
+
+
+def _standards(orm, study_id: int) -> list[dict[str, Any]]:
+    """Every version of the study's standards as it was set, each with the log of re-judgings under
+    it; intervals a bootstrap could not give (NaN) travel as null (JSON has no NaN)."""
+    rows = orm.scalars(
+        select(Standard).where(Standard.study_id == study_id).order_by(Standard.task, Standard.version)
+    ).all()
+    logs: dict[int, list[dict[str, Any]]] = {}
+    for log in orm.scalars(
+        select(Rejudgement).where(Rejudgement.standard_id.in_([r.id for r in rows])).order_by(Rejudgement.id)
+    ):
+        logs.setdefault(log.standard_id, []).append(
+            {
+                "judged_by": log.judged_by,
+                "judged_at": _when(log.judged_at),
+                "reason": log.reason,
+                "sessions": log.sessions,
+                "changed": log.changed,
+            }
+        )
+    return [
+        {
+            "task": row.task,
+            "version": row.version,
+            "rule": row.rule,
+            "marks": [_mark(mark) for mark in row.marks],
+            "experts": list(row.experts),
+            "sessions": list(row.sessions),
+            "min_experts": row.min_experts,
+            "registry_version": row.registry_version,
+            "analysis_version": row.analysis_version,
+            "set_by": row.set_by,
+            "set_at": _when(row.set_at),
+            "note": row.note,
+            "rejudgements": logs.get(row.id, []),
+        }
+        for row in rows
+    ]
+
+
+def _mark(mark: dict[str, Any]) -> dict[str, Any]:
+    if mark.get("interval") is None:
+        return {k: v for k, v in mark.items() if k != "interval"}
+    return {**mark, "interval": [v if v is not None and math.isfinite(v) else None for v in mark["interval"]]}
+
+
+def _verdicts(orm, study_id: int) -> dict[int, dict[str, Any]]:
+    """Session id -> its kept verdict, naming the standard version that gave it."""
+    found = orm.execute(
+        select(Verdict, Standard.version)
+        .join(Standard, Verdict.standard_id == Standard.id)
+        .where(Standard.study_id == study_id)
+    ).all()
+    return {
+        verdict.session_id: {
+            "standard_version": version,
+            "passed": bool(verdict.passed),
+            "judged_at": _when(verdict.judged_at),
+            "how": verdict.how,
+        }
+        for verdict, version in found
+    }
 
 
 def _session_files(row: Session) -> list[tuple[StreamFile, Path]]:
@@ -97,7 +165,9 @@ def export_study(
             ],
             "tasks": {},
             "sessions": [],
+            "standards": _standards(orm, study.id),  # as set, with their re-judgings: they travel
         }
+        verdicts = _verdicts(orm, study.id)
         copies: list[tuple[str, Path, str]] = []
         for person in participants:
             for row in sorted(person.sessions, key=lambda s: (s.trial, s.uid)):
@@ -141,6 +211,7 @@ def export_study(
                         }
                         for a in row.annotations
                     ],
+                    verdict=verdicts.get(row.id),
                 )
                 for record, path in _session_files(row):
                     entry["files"].append(

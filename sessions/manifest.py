@@ -126,6 +126,58 @@ class AnnotationRecord(_Strict):
     created_at: When
 
 
+class VerdictRecord(_Strict):
+    """A session's kept verdict (sessions.verdicts): under which version of its task's standard."""
+
+    standard_version: Annotated[int, Field(ge=1, le=1_000_000)]
+    passed: bool
+    judged_at: When
+    how: _label(300)
+
+
+class MarkRecord(_Strict):
+    metric: Annotated[str, Field(min_length=1, max_length=100)]
+    benchmark: Finite
+    better: Literal["lower", "higher"]
+    pass_if: _label(100)
+    experts: Annotated[int, Field(ge=0, le=1_000_000)]
+    interval: Annotated[list[OptionalFinite], Field(min_length=2, max_length=2)] | None = None
+
+
+class RejudgementRecord(_Strict):
+    judged_by: _label(100)
+    judged_at: When
+    reason: Text
+    sessions: Annotated[int, Field(ge=0, le=100_000_000)]
+    changed: Annotated[int, Field(ge=0, le=100_000_000)]
+
+
+class StandardRecordModel(_Strict):
+    """One version of the study's standard on a task, as it was set (sessions.standards), with the
+    log of re-judgings under it."""
+
+    task: Annotated[str, Field(min_length=1, max_length=100)]
+    version: Annotated[int, Field(ge=1, le=1_000_000)]
+    rule: Annotated[str, Field(min_length=1, max_length=32)]
+    marks: Annotated[list[MarkRecord], Field(min_length=1, max_length=500)]
+    experts: list[Annotated[str, Field(min_length=1, max_length=64)]]
+    sessions: list[PlainName]
+    min_experts: Annotated[int, Field(ge=1, le=100_000)]
+    registry_version: Annotated[str, Field(min_length=1, max_length=16)]
+    analysis_version: Annotated[int, Field(ge=1, le=1_000_000)] | None
+    set_by: _label(100)
+    set_at: When
+    note: Text
+    rejudgements: list[RejudgementRecord] = []
+
+    @model_validator(mode="after")
+    def _consistent(self) -> StandardRecordModel:
+        names = [m.metric for m in self.marks]
+        if len(set(names)) != len(names):
+            raise ValueError(f"standard v{self.version} on {self.task} marks {_first_repeat(names)!r} twice")
+        return self
+
+
 class SessionRecord(_Strict):
     uid: PlainName
     participant: Annotated[str, Field(min_length=1, max_length=64)]
@@ -143,6 +195,7 @@ class SessionRecord(_Strict):
     metrics: list[MetricRecord]
     ratings: list[RatingRecord]
     annotations: list[AnnotationRecord]
+    verdict: VerdictRecord | None = None  # bundles before standards travelled have none
 
     @model_validator(mode="after")
     def _consistent(self) -> SessionRecord:
@@ -165,6 +218,7 @@ class Manifest(_Strict):
     analyses: Any  # checked by sessions.analysis's own declaration rules (sessions.bundle)
     tasks: dict[Annotated[str, Field(min_length=1, max_length=100)], TaskRecord]
     sessions: Annotated[list[SessionRecord], Field(min_length=1)]
+    standards: list[StandardRecordModel] = []  # bundles before standards travelled have none
 
     @model_validator(mode="after")
     def _references(self) -> Manifest:
@@ -183,10 +237,37 @@ class Manifest(_Strict):
                 raise ValueError(f"session {session.uid} names unknown participant {session.participant!r}")
             if session.task not in self.tasks:
                 raise ValueError(f"session {session.uid} names unknown task {session.task!r}")
+        self._standards_resolve(set(codes), set(uids))
         total = sum(f.bytes for s in self.sessions for f in s.files)
         if total > MAX_BUNDLE_BYTES:
             raise ValueError(f"its files add up to {total} bytes, over the {MAX_BUNDLE_BYTES}-byte limit")
         return self
+
+    def _standards_resolve(self, codes: set[str], uids: set[str]) -> None:
+        """Each standard's task, experts and sessions are the bundle's own; each version is listed
+        once; each session's verdict names a version of its own task's standard."""
+        versions = [(s.task, s.version) for s in self.standards]
+        if len(set(versions)) != len(versions):
+            task, version = _first_repeat(versions)
+            raise ValueError(f"standard v{version} on {task!r} is listed twice")
+        for standard in self.standards:
+            what = f"standard v{standard.version} on {standard.task!r}"
+            if standard.task not in self.tasks:
+                raise ValueError(f"{what} is on a task the bundle does not have")
+            stranger = next((c for c in standard.experts if c not in codes), None)
+            if stranger is not None:
+                raise ValueError(f"{what} names expert {stranger!r}, who is not in the bundle")
+            unknown = next((u for u in standard.sessions if u not in uids), None)
+            if unknown is not None:
+                raise ValueError(f"{what} names session {unknown!r}, which is not in the bundle")
+        known = set(versions)
+        for session in self.sessions:
+            verdict = session.verdict
+            if verdict is not None and (session.task, verdict.standard_version) not in known:
+                raise ValueError(
+                    f"session {session.uid}'s verdict names standard v{verdict.standard_version} on "
+                    f"{session.task!r}, which the bundle does not have"
+                )
 
 
 def _first_repeat(items: list) -> Any:

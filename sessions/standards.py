@@ -14,6 +14,7 @@ is set; the older ones stay readable (:func:`standard_history`).
 
 from __future__ import annotations
 
+import math
 import shlex
 from dataclasses import dataclass
 from datetime import datetime
@@ -156,7 +157,7 @@ def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note
             "better": row.better,
             "pass_if": row.pass_if,
             "experts": int(row.experts),
-            "interval": list(intervals[row.metric]),
+            "interval": [v if math.isfinite(v) else None for v in intervals[row.metric]],  # JSON: no NaN
         }
         for row in benchmarks.itertuples()
     ]

@@ -229,3 +229,76 @@ def test_marks_set_before_intervals_were_kept_are_drift_checked_too(tmp_path, co
     assert [(e["metric"], e["direction"]) for e in moved.standard_drift] == [
         (m, "more lenient") for m in marked
     ]
+
+
+def _standing(catalog: Catalog) -> tuple[list, dict, list]:
+    """(every standard version as set, session uid -> its kept verdict, the re-judging log) without
+    the catalog's own ids."""
+    from sessions.models import Rejudgement, Standard
+
+    with catalog.session() as orm:
+        standards = [
+            (s.task, s.version, s.rule, s.marks, s.experts, s.sessions, s.min_experts, s.registry_version,
+             s.analysis_version, s.set_by, s.set_at, s.note)
+            for s in orm.scalars(select(Standard).order_by(Standard.task, Standard.version))
+        ]  # fmt: skip
+        verdicts = {
+            uid: (version, passed, judged_at, how)
+            for uid, version, passed, judged_at, how in orm.execute(
+                select(Session.uid, Standard.version, Verdict.passed, Verdict.judged_at, Verdict.how)
+                .join(Verdict, Verdict.session_id == Session.id)
+                .join(Standard, Verdict.standard_id == Standard.id)
+            )
+        }
+        logs = [
+            (version, r.judged_by, r.judged_at, r.reason, r.sessions, r.changed)
+            for r, version in orm.execute(
+                select(Rejudgement, Standard.version).join(Standard, Rejudgement.standard_id == Standard.id)
+            )
+        ]
+    return standards, verdicts, logs
+
+
+def test_standards_verdicts_and_rejudgings_travel_with_a_bundle(tmp_path, copy_demo):
+    """Issue 44: a bundle carried no standard, so the study arrived with no marks, no kept verdicts and
+    no record of re-judging. Now every version as set, each session's verdict under the version that
+    gave it, and the log travel; a bundle whose verdict names a version it does not carry is refused."""
+    import hashlib
+    import zipfile
+
+    home = tmp_path / "home"
+    url = copy_demo(home)
+    assert _cli(home, url, "standards", "set", "--study", DEMO_STUDY, "--task", TASK).exit_code == 0
+    why = ["--reason", "the board applies v2 to everyone", "--by", "Dr A"]
+    assert _cli(home, url, "standards", "rejudge", "--study", DEMO_STUDY, "--task", TASK, *why).exit_code == 0
+    catalog = Catalog(url)
+    here = _standing(catalog)
+    assert len(here[0]) >= 2 and here[1] and len(here[2]) == 1
+    bundle = tmp_path / "demo.zip"
+    assert _cli(home, url, "export", "--study", DEMO_STUDY, "-o", str(bundle)).exit_code == 0
+    elsewhere, elsewhere_url = tmp_path / "elsewhere", f"sqlite:///{tmp_path / 'elsewhere.sqlite'}"
+    imported = _cli(elsewhere, elsewhere_url, "import-bundle", str(bundle))
+    assert imported.exit_code == 0, imported.output
+    other = Catalog(elsewhere_url)
+    assert _standing(other) == here
+    arrived, _ = analyse_catalog_study(other, DEMO_STUDY)
+    assert set(arrived.proficiency["standard_version"]) == {2}  # judged as they were, not afresh
+    with zipfile.ZipFile(bundle) as archive:
+        manifest = json.loads(archive.read("manifest.json"))
+    manifest["study"]["name"] = "forged"
+    manifest["sessions"][0]["verdict"]["standard_version"] = 9
+    raw = json.dumps(manifest).encode()
+    forged = tmp_path / "forged.zip"
+    with zipfile.ZipFile(bundle) as source, zipfile.ZipFile(forged, "w") as target:
+        for info in source.infolist():
+            data = source.read(info.filename)
+            if info.filename == "manifest.json":
+                data = raw
+            elif info.filename == "manifest.sha256":
+                data = hashlib.sha256(raw).hexdigest().encode()
+            target.writestr(info.filename, data)
+    refused = _cli(tmp_path / "third", f"sqlite:///{tmp_path / 'third.sqlite'}", "import-bundle", str(forged))
+    assert refused.exit_code == 1 and "names standard v9" in refused.output, refused.output
+    assert refused.output.count("\n") == 1
+    catalog.close()
+    other.close()
