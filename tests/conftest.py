@@ -180,6 +180,18 @@ def display():
     server.wait(10)
 
 
+RINGS = Path("/dev/shm")
+
+
+def _rings() -> set[str]:
+    """The recorder's ring files on tmpfs now (recorder.ring)."""
+    return {path.name for path in RINGS.glob("vascsim-ring-*")} if RINGS.is_dir() else set()
+
+
+def pytest_sessionstart(session):
+    session.config._rings_before = _rings()
+
+
 def pytest_sessionfinish(session, exitstatus):
     """Issue 45, seen 13: the suite leaves no process behind. Anything still running that was started
     with this run's temporary folder in its command line or environment (a killed run's worker, a
@@ -209,4 +221,11 @@ def pytest_sessionfinish(session, exitstatus):
             except OSError:
                 pass
         print(f"\nprocesses left running by the tests (now killed): {'; '.join(names)}")
+        session.exitstatus = 1
+    # nor memory: a writer neither closed nor recovered leaves its ring (19 MB of tmpfs) for ever
+    leaked = sorted(_rings() - getattr(session.config, "_rings_before", set()))
+    if leaked:
+        for name in leaked:
+            (RINGS / name).unlink(missing_ok=True)
+        print(f"\n{len(leaked)} recorder ring(s) left in {RINGS} by the tests (now removed): {leaked[0]} ...")
         session.exitstatus = 1
