@@ -93,9 +93,8 @@ def sign_in(request: Request, response: Response, username: str, password: str) 
     state = _state(request)
     limiter: LoginRateLimiter = state.login_limiter
     keys, at = sign_in_keys(request, username, limiter.attempts), time.monotonic()
-    wait = limiter.claim(
-        keys, at
-    )  # counted before the (slow) password check: concurrent guesses cannot race it
+    # counted before the (slow) password check: concurrent guesses cannot race it
+    wait = limiter.claim(keys, at)
     if wait > 0:
         error = DashboardError(
             429, f"too many failed sign-ins for {username!r} or from this address; try again in {wait:.0f} s"

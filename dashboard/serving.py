@@ -121,6 +121,7 @@ class GuardedH11(H11Protocol):
     def _cut(self, why: str) -> None:
         """408 when no response has begun, then close (the application sees a disconnect)."""
         state = self.conn.our_state  # IDLE: waiting for a request; SEND_RESPONSE: one arrived
-        if state is h11.IDLE or (state is h11.SEND_RESPONSE and not self.cycle.response_started):
+        started = self.cycle is not None and self.cycle.response_started
+        if state is h11.IDLE or (state is h11.SEND_RESPONSE and not started):
             self.transport.write(_answer(408, "Request Timeout", f"{why}; send requests promptly"))
         self.transport.close()
