@@ -196,14 +196,18 @@ def standard_drift(analysis: StudyAnalysis, record: StandardRecord) -> list[dict
     (:func:`set_time_intervals`): the check never skips a mark for its age."""
     settings = analysis.settings
     practice = analysis.sessions[practice_mask(analysis.sessions)]
-    marks = [m for m in set_time_intervals(analysis, record) if m["metric"] in practice.columns]
-    metrics = [m["metric"] for m in marks if m.get("interval")]
-    if not metrics or not (practice[settings.group_col] == settings.skilled_group).any():
+    marks = [
+        m
+        for m in set_time_intervals(analysis, record)
+        if m["metric"] in practice.columns and m.get("interval")
+    ]
+    if not marks or not (practice[settings.group_col] == settings.skilled_group).any():
         return []
+    metrics = [m["metric"] for m in marks]
     today = proficiency_benchmarks(
         practice, metrics, settings.group_col, settings.skilled_group, settings.cluster_col, record.rule
     )
-    return mark_drift([m for m in marks if m["metric"] in metrics], today)
+    return mark_drift(marks, today)
 
 
 def set_time_intervals(analysis: StudyAnalysis, record: StandardRecord) -> list[dict]:
