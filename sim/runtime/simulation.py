@@ -461,8 +461,9 @@ class Simulation:
     def _start_prefetching(self, whole_columns: bool = False) -> None:
         """Start solving on-demand columns ahead of contact, if some contact could need them (with
         ``whole_columns``, as the live local stress in real time does: whole columns of precomputed
-        candidates too); before any of the run's threads start (the worker is forked). Simulated
-        runs wait for a solve without falling behind a clock, so they ask only for what they lack."""
+        candidates too); before any of the run's threads start (the worker is forked). Real time
+        only: simulated runs wait for a solve without falling behind a clock, so they solve what
+        they lack when they need it."""
         if self._prefetcher is None and (_on_demand(self._tissue) or whole_columns):
             self._prefetcher = Prefetcher(
                 self._tissue,
@@ -507,7 +508,9 @@ class Simulation:
             see(lambda: self.interaction.needle_pose)
         queue = [(0.0, i, 0, layer) for i, layer in enumerate(LAYERS)]
         heapq.heapify(queue)
-        self._start_prefetching()
+        # no prefetching: with no clock to fall behind, a contact solves the columns it lacks when it
+        # needs them, in this process; a worker would only solve some it never needs, on a core that
+        # is not free (the demo runs two sessions at once). The same columns, the same results.
         start_wall = wallclock.perf_counter()
         now = 0.0
         try:
