@@ -4,10 +4,10 @@ Run:  .venv/bin/python benchmarks/demo.py [--repeats 3]
 
 Each repeat runs the installed `vascsim demo` command in a new, empty VASCSIM_HOME
 (so the task models are built and cached inside the timed run, as on a fresh set-up)
-with the embedded SQLite catalog: the two-task curriculum's 58 sessions through the
+with the embedded SQLite catalog: the two-task curriculum's 75 sessions through the
 real simulator, recorder and catalog (two at once), all metrics, each task's
-construct-validity report, benchmarks and learning curves. Prints the median wall
-time; target < 120 s on 2 cores.
+construct-validity report, the standard, learning curves and verdicts. Prints the
+median wall time; target < 120 s on 2 cores (issue 44).
 """
 
 from __future__ import annotations

@@ -593,6 +593,13 @@ def _method_lines(analysis: StudyAnalysis) -> list[str]:
             if validity.level == "participant"
             else " (every session a row): a metric discriminates only when the test with group labels "
             "permuted across participants (p_cluster, Holm-corrected) agrees."
+        )
+        + (
+            ""
+            if s.baseline_trials is None
+            else f" Construct validity compares every {s.skilled_group} practice session with the other "
+            f"group's first {s.baseline_trials} practice session(s) each: their baseline, before practice "
+            "changed them."
         ),
         "Tests: two-sided Mann-Whitney U (exact permutation p up to 60 values, else normal approximation); "
         "with ties, the exact p is P(|W - E W| >= |w - E W|) over the permutation distribution of the "

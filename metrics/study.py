@@ -51,6 +51,9 @@ class StudySettings:
     retention_baseline: int = (
         2  # retention: the last delayed session against the mean of this many last practice ones
     )
+    # construct validity compares the skilled group with the other group's first N practice sessions
+    # (their baseline, before practice changed them); None: every practice session of both
+    baseline_trials: int | None = None
     rating_col: str | None = None  # a continuous rating for concurrent validity (e.g. "grs_total")
     task: str | None = None  # the task whose sessions are analysed (None: the study's only task)
     learning_model: str = "power"
@@ -94,6 +97,19 @@ def practice_mask(table: pd.DataFrame) -> pd.Series:
     if "phase" not in table.columns:
         return pd.Series(True, index=table.index)
     return table["phase"].fillna("practice") != "retention"
+
+
+def validity_mask(table: pd.DataFrame, practice: pd.Series, settings: StudySettings) -> pd.Series:
+    """The sessions construct validity compares: every practice session, or, with
+    ``settings.baseline_trials`` N, the skilled group's practice sessions and each other participant's
+    first N (in trial order; ``table`` sorted by participant and trial)."""
+    if settings.baseline_trials is None:
+        return practice
+    order = table[practice].groupby(settings.cluster_col, sort=False).cumcount()
+    early = pd.Series(False, index=table.index)
+    early[order.index] = order < settings.baseline_trials
+    skilled = table[settings.group_col] == settings.skilled_group
+    return practice & (skilled | early)
 
 
 def sessions_of_task(table: pd.DataFrame, task: str | None) -> pd.DataFrame:
@@ -185,7 +201,7 @@ def analyse_study(
     table = table.sort_values([settings.cluster_col, "trial"], kind="stable").reset_index(drop=True)
     practice = practice_mask(table)
     validity = construct_validity(
-        table[practice],
+        table[validity_mask(table, practice, settings)],
         settings.group_col,
         settings.groups,
         settings.cluster_col,
@@ -215,6 +231,14 @@ def analyse_study(
         notes.append(
             f"The benchmarks are provisional: {experts} expert(s) set them, fewer than the "
             f"{settings.min_experts} the rule asks for."
+        )
+    if settings.baseline_trials is not None:
+        others = " and ".join(g for g in settings.groups if g != settings.skilled_group)
+        notes.insert(
+            0,
+            f"Construct validity compares every {settings.skilled_group} practice session with each "
+            f"{others} participant's first {settings.baseline_trials} practice session(s): their baseline, "
+            "before practice changed them.",
         )
     judge = session_judge(settings)
     proficiency = judge(table, benchmarks)

@@ -40,6 +40,7 @@ DECLARABLE = (
     "progression_window",
     "non_compensatory",
     "retention_baseline",
+    "baseline_trials",
     "rating_col",
     "learning_model",
     "alpha",
@@ -81,11 +82,9 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise CatalogError(f"{what}: {name} must be a whole number >= 1; got {value!r}")
             values[name] = value
-        elif name == "progression_window":
+        elif name in ("progression_window", "baseline_trials"):
             if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
-                raise CatalogError(
-                    f"{what}: progression_window must be a whole number >= 1 or null; got {value!r}"
-                )
+                raise CatalogError(f"{what}: {name} must be a whole number >= 1 or null; got {value!r}")
             values[name] = value
         elif name == "non_compensatory":
             if not isinstance(value, bool):
@@ -151,6 +150,7 @@ DEFAULT_WORDS = {
     "rating_col": "the study's GRS or OSATS totals where sessions are rated, else none",
     "task": "the study's only task",
     "progression_window": "none: the passes must come in a row",
+    "baseline_trials": "none: construct validity compares every practice session of both groups",
 }
 """What an analysis setting left at its default (None) means, in words."""
 

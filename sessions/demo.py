@@ -1,12 +1,12 @@
 """``vascsim demo``: a small synthetic course through the real simulator, recorder, catalog and metrics.
 
-A two-task curriculum on a porcine artery with an arteriotomy (docs/tasks.md): 4 experts x 3
-sessions and 6 trainees x 5 practice sessions + 1 delayed retention session of the
-interrupted stitch, then every participant closes the arteriotomy with a row of three
-stitches (the course's final task). Each session is scripted through the simulator in
-simulated time, recorded, catalogued and scored; then, per task (trials count per task),
-construct validity on a primary metric set declared here in advance, expert benchmarks,
-learning curves and the report.
+A two-task curriculum on a porcine artery with an arteriotomy (docs/tasks.md): 5 experts x 2
+sessions and 6 trainees x 8 practice sessions + 1 delayed retention session of the
+interrupted stitch (the last trainee a slow learner), then every participant closes the
+arteriotomy with a row of three stitches (the course's final task). Each session is scripted
+through the simulator in simulated time, recorded, catalogued and scored; then, per task
+(trials count per task), construct validity on a primary metric set declared here in advance,
+the standard set once the experts are recorded, learning curves and the report.
 """
 
 from __future__ import annotations
@@ -44,14 +44,29 @@ FINAL_TASK = "arteriotomy-closure"
 PRIMARY_METRICS = task_spec(TASK).primary_metrics
 """Declared before looking at data: the task's primary metrics (sessions.tasks.TaskSpec.primary_metrics)."""
 
-BENCHMARK_RULE = "percentile:75"
-"""A trainee passes a metric at the level three in four experts reach (documented in docs/metrics.md)."""
+BENCHMARK_METRICS = tuple(m for m in PRIMARY_METRICS if m != "spectral_arc_length")
+"""Declared before the data: pass marks on the source paper's proposed measures (the tip's speed near
+the insertion point, before and after the pierce; a perpendicular entry) and on where the bite went.
+Smoothness (SPARC) is validated but sets no mark: over a whole session it moves with the session's
+length and phases (a slow, careful insertion reads as less smooth), too much to fail a stitch on."""
+
+BENCHMARK_RULE = "mean+sd:2"
+"""A trainee passes a metric within two standard deviations of the experts' mean on the worse side
+(Lap Mentor's "expert mean + 2 SD"; docs/metrics.md): a mark the experts themselves meet most of
+the time, so that passing every benchmark in one session is within an expert's reach."""
+
+BASELINE_TRIALS = 2
+"""Construct validity compares the experts with each trainee's first two practice sessions: a trainee
+who practises to the experts' level stops differing from them, which is the course working, not the
+metric failing."""
 
 DEMO_ANALYSIS = StudySettings(
     groups=("expert", "trainee"),
     skilled_group="expert",
     metrics=PRIMARY_METRICS,
     benchmark_rule=BENCHMARK_RULE,
+    benchmark_metrics=BENCHMARK_METRICS,
+    baseline_trials=BASELINE_TRIALS,
     task=TASK,
 )
 """The demo study's analysis, stored in the catalog with the study: every front-end computes from it."""
@@ -59,15 +74,15 @@ DEMO_ANALYSIS = StudySettings(
 
 @dataclass(frozen=True)
 class DemoSize:
-    experts: int = 4
-    expert_sessions: int = 3
-    trainees: int = 6
-    practice_sessions: int = 5
+    experts: int = 5  # the rule's minimum for a standard that is not provisional
+    expert_sessions: int = 2
+    trainees: int = 6  # the last one a slow learner (when there are at least 4)
+    practice_sessions: int = 8
     retention: bool = True
     closures: bool = True  # each participant closes the arteriotomy once, after practice
     ratings: bool = True  # two synthetic raters score every session with the GRS
     benchmark_override: str = ""
-    """A reason to benchmark the primary metrics where experts do better though the design is too small
+    """A reason to benchmark the declared metrics where experts do better though the design is too small
     for an AUC interval (test fixtures of two experts and three trainees); printed in every report."""
 
     @property
@@ -223,13 +238,14 @@ def run_demo(
                     orm, study, code, level=kind, group_label=kind, synthetic=True
                 )
                 participant.user_id = previous.links.get(code)  # a re-run keeps trainee accounts linked
+                slow = kind == "trainee" and k == count >= 4  # one who does not get there
                 profile = profile_for(
-                    kind, seed * 1000 + zlib.crc32(code.encode()) % 997
+                    kind, seed * 1000 + zlib.crc32(code.encode()) % 997, slow_learner=slow
                 )  # not hash(): salted per process
                 for trial in range(1, sessions + 1):
                     plans.append((code, TASK, trial, "practice", _skills(profile, trial)))
-                if size.closures:  # the final task, with the skill the practice left
-                    plans.append((code, FINAL_TASK, 1, "practice", _skills(profile, sessions)))
+                if size.closures:  # the final task, with what the practice on the other carries over
+                    plans.append((code, FINAL_TASK, 1, "practice", profile.transferred(sessions)))
                 if kind == "trainee" and size.retention:
                     retained = _skills(profile, sessions, "retention")
                     plans.append((code, TASK, sessions + 1, "retention", retained))
@@ -249,9 +265,7 @@ def run_demo(
         synthetic_ratings(catalog, runs, seed)
     declared = DEMO_ANALYSIS
     if size.benchmark_override:
-        declared = dataclasses.replace(
-            DEMO_ANALYSIS, benchmark_metrics=PRIMARY_METRICS, benchmark_override=size.benchmark_override
-        )
+        declared = dataclasses.replace(DEMO_ANALYSIS, benchmark_override=size.benchmark_override)
     declare_analysis(catalog, DEMO_STUDY, declared, author="vascsim demo", note="declared before the data")
     try:  # a course sets its standard once its experts are recorded; the demo does the same
         set_standard(catalog, DEMO_STUDY, TASK, "vascsim demo", "set once the experts were recorded")

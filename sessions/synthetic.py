@@ -2,9 +2,11 @@
 
 Every synthetic participant is stored with ``synthetic = True`` and every report that
 includes one says so. An ``expert`` keeps a stable high skill; a ``trainee`` starts low
-and improves with practice along an exponential curve (with a small loss at the
-delayed retention session). Skill in [0, 1] sets entry-angle spread, insertion speed,
-hesitations, tremor and how much the wrist turns the needle rather than levering it.
+and improves with practice along an exponential curve towards a plateau near the
+experts' (with a small loss at the delayed retention session and on a task it has
+not practised); a slow learner levels off well short of it. Skill in [0, 1] sets
+entry-angle spread, insertion speed, hesitations, tremor and how much the wrist turns
+the needle rather than levering it.
 """
 
 from __future__ import annotations
@@ -27,38 +29,67 @@ PROFILES = ("expert", "trainee")
 
 @dataclass(frozen=True)
 class Profile:
+    """A synthetic participant's skill over trials: an expert's stays at ``start_skill``; a
+    trainee's rises from it towards ``plateau`` along an exponential curve (fast early gains, then a
+    plateau: the shape of published simulator learning curves), with a small loss at the delayed
+    retention session and on a task not practised."""
+
     kind: str
     start_skill: float
     learning_rate: float  # per practice trial
+    plateau: float = 0.99  # where a trainee's curve levels off
 
     def skill(self, trial: int, phase: str = "practice") -> float:
         return self._curve(trial, phase, self.learning_rate)
 
     def placement_skill(self, trial: int, phase: str = "practice") -> float:
-        """How accurately the hand places its bites: the same curve, learnt at 0.4 of the rate (a
-        modelling choice: aiming a curved needle at a mark improves more slowly than the motion)."""
+        """How accurately the hand places its bites: the same curve, learnt at ``PLACEMENT_LEARNING``
+        of the rate (a modelling choice: aiming a curved needle at a mark improves more slowly than
+        the motion)."""
         return self._curve(trial, phase, PLACEMENT_LEARNING * self.learning_rate)
+
+    def transferred(self, trial: int) -> tuple[float, float]:
+        """(motion, placement) skill on a task not practised, after ``trial`` practice trials of
+        another: an expert's own; a trainee's less ``TRANSFER_LOSS`` (a new task's first attempt)."""
+        loss = 0.0 if self.kind == "expert" else TRANSFER_LOSS
+        return self.skill(trial) - loss, self.placement_skill(trial) - loss
 
     def _curve(self, trial: int, phase: str, rate: float) -> float:
         if self.kind == "expert":
             return self.start_skill
-        skill = self.start_skill + (0.99 - self.start_skill) * (1 - math.exp(-rate * (trial - 1)))
-        return skill - (0.08 if phase == "retention" else 0.0)
+        skill = self.start_skill + (self.plateau - self.start_skill) * (1 - math.exp(-rate * (trial - 1)))
+        return skill - (RETENTION_LOSS if phase == "retention" else 0.0)
 
 
-PLACEMENT_LEARNING = 0.4
+PLACEMENT_LEARNING = 0.8
 """Placement accuracy's learning rate as a fraction of the motion's (synthetic trainees)."""
+RETENTION_LOSS = 0.03
+"""Skill a synthetic trainee loses between the last practice session and the delayed retention one:
+a small decay, as reported for proficiency-based simulator training retested weeks later."""
+TRANSFER_LOSS = 0.25
+"""Skill a synthetic trainee lacks on a task it has not practised (the final task after practice on
+another): what practice on one task carries over to the next is partial."""
+SLOW_LEARNER_PLATEAU = 0.6
+"""Where a slow learner's curve levels off: well short of the experts (0.85-0.97); such a trainee
+does not reach proficiency and is flagged for attention."""
 SHALLOW_BITE_OFFSET = 1.1e-3
 """A bite taken this much too near the wound edge (0.4 mm from it on the interrupted stitch): the
 needle's curve comes out through the cut edge, a partial-thickness bite."""
 
 
-def profile_for(kind: str, seed: int) -> Profile:
+def profile_for(kind: str, seed: int, slow_learner: bool = False) -> Profile:
+    """A synthetic participant's profile: an expert's steady skill 0.85-0.97; a trainee starting at
+    0.05-0.3, learning at 0.6-1.0 per trial (within a few percent of its plateau after 4-7 trials)
+    towards a plateau of 0.95-0.99, or, a ``slow_learner``, at 0.2-0.4 towards
+    :data:`SLOW_LEARNER_PLATEAU`."""
     rng = np.random.default_rng(seed)
     if kind == "expert":
         return Profile("expert", float(rng.uniform(0.85, 0.97)), 0.0)
     if kind == "trainee":
-        return Profile("trainee", float(rng.uniform(0.05, 0.3)), float(rng.uniform(0.5, 0.9)))
+        start = float(rng.uniform(0.05, 0.3))
+        if slow_learner:
+            return Profile("trainee", start, float(rng.uniform(0.2, 0.4)), SLOW_LEARNER_PLATEAU)
+        return Profile("trainee", start, float(rng.uniform(0.6, 1.0)), float(rng.uniform(0.95, 0.99)))
     raise ValueError(f"synthetic profile must be one of {', '.join(PROFILES)}; got {kind!r}")
 
 
@@ -91,6 +122,9 @@ def pass_parameters(skill: float, seed: int, placement_skill: float | None = Non
         tremor_amplitude=float(2e-5 + 2.5e-4 * clumsiness),
         approach_time=float(0.6 + 0.6 * clumsiness),
         regrab_time=float(0.4 + 0.6 * clumsiness),
+        # slow and steady into the wall, brisk through it once regrasped: an expert pulls through at
+        # ~7 mm/s, a first-day trainee at ~5 (at its insertion speed an expert's stitch was the slowest)
+        pull_speed=float(0.007 - 0.002 * clumsiness),
         entry_offset=along,
         lateral_offset=across,
         seed=seed,

@@ -95,6 +95,13 @@ def studies_groups(study: str, added: tuple[str, ...]) -> None:
     help="Retention: compare the delayed session with the mean of this many last practice sessions.",
 )
 @click.option(
+    "--baseline-trials",
+    type=click.IntRange(0, 1000),
+    default=None,
+    help="Construct validity compares the skilled group with each other participant's first N practice "
+    "sessions (their baseline, before practice); 0: every practice session [default: 0].",
+)
+@click.option(
     "--benchmarks",
     "benchmark_names",
     default=None,
@@ -126,6 +133,7 @@ def studies_analysis(
     consecutive,
     rating,
     retention_baseline,
+    baseline_trials,
     benchmark_names,
     override_reason,
     min_experts,
@@ -156,6 +164,8 @@ def studies_analysis(
         changes["rating_col"] = rating
     if retention_baseline is not None:
         changes["retention_baseline"] = retention_baseline
+    if baseline_trials is not None:
+        changes["baseline_trials"] = baseline_trials or None
     if benchmark_names is not None:
         changes["benchmark_metrics"] = tuple(p.strip() for p in benchmark_names.split(",") if p.strip())
     if override_reason is not None:

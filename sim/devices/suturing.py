@@ -36,6 +36,8 @@ class SuturingPassParameters:
     regrab_time (s): jaws travel from the grip to the needle's tip and close on it.
     pull_arc_deg: the needle is then turned on along its own curve, so its body follows the
         tip's path through the wall, until this much further.
+    pull_speed: the tip's speed along its arc while pulling through (m/s); None: the insertion
+        speed.
     entry_offset (m): where the hand actually enters, off the intended entry point along the
         bite direction (positive: towards the exit, i.e. a smaller bite from a wound edge there);
         lateral_offset (m): off it across the bite direction.
@@ -54,6 +56,7 @@ class SuturingPassParameters:
     approach_distance: float = 0.004
     regrab_time: float = 0.6
     pull_arc_deg: float = 170.0
+    pull_speed: float | None = None
     entry_offset: float = 0.0
     lateral_offset: float = 0.0
     seed: int = 0
@@ -118,7 +121,11 @@ class SuturingPass:
         self._insert_time = (
             math.radians(self.p.insertion_arc_deg) / self._omega + self.p.hesitations * self.p.hesitation_time
         )
-        self._pull_time = math.radians(self.p.pull_arc_deg) / self._omega
+        pull_speed = self.p.insertion_speed if self.p.pull_speed is None else self.p.pull_speed
+        if not (math.isfinite(pull_speed) and pull_speed > 0):
+            raise DeviceError(f"a suturing pass's pull_speed must be a positive speed (m/s): {pull_speed}")
+        self._pull_omega = pull_speed / self.radius
+        self._pull_time = math.radians(self.p.pull_arc_deg) / self._pull_omega
         self.duration = self.p.approach_time + self._insert_time + self.p.regrab_time + self._pull_time
         self._sees: Callable[[], Pose] | None = None
         self._correction: Pose | None = None  # where the needle lay at the re-grasp against the plan
@@ -200,7 +207,7 @@ class SuturingPass:
         """Where the needle is at the end of the pull (the holder's frame at the original grip)."""
         released, _ = self._release
         centre = self._released_centre
-        turn = rotation_about(self.axis, self._omega * (self.duration - self.phases["pull"][0]))
+        turn = rotation_about(self.axis, self._pull_omega * (self.duration - self.phases["pull"][0]))
         planned = Pose.unchecked(centre + turn @ (released.position - centre), turn @ released.rotation)
         return planned if self._correction is None else self._correction.compose(planned)
 
@@ -225,7 +232,7 @@ class SuturingPass:
                 self._correction = seen  # the jaws close on the needle where it lies now
             target = seen.compose(Pose.unchecked(tip, released.rotation))
             return blend_poses(released, target, w), closing
-        pose = self._pull.pose(self._omega * (t - stop))
+        pose = self._pull.pose(self._pull_omega * (t - stop))
         return pose if seen is None else seen.compose(pose), True
 
     @functools.cached_property

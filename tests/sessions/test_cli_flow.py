@@ -165,16 +165,28 @@ def test_replay_against_the_expert_group(home, tmp_path):
 
 
 @pytest.mark.slow
-def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
+def test_the_demo_shows_a_course_that_works_and_says_how_to_go_on(tmp_path, monkeypatch):
+    """Issue 44, seen 7: the demo showed 0 of 6 trainees proficient, every retention failed, the
+    experts passing a third of their own sessions and the closure "trainees better" on two metrics.
+    Now, on the full demo: most trainees reach proficiency and keep it at retention, the slow learner
+    does not and is flagged, the experts pass their own standard most of the time, and on each task
+    every metric that discriminates does so the expected way (none shows the trainees better)."""
+    from dashboard.queries import ATTENTION_AFTER_TRIALS
+    from sessions.analysis import analyse_catalog_study
+    from sessions.catalog import Catalog
+    from sessions.demo import DEMO_STUDY, FINAL_TASK, DemoSize
+
     monkeypatch.setenv("VASCSIM_HOME", str(tmp_path / "home"))
     monkeypatch.delenv("VASCSIM_DATABASE_URL", raising=False)
-    result = CliRunner().invoke(main, ["demo", "--small"])
+    result = CliRunner().invoke(main, ["demo"])
     assert result.exit_code == 0, result.output
     lines = result.stdout.strip().splitlines()
+    assert lines[-4].startswith(f"{DemoSize().sessions} sessions in ")
     report = Path(lines[-4].rsplit("full report: ", 1)[1])
     assert report.is_file() and report.name == "report.html"
     # the curriculum's final task (issue 22): analysed on its own, with its own report
     assert lines[-5].startswith("final task arteriotomy-closure (each participant once, after practice)")
+    assert "trainees better" not in lines[-5]
     assert Path(lines[-5].rsplit("report: ", 1)[1]).is_file()
     assert lines[-3].startswith("replay a trainee against the experts: vascsim replay S-")
     uid = lines[-3].split("vascsim replay ", 1)[1].split()[0]
@@ -187,6 +199,26 @@ def test_demo_prints_the_report_and_how_to_replay(tmp_path, monkeypatch):
     listed = invoke("sessions", "list", "--study", "synthetic-demo").stdout  # a curriculum: the task shown
     assert "arteriotomy-closure" in listed and "interrupted-stitch" in listed and uid in listed
     assert max(len(line) for line in listed.splitlines()) <= 80 and "metrics current" in listed
+
+    catalog = Catalog(f"sqlite:///{tmp_path / 'home' / 'catalog.sqlite'}", migrate=False)
+    practice, _ = analyse_catalog_study(catalog, DEMO_STUDY)
+    trainees = practice.trainees.set_index("participant_id")
+    proficient = trainees.index[trainees["proficient"].astype(bool)].tolist()
+    assert len(proficient) >= 4 and "T06" not in proficient  # most, but not the slow learner
+    kept = trainees.loc[proficient, "retention_passed"].astype(bool)
+    assert kept.sum() >= 0.75 * len(proficient)
+    slow = trainees.loc["T06"]
+    assert int(slow["practice_sessions"]) >= ATTENTION_AFTER_TRIALS  # so the study page flags T06
+    experts = practice.sessions["label"].to_numpy() == "expert"
+    assert practice.proficiency["passed"].to_numpy()[experts].mean() > 0.5  # their own standard
+    assert not practice.benchmarks.empty and not practice.benchmarks["provisional"].any()
+    final, _ = analyse_catalog_study(catalog, DEMO_STUDY, {"task": FINAL_TASK})
+    for analysis in (practice, final):
+        table = analysis.validity.table
+        assert (table["auc_ci_high"] > 0.5).all(), table  # no metric shows the trainees better
+        assert (table.loc[table["auc_ci_low"] > 0.5, "auc"] > 0.5).all()
+        assert (table["auc_ci_low"] > 0.5).sum() >= 2  # and some tell the groups apart the right way
+    catalog.close()
 
 
 def test_a_scripted_run_ends_with_its_script_is_marked_synthetic_and_names_a_task_without_experts(home):

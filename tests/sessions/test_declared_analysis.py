@@ -53,11 +53,11 @@ def _cli(home, *args):
 def test_the_demo_declares_its_analysis(demo):
     catalog, _ = demo
     settings, version, author = declared_settings(catalog, DEMO_STUDY)
-    fixture = dataclasses.replace(
-        DEMO_ANALYSIS,
-        benchmark_metrics=DEMO_ANALYSIS.metrics,
-        benchmark_override=REDUCED_DEMO_SIZE["benchmark_override"],
+    fixture = dataclasses.replace(DEMO_ANALYSIS, benchmark_override=REDUCED_DEMO_SIZE["benchmark_override"])
+    assert DEMO_ANALYSIS.benchmark_metrics == tuple(
+        m for m in DEMO_ANALYSIS.metrics if m != "spectral_arc_length"
     )
+    assert DEMO_ANALYSIS.baseline_trials == 2 and DEMO_ANALYSIS.benchmark_rule == "mean+sd:2"
     assert version == 1 and author == "vascsim demo" and settings == fixture
 
 
@@ -139,12 +139,10 @@ def test_an_override_is_for_one_run_and_is_named(demo):
     catalog, home = demo
     result = _cli(home, "report", "--study", DEMO_STUDY, "--rule", "mean", "--json")
     data = json.loads(result.stdout)
-    assert data["overridden"] == {"benchmark_rule": {"declared": "percentile:75", "used": "mean"}}
+    assert data["overridden"] == {"benchmark_rule": {"declared": "mean+sd:2", "used": "mean"}}
     assert {b["rule"] for b in data["benchmarks"]} == {"mean"}
     analysis, source = analyse_catalog_study(catalog, DEMO_STUDY, {"benchmark_rule": "mean"})
-    assert any(
-        "Overridden for this run only: benchmark_rule percentile:75 -> mean" in n for n in analysis.notes
-    )
+    assert any("Overridden for this run only: benchmark_rule mean+sd:2 -> mean" in n for n in analysis.notes)
     assert declared_settings(catalog, DEMO_STUDY)[1] == 1  # the declaration itself is unchanged
 
 
@@ -159,7 +157,7 @@ def test_declarations_are_versioned_never_edited(tmp_path):
     history = analysis_history(catalog, "course")
     assert [(h["version"], h["author"], h["settings"]["benchmark_rule"]) for h in history] == [
         (1, "alice", "median"),
-        (2, "bob", "percentile:75"),
+        (2, "bob", "mean+sd:2"),
     ]
     catalog.close()
 
@@ -188,7 +186,7 @@ def test_a_bad_declaration_names_its_field(data, message):
 def test_cli_declares_and_shows(demo):
     _, home = demo
     shown = _cli(home, "studies", "analysis", DEMO_STUDY).stdout
-    assert "declared analysis version 1" in shown and "percentile:75" in shown
+    assert "declared analysis version 1" in shown and "mean+sd:2" in shown
 
 
 def test_what_counts_as_retention_is_declared_and_used(tmp_path, copy_demo):
