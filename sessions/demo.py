@@ -198,8 +198,11 @@ def _run_all(catalog: Catalog, home: Path, runs: list, workers: int) -> Iterator
             yield plan
         return
     context = multiprocessing.get_context("spawn")  # no inherited database connections or threads
+    # the longest first (a closure's three stitches before the single ones), so no worker is left
+    # with a long session while the other has nothing to do; each session's seed is its own
+    ordered = sorted(runs, key=lambda run: -len(task_spec(run[0].task).bites()))
     with ProcessPoolExecutor(workers, mp_context=context) as pool:
-        pending = [pool.submit(_run_planned, catalog.url, str(home), *run) for run in runs]
+        pending = [pool.submit(_run_planned, catalog.url, str(home), *run) for run in ordered]
         try:
             for done in as_completed(pending):
                 yield done.result()
