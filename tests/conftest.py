@@ -192,6 +192,20 @@ def pytest_sessionstart(session):
     session.config._rings_before = _rings()
 
 
+def _own_resource_tracker(pid: int) -> bool:
+    """multiprocessing's resource tracker of this test process: started by the first spawn-context
+    pool (e.g. the demo's), with the environment of the test that started it, and ending with this
+    process, not left behind by a test."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            parent = int(stat.read().rsplit(")", 1)[1].split()[1])
+        with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+            words = cmdline.read()
+    except (OSError, ValueError, IndexError):
+        return False
+    return parent == os.getpid() and b"multiprocessing.resource_tracker" in words
+
+
 def pytest_sessionfinish(session, exitstatus):
     """Issue 45, seen 13: the suite leaves no process behind. Anything still running that was started
     with this run's temporary folder in its command line or environment (a killed run's worker, a
@@ -206,7 +220,8 @@ def pytest_sessionfinish(session, exitstatus):
     if factory is None:
         return
     base = str(factory.getbasetemp())
-    left = still_running(started_under(base), within=10.0)
+    left = [pid for pid in started_under(base) if not _own_resource_tracker(pid)]
+    left = still_running(left, within=10.0)
     if left:
         names = []
         for pid in left:
