@@ -514,7 +514,7 @@ def standards_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     marks = standards.misclassification
     shown = marks[
         ["metric", "rule", "pass_if", "false_pass_shown", "false_fail_shown", "unskilled", "skilled"]
-    ]
+    ].assign(metric=[display_name(m) for m in marks["metric"]])
     shown = shown.rename(
         columns={
             "pass_if": "passes if",
@@ -554,7 +554,7 @@ def reliability_tables(analysis: StudyAnalysis) -> tuple[pd.DataFrame, str, list
     retest = reliability.test_retest[reliability.test_retest["metric"].isin(chosen)]
     retest = pd.DataFrame(
         {
-            "metric": retest["metric"],
+            "metric": [display_name(m) for m in retest["metric"]],
             "participants": retest["participants"],
             "ICC(3,1) (95 % CI), reading": [
                 interval_text(v, lo, hi, r)
@@ -673,7 +673,7 @@ def concurrent_for_reading(table: pd.DataFrame) -> pd.DataFrame:
             rho += " (too few participants for an interval)"
         rows.append(
             {
-                "metric": row.metric,
+                "metric": display_name(row.metric),
                 "better is": row.better,
                 "participants": int(row.n),
                 "Spearman rho, better with a higher rating (95 % CI)": rho,
@@ -691,6 +691,7 @@ def benchmarks_for_reading(benchmarks: pd.DataFrame) -> pd.DataFrame:
     if benchmarks.empty:
         return benchmarks
     shown = benchmarks[["metric", "pass_if", "better", "rule", "experts"]]
+    shown = shown.assign(metric=[display_name(m) for m in benchmarks["metric"]])
     return shown.rename(columns={"pass_if": "a session passes when", "better": "better is"})
 
 

@@ -8,7 +8,7 @@ import pytest
 from markupsafe import escape
 
 from metrics import compute_session_metrics
-from metrics.registry import REGISTRY_VERSION
+from metrics.registry import REGISTRY_VERSION, display_name
 from metrics.report import write_report
 from metrics.study import StudySettings, analyse_study
 from metrics.synthetic import synthetic_study
@@ -150,3 +150,6 @@ def test_concurrent_validity_reads_rho_with_its_interval_and_no_metric_unit():
     assert "unit" not in shown.columns  # rho has none; the metric's unit read as if it were rho's
     column = "Spearman rho, better with a higher rating (95 % CI)"
     assert shown[column].tolist() == ["0.65 (-0.08 to 0.98)", "0.50 (too few participants for an interval)"]
+    # issue 44, seen 10: the names a person reads, not the registry's keys
+    assert shown["metric"].tolist() == [display_name("path_length"), display_name("task_time")]
+    assert "path_length" not in shown["metric"].tolist()
