@@ -18,9 +18,9 @@ import numpy as np
 
 from sim.collision.mesh import CollisionMesh
 from sim.fem import Material, TissueModel
-from sim.interaction import NeedleInteraction
 from sim.mesh import vessel_mesh
 from sim.needle import Needle, Pose, rotation_aligning
+from sim.needle.interaction import NeedleInteraction
 
 
 def per_call(function: Callable[[], object], calls: int, repeats: int = 7) -> float:

@@ -29,8 +29,8 @@ import numpy as np  # noqa: E402
 from sessions.tasks import stitch_region_nodes, task_mesh, task_preset, task_spec  # noqa: E402
 from sim.experiments import PressedNeedle  # noqa: E402
 from sim.fem import BiphaseTissue  # noqa: E402
-from sim.interaction import NeedleInteraction  # noqa: E402
 from sim.needle import Needle, Pose, rotation_aligning  # noqa: E402
+from sim.needle.interaction import NeedleInteraction  # noqa: E402
 
 
 def wall_at(cell: float) -> BiphaseTissue:

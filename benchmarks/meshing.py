@@ -76,9 +76,9 @@ def main() -> None:
 
         from sessions.tasks import add_mesh_task, stitch_region_nodes, task_spec, tissue_for
         from sim.devices import ScriptedDevice
-        from sim.interaction import NeedleInteraction
         from sim.mesh.surfaces import mesh_vessel_surface
         from sim.needle import Needle, Pose, rotation_aligning
+        from sim.needle.interaction import NeedleInteraction
         from sim.runtime import Simulation
         from sim.runtime.osrt import process_prepared
         from sim.runtime.prefetch import SOLVE_CHUNK

@@ -25,8 +25,8 @@ import numpy as np
 from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.fem import BiphaseTissue
-from sim.interaction import NeedleInteraction
 from sim.needle import Needle, Pose
+from sim.needle.interaction import NeedleInteraction
 from sim.runtime import Simulation
 from sim.scenarios import scenario
 from sim.tissue_presets import tissue_preset

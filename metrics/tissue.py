@@ -6,7 +6,7 @@ tip, its speed, the needle state and the nominated triangle with the barycentric
 the contact point, and the header records the needle-force law (:func:`session_forces`). While
 the needle indents that triangle (state ``contact``) those determine the tissue's state
 exactly, so this module derives from them, with the same tissue model and the same code the
-runtime used (the force kernel of :mod:`sim.needle_load`, or the paper's barycentric drive
+runtime used (the force kernel of :mod:`sim.needle.load`, or the paper's barycentric drive
 ``b_k d`` for sessions recorded under it):
 
 - ``stretch``: the largest stretch (deformed over rest length) of the edges of the elements within
@@ -31,8 +31,8 @@ from metrics.streams import SessionStreams
 from sim.fem import Tissue
 from sim.fem.fields import IndentationStress, LocalStress, TissueFieldReplay
 from sim.needle import Needle
-from sim.needle_forces import NeedleForces
-from sim.needle_load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
+from sim.needle.forces import NeedleForces
+from sim.needle.load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
 
 NEAR_CONTACT_M = 0.002
 """With the paper's rule, elements whose centroid lies within 2 mm of the contact point count as "near
@@ -171,8 +171,8 @@ class _BarycentricIndentation:
 
 
 class _KernelIndentation:
-    """The force kernel (:mod:`sim.needle_load`): the same load, contact law
-    (:func:`sim.needle_load.kernel_step`: stick-slip, loading-only speed effect, tearing) and local
+    """The force kernel (:mod:`sim.needle.load`): the same load, contact law
+    (:func:`sim.needle.load.kernel_step`: stick-slip, loading-only speed effect, tearing) and local
     operator the runtime built at the first touch, stepped through the run's ticks in order (a tick
     repeating the last one's tip and speed is the same FEM step, held)."""
 

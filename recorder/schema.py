@@ -9,7 +9,7 @@ from __future__ import annotations
 import pyarrow as pa
 
 from sim.errors import VascsimError
-from sim.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
+from sim.needle.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
 from sim.runtime.shared import EVENT_CODES as RUNTIME_EVENT_KINDS
 
 SCHEMA_VERSION = 3

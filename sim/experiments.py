@@ -134,10 +134,10 @@ def kernel_indentation_curve(
     needle_speed: float = 0.0,
 ) -> KernelIndentation:
     """The force-depth curve the runtime's force kernel gives at a surface ``point`` with outward
-    ``normal`` (the same :class:`sim.needle_load.KernelLoad` a first touch builds there)."""
+    ``normal`` (the same :class:`sim.needle.load.KernelLoad` a first touch builds there)."""
     from types import SimpleNamespace
 
-    from sim.needle_load import KernelLoad, kernel_factory
+    from sim.needle.load import KernelLoad, kernel_factory
 
     mesh = tissue.mesh
     n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
@@ -188,8 +188,8 @@ class PressedNeedle:
     """
 
     def __init__(self, tissue, forces, point: ArrayLike, normal: ArrayLike, step: float = 2e-5) -> None:
-        from sim.interaction import NeedleInteraction
         from sim.needle import Needle, rotation_aligning
+        from sim.needle.interaction import NeedleInteraction
 
         self.normal = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
         self.point = np.asarray(point, dtype=np.float64)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, fields
 
 from sim.errors import ModelError
 from sim.fem.biphase import BiphaseParameters
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from metrics.streams import MetricsError
 from sim.devices import ReplayDevice
 from sim.needle import Needle
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 from sim.runtime.snapshots import STATE_CODES
 

@@ -33,9 +33,9 @@ from sim.devices.base import GRIP_BUTTON, STOP_BUTTON, Device, DeviceLostError
 from sim.errors import VascsimError
 from sim.fem import Tissue
 from sim.fem.kernel import warm_kernel_geometry
-from sim.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.needle import Needle, Pose
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
+from sim.needle.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.runtime.logs import HapticColumns, interpolate_force
 from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead
 from sim.runtime.safety import ForceSafety, SafetySettings

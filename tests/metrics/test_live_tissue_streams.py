@@ -13,7 +13,7 @@ from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 
 FORCES = task_preset("wall-stitch").forces

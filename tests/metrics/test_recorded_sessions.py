@@ -9,7 +9,7 @@ from recorder.runtime import RuntimeRecorder
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule

@@ -19,7 +19,7 @@ from sessions.synthetic import pass_parameters
 from sessions.tasks import task_preset, tissue_for
 from sim.fem.fields import IndentationStress
 from sim.needle import Needle
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule

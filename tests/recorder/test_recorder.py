@@ -281,7 +281,7 @@ def test_record_takes_any_row_numpy_can_convert_and_names_a_wrong_length(tmp_pat
 
 def test_every_event_kind_the_simulator_emits_has_a_place_in_the_schema():
     from recorder.schema import EVENT_KINDS
-    from sim.interaction import EVENT_KINDS as NEEDLE_KINDS
+    from sim.needle.interaction import EVENT_KINDS as NEEDLE_KINDS
     from sim.runtime.shared import EVENT_CODES as RUNTIME_KINDS
 
     assert set(NEEDLE_KINDS) <= set(EVENT_KINDS)

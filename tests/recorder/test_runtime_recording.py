@@ -8,7 +8,7 @@ from recorder.runtime import RuntimeRecorder, quaternion_of
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import quaternion_matrix
 from sim.needle import Needle, rotation_about
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule

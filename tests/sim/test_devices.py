@@ -20,10 +20,10 @@ from sim.devices.scripted import (
 from sim.devices.spacemouse import SpaceMouse, SpaceMouseDecoder
 from sim.devices.usb_discovery import identify, scan_usb
 from sim.fem import Material, TissueModel
-from sim.interaction import NeedleInteraction
 from sim.mesh import box_mesh
 from sim.needle import Needle, NeedleError, Pose, TurnAbout, rotation_about
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
+from sim.needle.interaction import NeedleInteraction
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 

@@ -8,10 +8,10 @@ import pytest
 from sim.collision import intersect_segments_triangles
 from sim.collision.mesh import CollisionMesh
 from sim.fem import BiphaseTissue, Material, TissueModel
-from sim.interaction import NeedleInteraction, PiercingRules, entry_angle_deg
 from sim.mesh import box_mesh
 from sim.needle import Needle, Pose, rotation_about, rotation_aligning
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
+from sim.needle.interaction import NeedleInteraction, PiercingRules, entry_angle_deg
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
@@ -234,7 +234,7 @@ def test_distributed_contact_force_is_the_sum_of_nodal_reactions(wall):
 def test_entry_angle_and_rules_validation():
     assert entry_angle_deg(np.array([0, 0, -1.0]), np.array([0, 0, 1.0])) == pytest.approx(0.0)
     assert entry_angle_deg(np.array([1.0, 0, -1.0]), np.array([0, 0, 1.0])) == pytest.approx(45.0)
-    from sim.interaction import InteractionError
+    from sim.needle.interaction import InteractionError
 
     with pytest.raises(InteractionError, match="max_entry_angle_deg"):
         PiercingRules(max_entry_angle_deg=0)
@@ -245,7 +245,7 @@ def test_entry_angle_and_rules_validation():
 def test_region_forces_follow_the_entered_region_and_are_checked(wall):
     """A region's own needle forces (a calcified plaque's higher puncture) apply where its faces are
     entered; a region the mesh lacks, or another load model, is refused by name."""
-    from sim.interaction import InteractionError
+    from sim.needle.interaction import InteractionError
 
     plaque = NeedleForces(puncture_force=1.5)
     interaction = NeedleInteraction(wall, Needle.straight(), region_forces={0: plaque})

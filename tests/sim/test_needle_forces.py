@@ -22,7 +22,7 @@ from sim.fem.kernel import (
 )
 from sim.mesh import box_mesh, grid_box_mesh, refined_coordinates
 from sim.needle import Needle
-from sim.needle_forces import NeedleForces, NeedleForcesError
+from sim.needle.forces import NeedleForces, NeedleForcesError
 from sim.runtime import Simulation
 
 WIRE_RADIUS = 1.25e-4

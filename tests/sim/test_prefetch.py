@@ -10,7 +10,7 @@ import pytest
 
 from sim.errors import SolverError
 from sim.fem import BiphaseTissue, Material, TissueModel
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime.prefetch import ColumnWorker, Prefetcher, arc_ahead, line_ahead
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule

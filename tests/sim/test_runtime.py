@@ -12,7 +12,7 @@ from sim.devices import DeviceLostError, ScriptedDevice, SuturingPass
 from sim.devices.base import STOP_BUTTON, DeviceLimits
 from sim.errors import ModelError
 from sim.needle import Needle, Pose
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 from sim.runtime import RunResult, RuntimeSettings, SafetySettings, Simulation
 from sim.runtime.safety import ForceSafety
 
@@ -365,7 +365,7 @@ from sim.fem import BiphaseTissue
 from sim.mesh import box_mesh
 from sim.needle import Needle
 from sim.runtime import Simulation
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 

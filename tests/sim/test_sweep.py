@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.collision.mesh import CollisionMesh
 from sim.fem import Material, TissueModel
-from sim.interaction import NeedleInteraction
 from sim.mesh import box_mesh
 from sim.needle import Needle, Pose, rotation_aligning
+from sim.needle.interaction import NeedleInteraction
 from sim.needle.sweep import first_touch
 
 THICKNESS = 0.0015

@@ -18,7 +18,7 @@ States: ``free`` -> ``contact`` -> ``pierced`` -> ``exited`` -> ``free`` (pulled
 through). Every transition is a :class:`NeedleEvent`.
 
 How the needle loads the tissue and what resists it after piercing is set by
-:class:`sim.needle_forces.NeedleForces`: by default a mesh-independent force kernel
+:class:`sim.needle.forces.NeedleForces`: by default a mesh-independent force kernel
 around the tip with the wire's near field (:mod:`sim.fem.kernel`), a force-based
 puncture threshold, then cutting, friction and the far wall's emergence peak along
 the needle; ``NeedleForces.paper()`` is the source paper's barycentric rule.
@@ -52,8 +52,7 @@ from sim.collision.mesh import CollisionMesh, TriangleContact
 from sim.fem import Tissue
 from sim.fem.fields import LocalStress
 from sim.needle import Needle, Pose, rotation_about
-from sim.needle.sweep import Touch, touches
-from sim.needle_events import (
+from sim.needle.events import (
     EVENT_KINDS,
     FemStep,
     InteractionError,
@@ -61,9 +60,10 @@ from sim.needle_events import (
     PiercingRules,
     entry_angle_deg,
 )
-from sim.needle_forces import NeedleForces
-from sim.needle_load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
-from sim.needle_passage import NEAR_CONTACT, GraphicsRateTracking
+from sim.needle.forces import NeedleForces
+from sim.needle.load import KernelLoad, kernel_factory, kernel_step, mindlin_ratio, tissue_poisson_ratio
+from sim.needle.passage import NEAR_CONTACT, GraphicsRateTracking
+from sim.needle.sweep import Touch, touches
 
 
 def _checked_region_forces(
@@ -599,7 +599,7 @@ class NeedleInteraction(GraphicsRateTracking):
         penalty drive.
 
         ``surface``: (m, 3) outward normals of a needle pressing on the surface: the contact law of
-        :func:`sim.needle_load.kernel_step` (stick-slip, loading-only speed effect, tearing); the
+        :func:`sim.needle.load.kernel_step` (stick-slip, loading-only speed effect, tearing); the
         contact points it moves (slid, torn) are moved here."""
         load = self._kernel_load(key)
         ranks = [rank for _, rank in key]

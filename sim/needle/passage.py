@@ -2,7 +2,7 @@
 needle against the collision mesh, the first crossing at the tip promoted to a contact, the exit
 through the far wall, the end of the passage, and implausible hits (reported when they start).
 
-A mixin of :class:`sim.interaction.NeedleInteraction`, which holds the state these methods read
+A mixin of :class:`sim.needle.interaction.NeedleInteraction`, which holds the state these methods read
 and change (``state``, ``contacts``, the collision mesh) and the FEM-rate half.
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.collision.mesh import TriangleContact, segment_ends
-from sim.needle_events import NeedleEvent, entry_angle_deg
+from sim.needle.events import NeedleEvent, entry_angle_deg
 
 HOLE_REACH = 1.5e-3
 """After a pull-through, the needle's body crossing the surface this close (m) to the passage's entry

@@ -2,7 +2,7 @@
 forces, the piercing rules, and the entry angle they are judged by.
 
 Value types only (no state): the runtime, the recorder's event schema and the metrics read these
-without the interaction's machinery (:mod:`sim.interaction`).
+without the interaction's machinery (:mod:`sim.needle.interaction`).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from sim.fem import Tissue, TissueModel
 from sim.fem.fields import LocalStress
 from sim.fem.kernel import ForceKernel, KernelContact, kernel_at, lateral_near_field, normal_near_field
-from sim.needle_forces import NeedleForces
+from sim.needle.forces import NeedleForces
 
 KernelFactory = Callable[[TissueModel], tuple[list[ForceKernel], list[NDArray[np.float64]]]]
 """Builds the kernels and their (3, 3) near-field compliances on one phase's model."""

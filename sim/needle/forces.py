@@ -52,7 +52,7 @@ class NeedleForces:
     lateral_scale: factor on the sideways (levering) stiffness of a pierced wall (1: the kernel's
         own stiffness with the wire's near field in the plane across the needle).
     puncture_force: normal force (N) at which a well-aligned needle pierces; ``None`` uses the
-        paper's stress rule (:attr:`sim.interaction.PiercingRules.puncture_stress` x wire area).
+        paper's stress rule (:attr:`sim.needle.interaction.PiercingRules.puncture_stress` x wire area).
     emergence_force: the far wall's resistance (N) just before the tip comes out (Frick's second peak).
     emergence_ramp: depth (m) before the far surface over which that resistance builds.
     cutting_force: axial resistance (N) at the tip while it cuts new wall.
