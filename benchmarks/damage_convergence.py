@@ -27,7 +27,7 @@ sys.path = [p for p in sys.path if Path(p).resolve() != Path(__file__).resolve()
 import numpy as np  # noqa: E402
 
 from sessions.tasks import stitch_region_nodes, task_mesh, task_preset, task_spec  # noqa: E402
-from sim.experiments import PressedNeedle  # noqa: E402
+from sim.calibration.indentation import PressedNeedle  # noqa: E402
 from sim.fem import BiphaseTissue  # noqa: E402
 from sim.needle import Needle, Pose, rotation_aligning  # noqa: E402
 from sim.needle.interaction import NeedleInteraction  # noqa: E402

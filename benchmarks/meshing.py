@@ -75,6 +75,7 @@ def main() -> None:
         from threadpoolctl import threadpool_limits
 
         from sessions.tasks import add_mesh_task, stitch_region_nodes, task_spec, tissue_for
+        from sim.calibration.presets import tissue_preset
         from sim.devices import ScriptedDevice
         from sim.mesh.surfaces import mesh_vessel_surface
         from sim.needle import Needle, Pose, rotation_aligning
@@ -82,7 +83,6 @@ def main() -> None:
         from sim.runtime import Simulation
         from sim.runtime.osrt import process_prepared
         from sim.runtime.prefetch import SOLVE_CHUNK
-        from sim.tissue_presets import tissue_preset
 
         surface = Path(folder) / "lumen.stl"
         bent_lumen().save(surface)

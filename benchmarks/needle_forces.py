@@ -23,13 +23,13 @@ import time
 import numpy as np
 
 from sessions.tasks import task_preset, task_spec, tissue_for
+from sim.calibration.presets import tissue_preset
+from sim.calibration.scenarios import scenario
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.fem import BiphaseTissue
 from sim.needle import Needle, Pose
 from sim.needle.interaction import NeedleInteraction
 from sim.runtime import Simulation
-from sim.scenarios import scenario
-from sim.tissue_presets import tissue_preset
 
 
 def percentiles(samples: list[float]) -> tuple[float, float, float]:

@@ -19,10 +19,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from sim.calibration.scenarios import SCENARIOS, scenario
 from sim.fem import BiphaseParameters, Material, TissueModel
 from sim.fem.biphase import BiphaseContact
 from sim.fem.condensation import condensed_inverse_multi_rhs, node_dofs
-from sim.scenarios import SCENARIOS, scenario
 
 PRECOMPUTED = ("paper_table2_792", "paper_table2_1286", "paper_table2_2283", "vessel_10k")
 ON_DEMAND_ONLY = ("vessel_50k",)

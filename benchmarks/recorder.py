@@ -49,9 +49,9 @@ from recorder import COLUMN, SAMPLE_COLUMNS, SessionWriter  # noqa: E402
 from recorder.remote import encode_batch, pack_frame  # noqa: E402
 from recorder.writer import samples_batch  # noqa: E402
 from sessions.config import prepare_rendering  # noqa: E402
+from sim.calibration.presets import tissue_preset  # noqa: E402
 from sim.runtime.cpu import IdlePolling, stolen_seconds  # noqa: E402
 from sim.runtime.osrt import set_all_threads, sleep_until  # noqa: E402
-from sim.tissue_presets import tissue_preset  # noqa: E402
 
 ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 
@@ -130,15 +130,15 @@ def haptic_process_cost(directory: str, seconds: float = 30.0) -> tuple[np.ndarr
     import mmap
 
     from recorder.runtime import RuntimeRecorder
+    from sim.calibration.indentation import paper_cube
+    from sim.calibration.scenarios import practice_passes, scenario
     from sim.devices import ScriptedDevice
     from sim.devices.scripted import sequence_of_passes
-    from sim.experiments import paper_cube
     from sim.fem import BiphaseTissue
     from sim.needle import Needle
     from sim.render import TissueRenderer
     from sim.runtime import RuntimeSettings, Simulation
     from sim.runtime.display import DisplayScene
-    from sim.scenarios import practice_passes, scenario
 
     needle = Needle.curved()
     mesh, fixed = paper_cube()

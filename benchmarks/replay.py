@@ -33,13 +33,13 @@ from metrics.replay.export import ReplaySettings, export_replay  # noqa: E402
 from recorder import SessionWriter, open_session  # noqa: E402
 from recorder.runtime import RuntimeRecorder  # noqa: E402
 from sessions.config import prepare_rendering  # noqa: E402
+from sim.calibration.presets import tissue_preset  # noqa: E402
+from sim.calibration.scenarios import practice_passes, scenario  # noqa: E402
 from sim.devices import ScriptedDevice  # noqa: E402
 from sim.devices.scripted import sequence_of_passes  # noqa: E402
 from sim.fem import BiphaseTissue  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
-from sim.scenarios import practice_passes, scenario  # noqa: E402
-from sim.tissue_presets import tissue_preset  # noqa: E402
 
 ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 

@@ -39,15 +39,15 @@ import numpy as np
 from kernel_trace import HapticCoreTrace, late_periods_explained
 
 from sessions.config import prepare_rendering
+from sim.calibration.indentation import paper_cube
+from sim.calibration.presets import tissue_preset
+from sim.calibration.scenarios import practice_passes, scenario
 from sim.devices import ScriptedDevice
 from sim.devices.scripted import sequence_of_passes
-from sim.experiments import paper_cube
 from sim.fem import BiphaseTissue
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings, Simulation
 from sim.runtime.cpu import stolen_seconds
-from sim.scenarios import practice_passes, scenario
-from sim.tissue_presets import tissue_preset
 
 LIVE_STRESS = RuntimeSettings().live_stress_in_real_time  # --live-stress / --no-live-stress
 ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit

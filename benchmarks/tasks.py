@@ -47,7 +47,7 @@ def convergence(task: str = "interrupted-stitch") -> None:
     import dataclasses
 
     from sessions.tasks import region_presets, stitch_region_nodes, task_mesh, task_spec
-    from sim.experiments import kernel_indentation_curve
+    from sim.calibration.indentation import kernel_indentation_curve
     from sim.fem import BiphaseTissue
 
     base, preset = task_spec(task), task_preset(task)

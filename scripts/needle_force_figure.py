@@ -21,9 +21,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from sessions.tasks import task_preset, task_spec, tissue_for
+from sim.calibration.indentation import load_cycle
 from sim.devices import ScriptedDevice, SuturingPass
 from sim.devices.scripted import SuturingPassParameters
-from sim.experiments import load_cycle
 from sim.needle import Needle
 from sim.runtime import Simulation
 

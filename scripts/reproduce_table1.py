@@ -8,7 +8,7 @@ at Poisson's ratio 0.45 and at the paper's maximum 0.47.
 
 from __future__ import annotations
 
-from sim.experiments import indentation_curve
+from sim.calibration.indentation import indentation_curve
 from sim.fem import BiphaseParameters
 
 STRAINS = (0.02, 0.10, 0.20, 0.50)

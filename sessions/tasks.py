@@ -306,8 +306,8 @@ def add_mesh_task(
     the outer surface's nodes within ``stitch_radius``; ``fixed`` names the node sets held."""
     import re
 
+    from sim.calibration.presets import tissue_preset
     from sim.mesh import save_mesh
-    from sim.tissue_presets import tissue_preset
 
     if not re.fullmatch(r"[a-z0-9][a-z0-9-]{1,40}", name):
         raise VascsimError(f"task name {name!r}: 2-41 lower-case letters, digits and dashes")
@@ -470,8 +470,8 @@ def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
 
 
 def task_preset(task: str):
-    """The task's tissue preset (:mod:`sim.tissue_presets`): biphase parameters and needle forces."""
-    from sim.tissue_presets import tissue_preset
+    """The task's tissue preset (:mod:`sim.calibration.presets`): biphase parameters and needle forces."""
+    from sim.calibration.presets import tissue_preset
 
     return tissue_preset(task_spec(task).parameters.get("tissue", "paper"))
 
@@ -479,7 +479,7 @@ def task_preset(task: str):
 def region_presets(task: str) -> dict:
     """Mesh region name -> tissue preset for the task's regions that differ from its wall (e.g. a
     calcified plaque); empty for a uniform wall."""
-    from sim.tissue_presets import tissue_preset
+    from sim.calibration.presets import tissue_preset
 
     return {
         region: tissue_preset(name)

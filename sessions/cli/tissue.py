@@ -83,7 +83,7 @@ def indentation(
 
     console = Console(stderr=True)
     if preset == "paper":
-        from sim.experiments import indentation_curve
+        from sim.calibration.indentation import indentation_curve
 
         strains = np.linspace(0.0, max_strain, steps)
         with console.status("precomputing the test cube and pressing the needle..."):
@@ -95,9 +95,9 @@ def indentation(
         return
     from sessions.config import cache_dir
     from sessions.tasks import task_spec, tissue_for
-    from sim.experiments import kernel_indentation_curve
+    from sim.calibration.indentation import kernel_indentation_curve
+    from sim.calibration.presets import tissue_preset
     from sim.fem import BiphaseTissue
-    from sim.tissue_presets import tissue_preset
 
     spec, chosen = task_spec("wall-stitch"), tissue_preset(preset)
     with console.status(f"precomputing the wall-stitch patch ({preset}) and pressing the needle..."):
@@ -114,7 +114,7 @@ def indentation(
         )
         cycle = None
         if unload:
-            from sim.experiments import load_cycle
+            from sim.calibration.indentation import load_cycle
 
             cycle = load_cycle(tissue, chosen.forces, spec.entry, spec.normal, depths[-1], speed, speed)
     if as_json:

@@ -8,7 +8,7 @@ import numpy as np
 from click.testing import CliRunner
 
 from sessions.cli import main
-from sim.experiments import indentation_curve
+from sim.calibration.indentation import indentation_curve
 
 VASCSIM = Path(sys.executable).with_name("vascsim")
 
@@ -46,7 +46,7 @@ def test_calibrated_indentation_is_the_runtime_kernel_and_pierces_in_the_publish
     """The default curve: the porcine-artery wall-stitch patch through the force kernel; its force at
     each depth is what the kernel computes, and the wall gives at 0.7-1.1 mm under 0.8 N."""
     from sessions.tasks import task_preset, task_spec, tissue_for
-    from sim.experiments import kernel_indentation_curve
+    from sim.calibration.indentation import kernel_indentation_curve
 
     env = dict(os.environ, VASCSIM_HOME=str(tmp_path))
     result = CliRunner(env=env).invoke(main, ["indentation", "--steps", "13", "--json"])
@@ -81,7 +81,7 @@ def test_indentation_at_a_speed_with_its_unloading_branch_and_work(tmp_path):
     """``--speed`` presses at that speed; ``--unload`` draws the needle back out and reports the work
     put in and given back, which never exceeds what went in (issue 43: the wall returned 1.69x)."""
     from sessions.tasks import task_preset, task_spec, tissue_for
-    from sim.experiments import load_cycle
+    from sim.calibration.indentation import load_cycle
 
     env = dict(os.environ, VASCSIM_HOME=str(tmp_path))
     arguments = ["indentation", "--steps", "7", "--max-depth", "0.6", "--speed", "10", "--unload", "--json"]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sessions.tasks import task_preset, task_spec, tissue_for
-from sim.experiments import PressedNeedle, load_cycle
+from sim.calibration.indentation import PressedNeedle, load_cycle
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from sim.tissue_presets import PRESETS, describe, undocumented
+from sim.calibration.presets import PRESETS, describe, undocumented
 
 CITED = re.compile(
     r"(19|20)\d\d|PAPER\.md|fitted|chosen|as the artery's|not in the paper|model choice|numerical"

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.experiments import paper_cube, top_contact_triangle
+from sim.calibration.indentation import paper_cube, top_contact_triangle
 from sim.fem import Material, TissueModel
 from sim.needle import Needle, Pose, rotation_aligning
 from sim.render import RenderFrame, TissueRenderer, compare_images, surface_stress, write_image

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 import pyvista as pv
 
+from sim.calibration.indentation import kernel_indentation_curve
+from sim.calibration.presets import tissue_preset
 from sim.errors import MeshError
-from sim.experiments import kernel_indentation_curve
 from sim.fem import BiphaseTissue
 from sim.mesh import vessel_mesh
 from sim.mesh.surfaces import (
@@ -23,7 +24,6 @@ from sim.mesh.surfaces import (
     read_surface,
     wall_surface,
 )
-from sim.tissue_presets import tissue_preset
 
 PRESET = tissue_preset("porcine-artery")
 

@@ -1,4 +1,4 @@
-"""Named meshes with their supports and contact candidates, shared by the demo and benchmarks.
+"""Named meshes with their supports and contact candidates, for the benchmarks.
 
 ``paper_table2_*`` are tissue slabs clamped at two opposite ends, sized like the
 paper's Table 2 models (nodes within 0.8 %, contact candidates exactly as the
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.calibration.indentation import paper_cube
 from sim.errors import ModelError
 from sim.mesh import TetMesh, Wound, box_mesh, vessel_mesh
 
@@ -58,8 +59,7 @@ def _vessel(name: str, n_theta: int, n_axial: int) -> Scenario:
 
 
 def _paper_cube() -> Scenario:
-    mesh = box_mesh(0.01, 8)
-    fixed = mesh.node_sets["z0"]
+    mesh, fixed = paper_cube()
     return Scenario(
         "paper_cube",
         mesh,
