@@ -26,8 +26,8 @@ from dashboard.auth import Viewer, require
 from dashboard.errors import DashboardError, not_found, said, status_of
 from dashboard.pages import render
 from dashboard.signals import inside, replay_video
+from metrics.errors import MetricsError
 from metrics.instruments import INSTRUMENTS, instrument
-from metrics.streams import MetricsError
 from sessions.ratings import add_rating, session_ratings
 from sessions.replaying import blind_replay_path
 from sessions.store import STAFF

@@ -6,9 +6,10 @@ The core imports without the web stack. Public API::
     from metrics.datasets import jigsaws
 """
 
+from metrics.errors import MetricsError
 from metrics.registry import REGISTRY, REGISTRY_VERSION, Metric
 from metrics.session import compute_session_metrics, metrics_of
-from metrics.streams import MetricsError, SessionStreams, from_frame, from_recorded
+from metrics.streams import SessionStreams, from_frame, from_recorded
 from metrics.validity import ConstructValidityResult, construct_validity
 
 __all__ = [

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.streams import MetricsError, SessionStreams
+from metrics.errors import MetricsError
+from metrics.streams import SessionStreams
 
 PHASES = ("approach", "contact", "pierce", "exit")
 MAX_DTW_POINTS = 400

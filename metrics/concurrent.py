@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from metrics.errors import MetricsError
 from metrics.registry import REGISTRY
 from metrics.statistics import holm
-from metrics.streams import MetricsError
 
 MIN_FOR_INTERVAL = 10
 """Fewer participants than this get no interval for rho, and the notes say why."""

@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from metrics.errors import MetricsError
 from metrics.proficiency import pass_condition
 from metrics.registry import REGISTRY
 from metrics.reliability import CronbachAlpha, cronbach_alpha, rater_agreement, test_retest
 from metrics.standards import leave_one_expert_out, misclassification_table, rule_comparison
-from metrics.streams import MetricsError
 
 CANDIDATE_RULES = ("mean", "median", "percentile:75", "mean+sd:2", "trimmed:10", "contrasting")
 """The rules every study's standard setting compares (the declared rule is added when not here)."""

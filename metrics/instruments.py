@@ -15,7 +15,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 TOTAL = "total"
 

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 SMOOTHING_CUTOFF_HZ = 6.0
 """Low-pass cutoff for speed and jerk: hand movements carry little above ~6 Hz (tremor sits at 8-12 Hz)."""

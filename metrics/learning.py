@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 
 def _power(n, plateau, amplitude, rate):

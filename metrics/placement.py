@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 FAR_SURFACE_COSINE = 0.7
 """An exit face whose outward normal is within 45 deg of the far surface's counts as full thickness."""

@@ -28,9 +28,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from metrics.errors import MetricsError
 from metrics.registry import REGISTRY
 from metrics.statistics import contrasting_groups_mark
-from metrics.streams import MetricsError
 from metrics.units import shown
 
 RULE_FORMS = "'mean', 'median', 'percentile:Q', 'mean+sd:K', 'trimmed:P' or 'contrasting'"

@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 if TYPE_CHECKING:
     from metrics.context import SessionContext

@@ -13,8 +13,9 @@ import pandas as pd
 import metrics.definitions
 import metrics.placement_metrics  # noqa: F401  (registers the stitch-placement metrics)
 from metrics.context import SessionContext
+from metrics.errors import MetricsError
 from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.streams import MetricsError, SessionStreams, from_recorded
+from metrics.streams import SessionStreams, from_recorded
 
 ID_COLUMNS = ("session_id", "participant_id", "label")
 ATTRIBUTE_COLUMNS = ("trial", "grs", "phase", "synthetic", "task")

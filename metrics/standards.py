@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from metrics.errors import MetricsError
 from metrics.proficiency import assess_proficiency, proficiency_benchmarks, rule_value, trials_to_proficiency
 from metrics.registry import REGISTRY
 from metrics.statistics import wilson_interval
-from metrics.streams import MetricsError
 
 SAFETY_METRICS = ("back_wall_catches", "wound_edge_tears", "force_clamp_hits")
 """Never events: a session with any of these above zero fails outright in non-compensatory mode

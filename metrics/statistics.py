@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 EXACT_MAX_TOTAL = 60
 """Exact (permutation) p-values for up to 60 observations in all; the normal approximation above."""

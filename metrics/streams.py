@@ -19,13 +19,9 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from sim.errors import VascsimError
+from metrics.errors import MetricsError
 
 EVENT_COLUMNS = ("time", "kind", "entry_angle_deg", "tip_speed", "triangle")
-
-
-class MetricsError(VascsimError, ValueError):
-    """A stream, table or parameter given to the metrics engine is unusable; the message names it."""
 
 
 def _empty_events() -> pd.DataFrame:

@@ -17,12 +17,12 @@ import numpy as np
 import pandas as pd
 
 from metrics.concurrent import ConcurrentValidityResult, concurrent_validity
+from metrics.errors import MetricsError
 from metrics.evidence import Reliability, StandardSetting, reliability_evidence, standard_setting
 from metrics.learning import cusum, fit_learning_curve, retention
 from metrics.proficiency import assess_proficiency, proficiency_benchmarks
 from metrics.registry import REGISTRY
 from metrics.standards import non_compensatory_passes, progression_reached
-from metrics.streams import MetricsError
 from metrics.validity import ConstructValidityResult, construct_validity
 
 RATING_COLUMNS = ("grs_total", "osats_total")

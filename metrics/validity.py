@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from metrics.composite import CompositeValidation, validate_composite
+from metrics.errors import MetricsError
 from metrics.registry import REGISTRY
 from metrics.statistics import (
     auc_interval,
@@ -31,7 +32,6 @@ from metrics.statistics import (
     minimum_exact_p,
     oriented_auc,
 )
-from metrics.streams import MetricsError
 
 LEVELS = ("participant", "trial")
 

@@ -18,7 +18,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session as OrmSession
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 from metrics.study import StudyAnalysis, StudySettings, analyse_study
 from sessions.catalog import Catalog, CatalogError, WrongState, now
 from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study

@@ -20,8 +20,8 @@ from pathlib import Path
 import pandas as pd
 from sqlalchemy import delete, func, select
 
+from metrics.errors import MetricsError
 from metrics.instruments import TOTAL, Instrument, instrument
-from metrics.streams import MetricsError
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, now
 from sessions.models import Participant, Rating, Session
 

@@ -34,8 +34,8 @@ from typing import Any
 
 import pandas as pd
 
+from metrics.errors import MetricsError
 from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.streams import MetricsError
 from metrics.units import display_unit, in_display_units
 from sessions.analysis import analyse_catalog_study
 from sessions.catalog import Catalog, CatalogError

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 DICTIONARY = "DICT_4X4_50"
 

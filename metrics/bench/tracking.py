@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.bench.camera import DICTIONARY, Camera, aruco_dictionary
-from metrics.streams import MetricsError, SessionStreams
+from metrics.errors import MetricsError
+from metrics.streams import SessionStreams
 
 SMOOTHING_HZ = 3.0
 """Low-pass cut-off for the tracked path. At 30 frames/s a marker's pose noise (~0.5 mm per frame at

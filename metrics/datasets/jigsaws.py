@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.streams import MetricsError, SessionStreams
+from metrics.errors import MetricsError
+from metrics.streams import SessionStreams
 
 FRAME_RATE_HZ = 30.0
 COLUMNS_PER_MANIPULATOR = 19

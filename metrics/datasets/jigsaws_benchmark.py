@@ -30,7 +30,7 @@ import pandas as pd
 from scipy import stats
 
 from metrics.datasets.jigsaws import Trial
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 PROTOCOLS = ("LOSO", "LOUO")
 SETUP_NAMES = {"LOSO": "SuperTrialOut", "LOUO": "UserOut"}

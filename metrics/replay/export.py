@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.alignment import PHASES, phase_starts
+from metrics.errors import MetricsError
 from metrics.replay import blind
 from metrics.replay.blind import blind_keys
 from metrics.replay.hud import FrameLayout, HudLine, Key, draw_key, value_line
@@ -27,7 +28,7 @@ from metrics.replay.reference import expert_reference
 from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
 from metrics.replay.track import ReplayTrack, session_track
 from metrics.replay.wound import outline_edges, wound_nodes
-from metrics.streams import MetricsError, SessionStreams, from_recorded
+from metrics.streams import SessionStreams, from_recorded
 from metrics.tissue import with_tissue_fields
 from sim.fem.fields import TissueFieldReplay
 

@@ -16,7 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.alignment import PHASES, Alignment, align_sessions, decimated, phase_starts
-from metrics.streams import MetricsError, SessionStreams
+from metrics.errors import MetricsError
+from metrics.streams import SessionStreams
 
 SIGNALS = {
     "force": ("force (mN)", 1e3),

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.streams import MetricsError, SessionStreams
+from metrics.errors import MetricsError
+from metrics.streams import SessionStreams
 
 STRESS_MAP_PIXEL_M = 2e-5
 """Stress maps sample the wall every 20 micrometres."""

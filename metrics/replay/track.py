@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 from sim.devices import ReplayDevice
 from sim.needle import Needle
 from sim.needle.forces import NeedleForces

@@ -42,7 +42,7 @@ def calibrate(images, out, squares, square_mm, marker_mm, dictionary) -> None:
     import cv2
 
     from metrics.bench.camera import BoardSpec, calibrate_charuco
-    from metrics.streams import MetricsError
+    from metrics.errors import MetricsError
 
     frames = []
     for path in images:

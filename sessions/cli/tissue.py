@@ -11,15 +11,16 @@ import numpy as np
 from sessions.cli.base import (
     user_errors,
 )
+from sim.calibration.presets import DEFAULT_PRESET, PRESETS
 
 
 @click.command()
 @click.option(
     "--tissue",
     "preset",
-    default="porcine-artery",
+    default=DEFAULT_PRESET,
     show_default=True,
-    type=click.Choice(["porcine-artery", "calcified", "paper"]),
+    type=click.Choice(list(PRESETS)),
     help="Tissue preset: a calibrated wall pressed at the wall-stitch entry point through the force "
     "kernel, or the source paper's 10 mm cube (PAPER.md Fig. 3 and Table 1).",
 )

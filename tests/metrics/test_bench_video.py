@@ -8,7 +8,7 @@ from metrics import SessionStreams, metrics_of
 from metrics.bench.camera import Camera, calibrate_charuco
 from metrics.bench.synthetic import charuco_views, default_camera_matrix, write_bench_video
 from metrics.bench.tracking import read_video, smooth_path, track_frames
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 
 MOTION = ("task_time", "path_length", "economy_of_motion", "log_dimensionless_jerk", "spectral_arc_length")
 

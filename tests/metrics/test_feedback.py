@@ -13,6 +13,7 @@ from sqlalchemy import select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
+from metrics.errors import MetricsError
 from metrics.feedback import (
     band_widths_outside,
     feedback_line,
@@ -24,7 +25,6 @@ from metrics.feedback import (
     what_to_work_on,
 )
 from metrics.registry import REGISTRY, metric
-from metrics.streams import MetricsError
 from sessions.accounts import create_user
 from sessions.catalog import Catalog
 from sessions.cli import main

@@ -20,7 +20,7 @@ from metrics.datasets.jigsaws_benchmark import (
     run_benchmark,
     setup_folds,
 )
-from metrics.streams import MetricsError
+from metrics.errors import MetricsError
 from sessions.cli import main
 from tests.metrics.test_jigsaws import write_trial
 

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from metrics.errors import MetricsError
 from metrics.reliability import (
     complete_block,
     cronbach_alpha,
@@ -19,7 +20,6 @@ from metrics.reliability import (
     krippendorff_alpha,
     test_retest,
 )
-from metrics.streams import MetricsError
 
 # Shrout & Fleiss (1979), Table 2: six targets rated by four judges
 SHROUT_FLEISS = np.array(

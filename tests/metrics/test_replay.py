@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from metrics import from_recorded
+from metrics.errors import MetricsError
 from metrics.replay.export import ReplayCanvas, ReplaySettings, SceneReplay, _hud_lines, export_replay
 from metrics.replay.plots import figure_pixels, signal_figure
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import stress_map
 from metrics.replay.track import replay_track, scene_track
-from metrics.streams import MetricsError
 from metrics.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from scipy import stats
 from statsmodels.stats.proportion import proportion_confint
 
+from metrics.errors import MetricsError
 from metrics.proficiency import check_rule, proficiency_benchmarks, rule_value
 from metrics.standards import (
     leave_one_expert_out,
@@ -21,7 +22,6 @@ from metrics.standards import (
     rule_comparison,
 )
 from metrics.statistics import contrasting_groups_mark, wilson_interval
-from metrics.streams import MetricsError
 
 
 def test_contrasting_groups_crosses_where_the_two_normal_fits_meet():

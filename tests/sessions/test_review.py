@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from metrics.errors import MetricsError
 from metrics.proficiency import band_position
-from metrics.streams import MetricsError
 from sessions.review import against_band
 
 BAND = {"expert_q1": 10.0, "expert_median": 12.0, "expert_q3": 14.0}
