@@ -11,7 +11,7 @@ from sessions.cli.base import (
     progress_bar,
     user_errors,
 )
-from sessions.cli.recorded import final_task_line
+from sessions.cli.sessions import final_task_line
 
 
 def proficiency_rule(analysis) -> str:

@@ -1,4 +1,4 @@
-"""`vascsim score` and `vascsim report`: metrics and study reports."""
+"""`vascsim report`: a study's report (HTML, Markdown, CSV tables, figures) under its declared analysis."""
 
 from __future__ import annotations
 
@@ -10,78 +10,10 @@ from sessions.cli.base import (
     analysis_options,
     open_catalog,
     print_json,
-    progress_bar,
     stderr_console,
     user_errors,
 )
-from sessions.cli.lrs import push_after_scoring
-
-SCHEDULER = click.option(
-    "--scheduler",
-    default=None,
-    help="Compute on a running Dask cluster (tcp://HOST:8786); sessions must be on a path its workers see.",
-)
-DATA_ROOT = click.option(
-    "--data-root",
-    default=None,
-    help="Where the workers read sessions from instead of VASCSIM_HOME: a path they mount or an fsspec "
-    "URL (s3://..., file://...) holding the same sessions/ folder.",
-)
-WORKERS = click.option(
-    "--workers",
-    type=click.IntRange(1, 256),
-    default=None,
-    help="Compute on a local Dask cluster of N worker processes.",
-)
-
-
-def _study_sessions(catalog, study: str, only_unscored: bool = False) -> list[str]:
-    """See :meth:`sessions.store.CatalogStore.scorable_sessions`."""
-    from sessions.store import CatalogStore
-
-    return CatalogStore(catalog).scorable_sessions(study, only_unscored)
-
-
-def _score_with_progress(catalog, home, targets, scheduler, workers, data_root=None) -> dict:
-    from sessions.scoring import score_sessions
-
-    where = f" on {scheduler}" if scheduler else (f" on {workers} local Dask workers" if workers else "")
-    with progress_bar() as progress:
-        task = progress.add_task(f"scoring{where}", total=len(targets), last="")
-        return score_sessions(
-            catalog,
-            targets,
-            home,
-            scheduler=scheduler,
-            workers=workers,
-            progress=lambda uid: progress.update(task, advance=1, last=uid),
-            data_root=data_root,
-        )
-
-
-@click.command()
-@click.argument("uids", nargs=-1)
-@click.option("--study", default=None, help="Score every complete session of this study.")
-@SCHEDULER
-@WORKERS
-@DATA_ROOT
-@click.option("--json", "as_json", is_flag=True, help="Print the metrics as JSON.")
-@user_errors
-def score(uids, study, scheduler, workers, data_root, as_json) -> None:
-    """(Re)compute every metric of the given sessions, or of a whole study (in this process, or on
-    Dask with --workers N or --scheduler tcp://HOST:8786: the same results)."""
-    from sessions.catalog import CatalogError
-
-    catalog, home = open_catalog()
-    targets = list(uids) + (_study_sessions(catalog, study) if study else [])
-    if not targets:
-        raise CatalogError("nothing to score: give session ids or --study")
-    results = _score_with_progress(catalog, home, targets, scheduler, workers, data_root)
-    if as_json:
-        print_json(results)
-    else:
-        click.echo(f"scored {len(results)} session(s)")
-    push_after_scoring(catalog, home, results)
+from sessions.cli.score import DATA_ROOT, SCHEDULER, WORKERS, score_with_progress, study_sessions
 
 
 @click.command()
@@ -123,9 +55,9 @@ def report(
 
     catalog, home = open_catalog()
     if scheduler or workers or data_root:
-        stale = _study_sessions(catalog, study, only_unscored=True)
+        stale = study_sessions(catalog, study, only_unscored=True)
         if stale:
-            _score_with_progress(catalog, home, stale, scheduler, workers, data_root)
+            score_with_progress(catalog, home, stale, scheduler, workers, data_root)
     overrides = analysis_options(groups, level, metric_names, rule)
     if rating is not None:
         overrides["rating_col"] = rating
