@@ -64,8 +64,9 @@ class Profile:
 PLACEMENT_LEARNING = 0.8
 """Placement accuracy's learning rate as a fraction of the motion's (synthetic trainees)."""
 RETENTION_LOSS = 0.03
-"""Skill a synthetic trainee loses between the last practice session and the delayed retention one:
-a small decay, as reported for proficiency-based simulator training retested weeks later."""
+"""Skill a synthetic trainee loses between the last practice session and the delayed retention one: a
+modelling choice, small next to what the practice gained (so a trainee who reached the experts keeps
+it more often than not)."""
 TRANSFER_LOSS = 0.25
 """Skill a synthetic trainee lacks on a task it has not practised (the final task after practice on
 another): what practice on one task carries over to the next is partial."""

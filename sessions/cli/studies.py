@@ -99,7 +99,7 @@ def studies_groups(study: str, added: tuple[str, ...]) -> None:
     type=click.IntRange(0, 1000),
     default=None,
     help="Construct validity compares the skilled group with each other participant's first N practice "
-    "sessions (their baseline, before practice); 0: every practice session [default: 0].",
+    "sessions (their baseline, before practice); 0 compares every practice session (the default).",
 )
 @click.option(
     "--benchmarks",
