@@ -214,3 +214,29 @@ def parse_size(_ctx, _param, value: str) -> tuple[int, int]:
     except ValueError:
         raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels, e.g. 1280x720") from None
     return width, height
+
+
+def per_file(description: str, work):
+    """Run ``work(advance)`` under a transient progress bar advanced once per file."""
+    with progress_bar(transient=True) as progress:
+        task = progress.add_task(description, total=None, last="")
+        return work(lambda name: progress.update(task, advance=1, last=name))
+
+
+def print_summary(summary: dict, as_json: bool, text: str) -> None:
+    """The summary as JSON with --json, else its one line of text."""
+    if as_json:
+        print_json(summary)
+    else:
+        click.echo(text)
+
+
+def number_pair(text: str, what: str, kind=int, count: int = 2) -> tuple:
+    """``count`` numbers from "7x5" or "0,-60,-10" (an option named ``what``), or a usage error."""
+    try:
+        parts = tuple(kind(part) for part in text.replace("x", ",").split(","))
+    except ValueError:
+        parts = ()
+    if len(parts) != count:
+        raise click.BadParameter(f"{what} {text!r} needs {count} numbers separated by ',' or 'x'")
+    return parts
