@@ -8,12 +8,26 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recorder.scene import SceneLog
-from recorder.schema import COLUMN, SAMPLE_COLUMNS
+from recorder.schema import COLUMN, SAMPLE_COLUMNS, column_span
 from recorder.writer import SessionWriter
 from sim.devices.base import DeviceSample
 from sim.needle import Pose
 from sim.runtime.simulation import Simulation
 from sim.runtime.snapshots import STATE_CODES, FemSnapshot
+
+# the sample row's places, by name (recorder/schema.py declares the order)
+_TIME, _TIP_SPEED, _TRIANGLE = COLUMN["time"], COLUMN["tip_speed"], COLUMN["contact_triangle"]
+_LOCAL_STRESS, _STRETCH, _STATE = COLUMN["local_stress"], COLUMN["stretch"], COLUMN["pierced"]
+_GRIP, _PERIOD = COLUMN["grip"], COLUMN["period"]
+_TOOL = column_span("tool_x", "tool_y", "tool_z")
+_TOOL_ROTATION = column_span("tool_qw", "tool_qx", "tool_qy", "tool_qz")
+_TOOL_VELOCITY = column_span("tool_vx", "tool_vy", "tool_vz")
+_TIP = column_span("tip_x", "tip_y", "tip_z")
+_TANGENT = column_span("tangent_x", "tangent_y", "tangent_z")
+_FORCE = column_span("force_x", "force_y", "force_z")
+_BARYCENTRIC = column_span("bary_0", "bary_1", "bary_2")
+_REACTION = column_span("reaction_x", "reaction_y", "reaction_z")
+_TIP_VELOCITY = column_span("tip_vx", "tip_vy", "tip_vz")
 
 
 def quaternion_of(rotation: NDArray[np.float64]) -> tuple[float, float, float, float]:
@@ -39,10 +53,9 @@ class RuntimeRecorder:
     def __init__(self, writer: SessionWriter) -> None:
         self.writer = writer
         self._row = np.zeros(len(SAMPLE_COLUMNS))
-        self._row[COLUMN["local_stress"]] = math.nan
-        self._row[COLUMN["stretch"]] = math.nan
-        velocity = COLUMN["tip_vx"]
-        self._row[velocity : velocity + 3] = math.nan  # not known before the first FEM step
+        self._row[_LOCAL_STRESS] = math.nan
+        self._row[_STRETCH] = math.nan
+        self._row[_TIP_VELOCITY] = math.nan  # not known before the first FEM step
         self._row_cells = memoryview(self._row)  # what record() copies cheapest (recorder/_ring.c)
         self._last_time: float | None = None
         self._needle_at = None  # (tip, tangent) of the grasped needle for a device sample, once attached
@@ -80,30 +93,28 @@ class RuntimeRecorder:
         self, now: float, sample: DeviceSample, force: NDArray[np.float64], fem: FemSnapshot | None
     ) -> None:
         row = self._row
-        row[0] = now
-        row[1:4] = sample.position
-        row[4:8] = quaternion_of(sample.rotation)
-        row[8:11] = sample.velocity
+        row[_TIME] = now
+        row[_TOOL] = sample.position
+        row[_TOOL_ROTATION] = quaternion_of(sample.rotation)
+        row[_TOOL_VELOCITY] = sample.velocity
         if fem is not None:
-            row[11:14] = fem.needle_vertices[0]
-            row[14] = fem.tip_speed
+            row[_TIP] = fem.needle_vertices[0]
+            row[_TIP_SPEED] = fem.tip_speed
             if fem.tip_tangent is not None:
-                row[15:18] = fem.tip_tangent
-            velocity = COLUMN["tip_vx"]
-            row[velocity : velocity + 3] = fem.tip_velocity if fem.tip_velocity is not None else math.nan
-            row[COLUMN["contact_triangle"]] = fem.contact_triangle
-            row[22:25] = fem.barycentric
-            row[25] = fem.local_stress  # held between FEM steps: the latest snapshot's
-            row[26] = fem.stretch
-            row[COLUMN["pierced"]] = STATE_CODES.get(fem.state, 0)
+                row[_TANGENT] = fem.tip_tangent
+            row[_TIP_VELOCITY] = fem.tip_velocity if fem.tip_velocity is not None else math.nan
+            row[_TRIANGLE] = fem.contact_triangle
+            row[_BARYCENTRIC] = fem.barycentric
+            row[_LOCAL_STRESS] = fem.local_stress  # held between FEM steps: the latest snapshot's
+            row[_STRETCH] = fem.stretch
+            row[_STATE] = STATE_CODES.get(fem.state, 0)
         elif self._needle_at is not None:  # before the first FEM step: where the holder puts the needle
-            row[11:14], row[15:18] = self._needle_at(sample)
-        row[18:21] = force
-        reaction = COLUMN["reaction_x"]
+            row[_TIP], row[_TANGENT] = self._needle_at(sample)
+        row[_FORCE] = force
         if fem is not None:
-            row[reaction : reaction + 3] = fem.needle_force  # the tissue's, not what the device was sent
-        row[COLUMN["grip"]] = sample.buttons & 1
-        row[COLUMN["period"]] = 0.0 if self._last_time is None else now - self._last_time
+            row[_REACTION] = fem.needle_force  # the tissue's, not what the device was sent
+        row[_GRIP] = sample.buttons & 1
+        row[_PERIOD] = 0.0 if self._last_time is None else now - self._last_time
         self._last_time = now
         self.writer.record(self._row_cells)
 

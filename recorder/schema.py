@@ -69,6 +69,17 @@ REACTION_COLUMNS = ("reaction_x", "reaction_y", "reaction_z")
 VELOCITY_COLUMNS = ("tip_vx", "tip_vy", "tip_vz")
 SAMPLE_COLUMNS = tuple(name for name, _, _ in SAMPLE_FIELDS)
 COLUMN = {name: i for i, name in enumerate(SAMPLE_COLUMNS)}
+
+
+def column_span(*names: str) -> slice:
+    """The row slice holding ``names``, which must be adjacent and in this order (e.g. a vector's
+    three components): how code that fills a sample row names its places instead of counting them."""
+    first = COLUMN[names[0]]
+    if tuple(SAMPLE_COLUMNS[first : first + len(names)]) != names:
+        raise RecorderError(f"sample columns {', '.join(names)} are not adjacent in this order")
+    return slice(first, first + len(names))
+
+
 INTEGER_COLUMNS = {"contact_triangle": pa.int32(), "pierced": pa.int8(), "grip": pa.int8()}
 
 

@@ -46,6 +46,47 @@ class Arena:
         return out
 
 
+class SlotLayout:
+    """Named places in a shared slot, from one declaration of (name, doubles) in order: a field of one
+    double is an index, a wider one a slice. ``size`` is the slot's length."""
+
+    def __init__(self, fields: tuple[tuple[str, int], ...]) -> None:
+        self.fields = fields
+        self._places: dict[str, int | slice] = {}
+        at = 0
+        for name, size in fields:
+            self._places[name] = at if size == 1 else slice(at, at + size)
+            at += size
+        self.size = at
+
+    def __getitem__(self, name: str) -> int | slice:
+        return self._places[name]
+
+
+HOLDER_LAYOUT = SlotLayout(
+    (("seq", 1), ("time", 1), ("position", 3), ("rotation", 9), ("velocity", 3), ("grip", 1))
+)
+"""The holder slot (a seqlock counter first). The compiled force path (sim/runtime/_haptic.c) writes
+its counter, time and grip at the same places; tests/sim/test_shared.py checks them."""
+FEM_LAYOUT = SlotLayout(
+    (
+        ("seq", 1),
+        ("time", 1),
+        ("tip", 3),
+        ("tip_speed", 1),
+        ("tangent", 3),
+        ("triangle", 1),
+        ("barycentric", 3),
+        ("state", 1),
+        ("needle_force", 3),
+        ("local_stress", 1),
+        ("stretch", 1),
+        ("tip_velocity", 3),
+    )
+)
+"""The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""
+
+
 def _consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """Seqlock read: a copy taken while no write was in progress (None before the first write)."""
     for _ in range(1000):
@@ -57,12 +98,12 @@ def _consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
 
 
 class SharedHolder:
-    """Latest holder snapshot: [seq, time, position 3, rotation 9, velocity 3, grip]."""
+    """Latest holder snapshot, laid out as :data:`HOLDER_LAYOUT`."""
 
     @staticmethod
     def doubles() -> int:
         """Its size in the arena: a seqlock counter, time, position, rotation, velocity, grip."""
-        return 18
+        return HOLDER_LAYOUT.size
 
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(self.doubles())
@@ -73,13 +114,13 @@ class SharedHolder:
         return self._slot
 
     def put(self, snapshot) -> None:
-        slot = self._slot
+        slot, at = self._slot, HOLDER_LAYOUT
         slot[0] += 1  # odd: writing
-        slot[1] = snapshot.time
-        slot[2:5] = snapshot.pose.position
-        slot[5:14] = snapshot.pose.rotation.ravel()
-        slot[14:17] = snapshot.velocity
-        slot[17] = float(snapshot.grip)
+        slot[at["time"]] = snapshot.time
+        slot[at["position"]] = snapshot.pose.position
+        slot[at["rotation"]] = snapshot.pose.rotation.ravel()
+        slot[at["velocity"]] = snapshot.velocity
+        slot[at["grip"]] = float(snapshot.grip)
         slot[0] += 1  # even: consistent
 
     def get(self):
@@ -87,9 +128,9 @@ class SharedHolder:
         copy = _consistent_copy(self._slot)
         if copy is None:
             return None
-        return HolderSnapshot(
-            float(copy[1]), Pose.unchecked(copy[2:5], copy[5:14].reshape(3, 3)), copy[14:17], bool(copy[17])
-        )
+        at = HOLDER_LAYOUT
+        pose = Pose.unchecked(copy[at["position"]], copy[at["rotation"]].reshape(3, 3))
+        return HolderSnapshot(float(copy[at["time"]]), pose, copy[at["velocity"]], bool(copy[at["grip"]]))
 
 
 class SharedForceHistory:
@@ -372,15 +413,14 @@ class SharedFem:
     """The FEM layer's snapshot: whole in the process that writes it, and the fields the haptic
     process records (tip, speed, direction, contact triangle, barycentrics, state) in shared memory.
 
-    Layout: [seq, time, tip 3, tip speed, tangent 3, triangle, barycentric 3, state code, needle force 3,
-    local stress, stretch, tip velocity 3].
+    Laid out as :data:`FEM_LAYOUT`.
     """
 
     @staticmethod
     def doubles() -> int:
         """Its size in the arena: a seqlock counter, the step's state, force, stress, stretch and tip
         velocity."""
-        return 22
+        return FEM_LAYOUT.size
 
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(self.doubles())
@@ -390,19 +430,19 @@ class SharedFem:
     def put(self, snapshot) -> None:
 
         self._local = snapshot
-        slot = self._slot
+        slot, at = self._slot, FEM_LAYOUT
         slot[0] += 1
-        slot[1] = snapshot.time
-        slot[2:5] = snapshot.needle_vertices[0]
-        slot[5] = snapshot.tip_speed
-        slot[6:9] = snapshot.tip_tangent if snapshot.tip_tangent is not None else 0.0
-        slot[9] = snapshot.contact_triangle
-        slot[10:13] = snapshot.barycentric
-        slot[13] = STATE_CODES.get(snapshot.state, 0)
-        slot[14:17] = snapshot.needle_force
-        slot[17] = snapshot.local_stress
-        slot[18] = snapshot.stretch
-        slot[19:22] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
+        slot[at["time"]] = snapshot.time
+        slot[at["tip"]] = snapshot.needle_vertices[0]
+        slot[at["tip_speed"]] = snapshot.tip_speed
+        slot[at["tangent"]] = snapshot.tip_tangent if snapshot.tip_tangent is not None else 0.0
+        slot[at["triangle"]] = snapshot.contact_triangle
+        slot[at["barycentric"]] = snapshot.barycentric
+        slot[at["state"]] = STATE_CODES.get(snapshot.state, 0)
+        slot[at["needle_force"]] = snapshot.needle_force
+        slot[at["local_stress"]] = snapshot.local_stress
+        slot[at["stretch"]] = snapshot.stretch
+        slot[at["tip_velocity"]] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
         slot[0] += 1
 
     def get(self):
@@ -412,22 +452,23 @@ class SharedFem:
         copy = _consistent_copy(self._slot)
         if copy is None:
             return None
-        state = {code: name for name, code in STATE_CODES.items()}.get(int(copy[13]), "free")
+        at = FEM_LAYOUT
+        state = {code: name for name, code in STATE_CODES.items()}.get(int(copy[at["state"]]), "free")
         return FemSnapshot(
-            float(copy[1]),
-            copy[14:17],
-            copy[2:5].reshape(1, 3),
+            float(copy[at["time"]]),
+            copy[at["needle_force"]],
+            copy[at["tip"]].reshape(1, 3),
             state,
             np.zeros(0, dtype=np.int64),
             np.zeros((0, 3)),
             None,
-            float(copy[5]),
-            copy[6:9],
-            int(copy[9]),
-            tuple(float(w) for w in copy[10:13]),
+            float(copy[at["tip_speed"]]),
+            copy[at["tangent"]],
+            int(copy[at["triangle"]]),
+            tuple(float(w) for w in copy[at["barycentric"]]),
             math.nan,
-            float(copy[17]),
-            float(copy[18]),
+            float(copy[at["local_stress"]]),
+            float(copy[at["stretch"]]),
             math.nan,
-            copy[19:22],
+            copy[at["tip_velocity"]],
         )

@@ -52,3 +52,63 @@ def test_a_long_force_delay_reaches_back_past_64_outputs():
     for k in range(1000):
         shared.push(k * 1e-3, np.array([k, 0.0, 0.0]))
     np.testing.assert_allclose(shared.at(0.999 - 0.2), [799.0, 0.0, 0.0])
+
+
+def test_the_holder_slot_is_where_the_compiled_force_path_writes_it():
+    """Issue 48: the shared slots are laid out once, by name (sim.runtime.shared.HOLDER_LAYOUT). The
+    compiled haptic tick (sim/runtime/_haptic.c, publish_holder) writes the same slot; its offsets
+    are read from the C source here, so the two cannot drift apart unseen."""
+    import re
+    from pathlib import Path
+
+    import sim.runtime.shared as shared
+
+    source = (Path(shared.__file__).parent / "_haptic.c").read_text()
+    body = source[source.index("publish_holder(double *slot") :]
+    body = body[: body.index("\n}\n")]
+    copies = {int(at): int(n) for at, n in re.findall(r"memcpy\(slot \+ (\d+), \w+, (\d+) \* sizeof", body)}
+    scalars = [int(at) for at in re.findall(r"slot\[(\d+)\] = ", body)]
+    layout = shared.HOLDER_LAYOUT
+    vectors = ("position", "rotation", "velocity")
+    assert copies == {layout[name].start: layout[name].stop - layout[name].start for name in vectors}
+    assert scalars == [layout["time"], layout["grip"]] and layout.size == shared.SharedHolder.doubles() == 18
+
+
+def test_a_snapshot_read_from_shared_memory_is_the_one_written():
+    """The holder and FEM slots round-trip every field by name (as the haptic process reads them)."""
+    from sim.needle import Pose
+    from sim.runtime.shared import FEM_LAYOUT, SharedFem, SharedHolder
+    from sim.runtime.snapshots import FemSnapshot, HolderSnapshot
+
+    arena = Arena(SharedHolder.doubles() + SharedFem.doubles())
+    holder, fem = SharedHolder(arena), SharedFem(arena)
+    rotation = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    pose = Pose(np.array([1.0, 2.0, 3.0]), rotation)
+    holder.put(HolderSnapshot(0.25, pose, np.array([4.0, 5.0, 6.0]), True))
+    fem.put(
+        FemSnapshot(
+            time=0.5,
+            needle_force=np.array([0.1, 0.2, 0.3]),
+            needle_vertices=np.array([[7.0, 8.0, 9.0]]),
+            state="pierced",
+            contact_nodes=np.zeros(0, dtype=np.int64),
+            reaction_forces=np.zeros((0, 3)),
+            tip_speed=0.004,
+            tip_tangent=np.array([0.0, 0.0, 1.0]),
+            contact_triangle=42,
+            barycentric=(0.2, 0.3, 0.5),
+            local_stress=5e5,
+            stretch=1.1,
+            tip_velocity=np.array([1e-3, 2e-3, 3e-3]),
+        )
+    )
+    fem._owner = -1  # read as the haptic process does, from the slot
+    back, seen = holder.get(), fem.get()
+    assert back.time == 0.25 and back.grip and np.array_equal(back.pose.rotation, rotation)
+    assert np.array_equal(back.pose.position, [1, 2, 3]) and np.array_equal(back.velocity, [4, 5, 6])
+    assert (seen.time, seen.state, seen.contact_triangle, seen.tip_speed) == (0.5, "pierced", 42, 0.004)
+    assert seen.barycentric == (0.2, 0.3, 0.5) and (seen.local_stress, seen.stretch) == (5e5, 1.1)
+    assert np.array_equal(seen.needle_force, [0.1, 0.2, 0.3])
+    assert np.array_equal(seen.needle_vertices, [[7, 8, 9]]) and np.array_equal(seen.tip_tangent, [0, 0, 1])
+    assert np.array_equal(seen.tip_velocity, [1e-3, 2e-3, 3e-3])
+    assert FEM_LAYOUT.size == SharedFem.doubles() == 22
