@@ -196,6 +196,7 @@ def studies_analysis(
             value = "none"
         elif isinstance(value, list):
             value = ", ".join(value)
-        click.echo(f"  {name:20s} {value}")
+        line = f"{name:20s} {value}"
+        click.echo(click.wrap_text(line, 80, initial_indent="  ", subsequent_indent=" " * 23))
     for entry in history:
         click.echo(f"  v{entry['version']} {entry['created_at']} {entry['author']}: {entry['note']}")

@@ -19,6 +19,7 @@ import math
 import mmap
 import os
 import time
+import types
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,19 +49,21 @@ class Arena:
 
 class SlotLayout:
     """Named places in a shared slot, from one declaration of (name, doubles) in order: a field of one
-    double is an index, a wider one a slice. ``size`` is the slot's length."""
+    double is an index, a wider one a slice. ``size`` is the slot's length; ``at`` has each place as
+    an attribute (``layout.at.time``: what the 1 kHz readers use, one attribute lookup a field)."""
 
     def __init__(self, fields: tuple[tuple[str, int], ...]) -> None:
         self.fields = fields
-        self._places: dict[str, int | slice] = {}
-        at = 0
+        places: dict[str, int | slice] = {}
+        start = 0
         for name, size in fields:
-            self._places[name] = at if size == 1 else slice(at, at + size)
-            at += size
-        self.size = at
+            places[name] = start if size == 1 else slice(start, start + size)
+            start += size
+        self.size = start
+        self.at = types.SimpleNamespace(**places)
 
     def __getitem__(self, name: str) -> int | slice:
-        return self._places[name]
+        return getattr(self.at, name)
 
 
 HOLDER_LAYOUT = SlotLayout(
@@ -85,6 +88,7 @@ FEM_LAYOUT = SlotLayout(
     )
 )
 """The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""
+_STATE_NAMES = {code: name for name, code in STATE_CODES.items()}
 
 
 def _consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -114,13 +118,13 @@ class SharedHolder:
         return self._slot
 
     def put(self, snapshot) -> None:
-        slot, at = self._slot, HOLDER_LAYOUT
+        slot, at = self._slot, HOLDER_LAYOUT.at
         slot[0] += 1  # odd: writing
-        slot[at["time"]] = snapshot.time
-        slot[at["position"]] = snapshot.pose.position
-        slot[at["rotation"]] = snapshot.pose.rotation.ravel()
-        slot[at["velocity"]] = snapshot.velocity
-        slot[at["grip"]] = float(snapshot.grip)
+        slot[at.time] = snapshot.time
+        slot[at.position] = snapshot.pose.position
+        slot[at.rotation] = snapshot.pose.rotation.ravel()
+        slot[at.velocity] = snapshot.velocity
+        slot[at.grip] = float(snapshot.grip)
         slot[0] += 1  # even: consistent
 
     def get(self):
@@ -128,9 +132,9 @@ class SharedHolder:
         copy = _consistent_copy(self._slot)
         if copy is None:
             return None
-        at = HOLDER_LAYOUT
-        pose = Pose.unchecked(copy[at["position"]], copy[at["rotation"]].reshape(3, 3))
-        return HolderSnapshot(float(copy[at["time"]]), pose, copy[at["velocity"]], bool(copy[at["grip"]]))
+        at = HOLDER_LAYOUT.at
+        pose = Pose.unchecked(copy[at.position], copy[at.rotation].reshape(3, 3))
+        return HolderSnapshot(float(copy[at.time]), pose, copy[at.velocity], bool(copy[at.grip]))
 
 
 class SharedForceHistory:
@@ -430,19 +434,19 @@ class SharedFem:
     def put(self, snapshot) -> None:
 
         self._local = snapshot
-        slot, at = self._slot, FEM_LAYOUT
+        slot, at = self._slot, FEM_LAYOUT.at
         slot[0] += 1
-        slot[at["time"]] = snapshot.time
-        slot[at["tip"]] = snapshot.needle_vertices[0]
-        slot[at["tip_speed"]] = snapshot.tip_speed
-        slot[at["tangent"]] = snapshot.tip_tangent if snapshot.tip_tangent is not None else 0.0
-        slot[at["triangle"]] = snapshot.contact_triangle
-        slot[at["barycentric"]] = snapshot.barycentric
-        slot[at["state"]] = STATE_CODES.get(snapshot.state, 0)
-        slot[at["needle_force"]] = snapshot.needle_force
-        slot[at["local_stress"]] = snapshot.local_stress
-        slot[at["stretch"]] = snapshot.stretch
-        slot[at["tip_velocity"]] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
+        slot[at.time] = snapshot.time
+        slot[at.tip] = snapshot.needle_vertices[0]
+        slot[at.tip_speed] = snapshot.tip_speed
+        slot[at.tangent] = snapshot.tip_tangent if snapshot.tip_tangent is not None else 0.0
+        slot[at.triangle] = snapshot.contact_triangle
+        slot[at.barycentric] = snapshot.barycentric
+        slot[at.state] = STATE_CODES.get(snapshot.state, 0)
+        slot[at.needle_force] = snapshot.needle_force
+        slot[at.local_stress] = snapshot.local_stress
+        slot[at.stretch] = snapshot.stretch
+        slot[at.tip_velocity] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
         slot[0] += 1
 
     def get(self):
@@ -452,23 +456,23 @@ class SharedFem:
         copy = _consistent_copy(self._slot)
         if copy is None:
             return None
-        at = FEM_LAYOUT
-        state = {code: name for name, code in STATE_CODES.items()}.get(int(copy[at["state"]]), "free")
+        at = FEM_LAYOUT.at
+        state = _STATE_NAMES.get(int(copy[at.state]), "free")
         return FemSnapshot(
-            float(copy[at["time"]]),
-            copy[at["needle_force"]],
-            copy[at["tip"]].reshape(1, 3),
+            float(copy[at.time]),
+            copy[at.needle_force],
+            copy[at.tip].reshape(1, 3),
             state,
             np.zeros(0, dtype=np.int64),
             np.zeros((0, 3)),
             None,
-            float(copy[at["tip_speed"]]),
-            copy[at["tangent"]],
-            int(copy[at["triangle"]]),
-            tuple(float(w) for w in copy[at["barycentric"]]),
+            float(copy[at.tip_speed]),
+            copy[at.tangent],
+            int(copy[at.triangle]),
+            tuple(float(w) for w in copy[at.barycentric]),
             math.nan,
-            float(copy[at["local_stress"]]),
-            float(copy[at["stretch"]]),
+            float(copy[at.local_stress]),
+            float(copy[at.stretch]),
             math.nan,
-            copy[at["tip_velocity"]],
+            copy[at.tip_velocity],
         )
