@@ -37,7 +37,7 @@ from sim.fem.columns import ColumnCache, mixed_columns
 from sim.fem.condensation import node_dofs, sparse_cholesky, superposed_reactions
 from sim.fem.material import Material, MaterialSpec, describe_materials, element_lame
 from sim.fem.precomputation import Precomputation, condensed, woodbury_composite
-from sim.fem.solution import ContactHandle, ContactSolution
+from sim.fem.solution import ContactHandle, ContactSolution, PrescribedHandle
 from sim.fem.surface import SurfaceGeometry
 from sim.mesh.tetmesh import TetMesh
 
@@ -413,6 +413,13 @@ class TissueModel:
         columns, block, rows = self._contact_columns(ids)
         return ContactHandle(ids, self.penalty, block, columns, rows)
 
+    def prescribed(self, nodes: ArrayLike) -> PrescribedHandle:
+        """A per-tick handle for nodes held exactly where they are put (a grasp), answering the
+        displacement of the contact candidates (:class:`sim.fem.solution.PrescribedHandle`)."""
+        ids = checks.contact_ids(nodes, self.mesh.n_nodes)
+        columns, block, rows = self._contact_columns(ids)
+        return PrescribedHandle(ids, block, columns, rows)
+
     def field_contact(self, nodes: ArrayLike) -> ContactHandle:
         """A handle for a fixed contact set whose displacement answer is the whole field: every
         node, in mesh order. Its K0^-1 columns are solved once (one multi-right-hand-side solve
@@ -431,6 +438,7 @@ class TissueModel:
         method: str = "exact",
         full_field: bool = False,
         fields: bool = False,
+        prescribed: Mapping[int, ArrayLike] | None = None,
     ) -> ContactSolution:
         """Respond to contact nodes driven to intended displacements.
 
@@ -441,14 +449,37 @@ class TissueModel:
             displacements summed (ignores how neighbouring contacts interact).
         full_field: displacement of every node (one sparse solve).
         fields: also element von Mises stress, principal stretch and volume change.
+        prescribed: node id -> displacement (3,) in metres at which the node is held exactly (a
+            grasp), solved jointly with ``contacts`` (which may then be empty): with N the penalty
+            contacts and P the held nodes, [[I + C G_NN, C G_NP], [G_PN, G_PP]] [f_N; f_P] =
+            [C a_N; a_P]. The solution lists the contacts first, then the held nodes.
         """
         if method not in ("exact", "superposition"):
             raise ModelError(f"method must be 'exact' or 'superposition'; got {method!r}")
-        nodes, intended = checks.parse_contacts(contacts, self.mesh.n_nodes)
+        if prescribed:
+            if method != "exact":
+                raise ModelError("held (prescribed) nodes are solved exactly; use method='exact'")
+            held, held_at = checks.parse_contacts(prescribed, self.mesh.n_nodes)
+            if contacts:
+                pressed, pressed_at = checks.parse_contacts(contacts, self.mesh.n_nodes)
+            else:
+                pressed, pressed_at = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+            nodes = checks.contact_ids(np.concatenate([pressed, held]), self.mesh.n_nodes)
+            intended = np.concatenate([pressed_at, held_at])
+        else:
+            nodes, intended = checks.parse_contacts(contacts, self.mesh.n_nodes)
         columns, block, rows = self._contact_columns(nodes)
         a = intended.reshape(-1)
         c = self.penalty
-        if method == "exact":
+        if prescribed:
+            n = 3 * len(pressed)  # rows of the penalty contacts; the held nodes' rows follow
+            system = block.copy()
+            system[:n] *= c
+            system[:n, :n] += np.eye(n)
+            rhs = a.copy()
+            rhs[:n] *= c
+            reactions = np.linalg.solve(system, rhs)
+        elif method == "exact":
             reactions = c * np.linalg.solve(np.eye(len(a)) + c * block, a)
         else:
             reactions = superposed_reactions(block, a, c)

@@ -118,3 +118,39 @@ class ContactHandle:
     def surface_displacement(self, reaction_forces: NDArray[np.float64]) -> NDArray[np.float64]:
         """(rows, 3) displacement of ``surface_nodes`` (m) under the given reaction forces."""
         return (self._columns @ reaction_forces.reshape(-1)).reshape(-1, 3)
+
+
+class PrescribedHandle:
+    """Nodes held exactly at prescribed displacements (a grasp: the forceps' jaws move the tissue
+    they close on). With G = K0^-1 the nodal forces that put nodes J exactly at a are
+    f = G_JJ^-1 a (the limit of the penalty contact as C grows), and the displacement anywhere is
+    G[:, J] f: the same field as the FEM solve with those dofs prescribed (Dirichlet), since
+    K0 u = f with u_J = a is that solve. Built once per grasp; each tick is one Cholesky solve
+    of order 3k and one product."""
+
+    __slots__ = ("_columns", "_factor", "nodes", "surface_nodes")
+
+    def __init__(
+        self,
+        nodes: NDArray[np.int64],
+        block: NDArray[np.float64],
+        columns: NDArray[np.float64],
+        surface_nodes: NDArray[np.int64],
+    ) -> None:
+        from scipy.linalg import cho_factor
+
+        self.nodes = nodes
+        self._factor = cho_factor(np.array(block, dtype=np.float64), lower=True)
+        self._columns = np.ascontiguousarray(columns)
+        self.surface_nodes = surface_nodes
+
+    def forces(self, prescribed: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(k, 3) forces (N) the grasp applies to the tissue at its nodes to hold them at the
+        prescribed displacements (k, 3) (m)."""
+        from scipy.linalg import cho_solve
+
+        return cho_solve(self._factor, np.reshape(prescribed, -1)).reshape(-1, 3)
+
+    def surface_displacement(self, forces: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(rows, 3) displacement of ``surface_nodes`` (m) under the grasp's nodal forces."""
+        return (self._columns @ np.reshape(forces, -1)).reshape(-1, 3)

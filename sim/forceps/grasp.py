@@ -1,0 +1,172 @@
+"""The subordinate hand on the tissue: grasp, move, release, tear (FEM rate).
+
+Closing the jaws within reach of the surface grasps the nodes under them
+(:func:`sim.forceps.jaws.jaw_nodes`); from then on each grasped node is held exactly
+at the hand's displacement since the grasp (the source paper's rule: the input
+displacement applied equally to each grasped node), through the tissue's condensed
+compliance (:meth:`sim.fem.TissueModel.prescribed`: f = G_PP^-1 a). With the needle
+loading nodes N by f_N at the same time, the grasp's forces are those that keep its
+nodes where the hand put them under both loads, f_P = G_PP^-1 (a - G_PN f_N), and the
+field is the superposition G[:, N] f_N + G[:, P] f_P: linear superposition, exact for
+the given needle forces. (The needle's own law reads the compliance of the tissue
+without the grasp; :meth:`sim.fem.TissueModel.solve` with ``prescribed`` is the joint
+solve of both as penalty contact and held nodes.) Opening the jaws lets go and the
+linear tissue returns to rest. A pull whose force on the tissue passes the forceps'
+``edge_tear_force`` tears the grasped edge out of the jaws (``edge_torn``).
+
+The grasp acts on the tissue's base model (the soft phase of a biphase tissue): the
+biphase split is the needle's law, driven by the needle's own indentation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.collision.mesh import CollisionMesh
+from sim.fem import Tissue
+from sim.fem.condensation import node_dofs
+from sim.forceps.jaws import Forceps, closest_surface_point, jaw_nodes
+
+FORCEPS_EVENT_KINDS = ("grasp", "release_grasp", "edge_torn")
+
+
+@dataclass(frozen=True)
+class ForcepsEvent:
+    """A change of the subordinate hand's hold on the tissue: ``grasp``, ``release_grasp``, ``edge_torn``.
+
+    time (s); triangle: the exterior triangle the jaws closed on (-1 when none); detail: a short
+    readable note."""
+
+    kind: str
+    time: float
+    triangle: int = -1
+    detail: str = ""
+    layer: str = "fem"
+
+
+@dataclass(frozen=True)
+class ForcepsStep:
+    """One FEM step of the subordinate hand: the forceps' force on the tissue (3,) N, the grasped
+    tissue's displacement (3,) m (zero when nothing is held), the grasped nodes and their forces
+    (k, 3) N, and the step's events."""
+
+    force: NDArray[np.float64]
+    displacement: NDArray[np.float64]
+    nodes: NDArray[np.int64]
+    nodal_forces: NDArray[np.float64]
+    events: list[ForcepsEvent] = field(default_factory=list)
+
+
+_NOTHING = np.zeros(0, dtype=np.int64)
+
+
+class ForcepsInteraction:
+    """The subordinate hand's forceps against one tissue: :meth:`hold` at the haptic rate, the
+    tissue's answer in :meth:`fem_step`, the collision mesh moved by :meth:`deform_collision` at the
+    graphics rate (the paper's design: the needle meets the tissue where the other hand holds it)."""
+
+    def __init__(self, tissue: Tissue, collision: CollisionMesh, forceps: Forceps | None = None) -> None:
+        self.tissue = tissue
+        self.model = tissue.base
+        self.collision = collision
+        self.forceps = forceps or Forceps()
+        self._free = np.ones(tissue.mesh.n_nodes, dtype=bool)
+        self._free[self.model.clamped_nodes] = False
+        self.jaw_point = np.zeros(3)
+        """Where the jaws close (m, world): the subordinate device's tool point."""
+        self.jaw_closed = False
+        self.nodes = _NOTHING
+        """The grasped nodes (empty when nothing is held)."""
+        self.triangle = -1
+        self._anchor = np.zeros(3)  # the jaw point when the grasp closed
+        self._handle = None
+        self._pending: list[ForcepsEvent] = []
+        self._forces = np.zeros((0, 3))  # the grasp's nodal forces at the last FEM step
+        self._shown = False  # whether the collision mesh is away from rest
+
+    @property
+    def grasping(self) -> bool:
+        return self.nodes.size > 0
+
+    def hold(self, time: float, jaw_point: NDArray[np.float64], jaw_closed: bool) -> None:
+        """The hand's jaw point (m) and jaws at ``time`` (haptic rate): closing within reach of the
+        surface grasps, opening lets go; the events come out of the next :meth:`fem_step`."""
+        self.jaw_point = np.asarray(jaw_point, dtype=np.float64)
+        was_closed, self.jaw_closed = self.jaw_closed, bool(jaw_closed)
+        if jaw_closed and not was_closed:
+            self._close(time)
+        elif was_closed and not jaw_closed and self.grasping:
+            self._let_go()
+            self._pending.append(ForcepsEvent("release_grasp", time, self.triangle, "jaws opened"))
+
+    def _close(self, time: float) -> None:
+        found = closest_surface_point(self.collision, self.jaw_point, self.forceps.grasp_reach)
+        if found is None:
+            return  # closed on air
+        triangle, point = found
+        nodes = jaw_nodes(self.collision, triangle, point, self.forceps, self._free)
+        if nodes.size == 0:
+            return  # only clamped tissue under the jaws
+        self.nodes, self.triangle, self._anchor = nodes, triangle, self.jaw_point.copy()
+        self._handle = self.model.prescribed(nodes)
+        self._pending.append(
+            ForcepsEvent(
+                "grasp",
+                time,
+                triangle,
+                f"{nodes.size} nodes under the {1e3 * self.forceps.jaw_width:.1f} mm jaws "
+                f"({self.forceps.rule} rule)",
+            )
+        )
+
+    def _let_go(self) -> None:
+        self.nodes, self._handle, self._forces = _NOTHING, None, np.zeros((0, 3))
+
+    def fem_step(
+        self, time: float, needle_nodes: NDArray[np.int64] | None = None, needle_forces: NDArray | None = None
+    ) -> ForcepsStep:
+        """The grasp's forces holding its nodes at the hand's displacement, with the needle's nodal
+        forces on the tissue (``needle_nodes``, ``needle_forces`` (n, 3) N) superposed exactly."""
+        events, self._pending = self._pending, []
+        if not self.grasping:
+            return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
+        displacement = self.jaw_point - self._anchor
+        held = np.tile(displacement, (self.nodes.size, 1))
+        if needle_nodes is not None and len(needle_nodes):
+            coupling = self.model.columns_at(needle_nodes, node_dofs(self.nodes))
+            held = held - (coupling @ np.reshape(needle_forces, -1)).reshape(-1, 3)
+        forces = self._handle.forces(held)
+        total = forces.sum(axis=0)
+        pull = float(np.linalg.norm(total))
+        if pull > self.forceps.edge_tear_force:
+            triangle = self.triangle
+            self._let_go()
+            detail = (
+                f"the grasped edge tore out of the jaws at {1e3 * pull:.0f} mN "
+                f"(holds up to {1e3 * self.forceps.edge_tear_force:.0f} mN)"
+            )
+            events.append(ForcepsEvent("edge_torn", time, triangle, detail))
+            return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
+        self._forces = forces
+        return ForcepsStep(total, displacement, self.nodes, forces, events)
+
+    def surface_displacement(self) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
+        """(nodes, displacement (m)) of the surface under the grasp's forces at the last FEM step, or
+        None when nothing is held."""
+        if not self.grasping or self._handle is None:
+            return None
+        return self._handle.surface_nodes, self._handle.surface_displacement(self._forces)
+
+    def deform_collision(self) -> None:
+        """Move the collision mesh to where the grasp holds the tissue (graphics rate; back to rest
+        once after a release)."""
+        moved = self.surface_displacement()
+        if moved is not None:
+            self.collision.deform(*moved)
+            self._shown = True
+        elif self._shown:
+            self.collision.update(self.collision.mesh.points)
+            self._shown = False
