@@ -55,7 +55,7 @@ def main() -> None:
     spec, forces = task_spec(task), task_preset(task).forces
     with tempfile.TemporaryDirectory() as folder:
         plan = SessionPlan("b", "p", task, 1)
-        device, duration = open_device("scripted", plan, None, pass_parameters(0.5, 3))
+        device, duration, _ = open_device("scripted", plan, None, pass_parameters(0.5, 3))
         header = {"session_id": "bench", "task": task, "placement": spec.placement,
                   "needle_forces": forces.as_dict()}  # fmt: skip
         writer = SessionWriter(Path(folder) / "s", header, flush_interval=0.1)

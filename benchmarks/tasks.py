@@ -35,7 +35,7 @@ from sim.runtime import Simulation  # noqa: E402
 def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
     """The whole task (every bite) as a scripted expert makes it, through the runner's device."""
     plan = SessionPlan("benchmark", "E", task, 1)
-    device, duration = open_device("scripted", plan, None, pass_parameters(1.0, seed))
+    device, duration, _ = open_device("scripted", plan, None, pass_parameters(1.0, seed))
     forces, by_region = task_preset(task).forces, region_forces(task, tissue.mesh)
     return Simulation(tissue, Needle.curved(), device, forces=forces, region_forces=by_region), duration
 

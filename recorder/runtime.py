@@ -28,6 +28,12 @@ _FORCE = column_span("force_x", "force_y", "force_z")
 _BARYCENTRIC = column_span("bary_0", "bary_1", "bary_2")
 _REACTION = column_span("reaction_x", "reaction_y", "reaction_z")
 _TIP_VELOCITY = column_span("tip_vx", "tip_vy", "tip_vz")
+_SUB_DISPLACEMENT = column_span("sub_dx", "sub_dy", "sub_dz")
+_SUB_TOOL = column_span("sub_x", "sub_y", "sub_z")
+_SUB_ROTATION = column_span("sub_qw", "sub_qx", "sub_qy", "sub_qz")
+_SUB_JAW = COLUMN["sub_jaw"]
+_GRASP_DISPLACEMENT = column_span("grasp_dx", "grasp_dy", "grasp_dz")
+_GRASP_FORCE = column_span("grasp_fx", "grasp_fy", "grasp_fz")
 
 
 def quaternion_of(rotation: NDArray[np.float64]) -> tuple[float, float, float, float]:
@@ -56,6 +62,10 @@ class RuntimeRecorder:
         self._row[_LOCAL_STRESS] = math.nan
         self._row[_STRETCH] = math.nan
         self._row[_TIP_VELOCITY] = math.nan  # not known before the first FEM step
+        self._row[_SUB_TOOL] = math.nan  # no subordinate hand (a one-handed session)
+        self._row[_SUB_ROTATION] = math.nan
+        self._subordinate = None  # the simulation, when it has a subordinate hand
+        self._sub_start = None  # the subordinate hand's first position: sub_dx/dy/dz count from it
         self._row_cells = memoryview(self._row)  # what record() copies cheapest (recorder/_ring.c)
         self._last_time: float | None = None
         self._needle_at = None  # (tip, tangent) of the grasped needle for a device sample, once attached
@@ -69,6 +79,8 @@ class RuntimeRecorder:
             return interaction.needle.world_vertices(pose)[0], interaction.needle.tip_tangent(pose)
 
         self._needle_at = needle_at
+        if simulation.subordinate is not None:
+            self._subordinate = simulation
         simulation.on_sample = self.on_sample
         simulation.on_event = self.on_event
         simulation.on_haptic_start = self.writer.prefault
@@ -114,9 +126,28 @@ class RuntimeRecorder:
         if fem is not None:
             row[_REACTION] = fem.needle_force  # the tissue's, not what the device was sent
         row[_GRIP] = sample.buttons & 1
+        if self._subordinate is not None:
+            self._subordinate_hand(row, fem)
         row[_PERIOD] = 0.0 if self._last_time is None else now - self._last_time
         self._last_time = now
         self.writer.record(self._row_cells)
+
+    def _subordinate_hand(self, row: NDArray[np.float64], fem: FemSnapshot | None) -> None:
+        """The subordinate hand's columns: its tool point, its displacement since its first reading,
+        orientation and jaws (this tick's reading), the grasp's tissue displacement and force (the
+        latest FEM step's)."""
+        sample = self._subordinate.subordinate_sample
+        if sample is None:
+            return
+        if self._sub_start is None:
+            self._sub_start = sample.position.copy()
+        row[_SUB_TOOL] = sample.position
+        row[_SUB_DISPLACEMENT] = sample.position - self._sub_start
+        row[_SUB_ROTATION] = quaternion_of(sample.rotation)
+        row[_SUB_JAW] = sample.buttons & 1
+        if fem is not None and fem.grasp_force is not None:
+            row[_GRASP_DISPLACEMENT] = fem.grasp_displacement
+            row[_GRASP_FORCE] = fem.grasp_force
 
     def on_event(self, event) -> None:
         self.writer.event(

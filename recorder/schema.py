@@ -9,14 +9,17 @@ from __future__ import annotations
 import pyarrow as pa
 
 from sim.errors import VascsimError
+from sim.forceps import FORCEPS_EVENT_KINDS
 from sim.needle.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
 from sim.runtime.shared import EVENT_CODES as RUNTIME_EVENT_KINDS
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """2 added the tissue's reaction force on the needle (``reaction_x/y/z``); 3 the tip's velocity vector
-(``tip_vx/vy/vz``, where 2 stored only its speed) and dropped ``compute`` (written 0 in every sample).
-Older files are read with the columns they lack NaN (not recorded) and without ``compute``."""
-READABLE_VERSIONS = (1, 2, 3)
+(``tip_vx/vy/vz``, where 2 stored only its speed) and dropped ``compute`` (written 0 in every sample);
+4 the subordinate hand's forceps: their tool point and orientation, jaws, the grasped tissue's
+displacement and the forceps' force on it (``sub_x`` ... ``grasp_fz``). Older files are read with the
+columns they lack NaN (not recorded) and without ``compute``."""
+READABLE_VERSIONS = (1, 2, 3, 4)
 
 
 class RecorderError(VascsimError):
@@ -64,11 +67,27 @@ SAMPLE_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("tip_vx", "m/s", "needle tip velocity (between the last two FEM steps)"),
     ("tip_vy", "m/s", ""),
     ("tip_vz", "m/s", ""),
+    ("sub_x", "m", "subordinate tool (forceps jaw) position; NaN without a subordinate hand"),
+    ("sub_y", "m", ""),
+    ("sub_z", "m", ""),
+    ("sub_qw", "1", "subordinate tool orientation quaternion"),
+    ("sub_qx", "1", ""),
+    ("sub_qy", "1", ""),
+    ("sub_qz", "1", ""),
+    ("sub_jaw", "1", "forceps jaws closed (1) or open (0)"),
+    ("grasp_dx", "m", "displacement of the tissue the forceps hold (0 when they hold none)"),
+    ("grasp_dy", "m", ""),
+    ("grasp_dz", "m", ""),
+    ("grasp_fx", "N", "the forceps' force on the tissue"),
+    ("grasp_fy", "N", ""),
+    ("grasp_fz", "N", ""),
 )
 REACTION_COLUMNS = ("reaction_x", "reaction_y", "reaction_z")
 VELOCITY_COLUMNS = ("tip_vx", "tip_vy", "tip_vz")
 SAMPLE_COLUMNS = tuple(name for name, _, _ in SAMPLE_FIELDS)
 COLUMN = {name: i for i, name in enumerate(SAMPLE_COLUMNS)}
+SUBORDINATE_COLUMNS = SAMPLE_COLUMNS[COLUMN["sub_x"] :]
+"""The columns schema version 4 added: the subordinate hand's forceps."""
 
 
 def column_span(*names: str) -> slice:
@@ -92,10 +111,11 @@ SAMPLE_SCHEMA = pa.schema(
     [_field(*spec) for spec in SAMPLE_FIELDS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": str(SCHEMA_VERSION)},
 )
+_V3_FIELDS = tuple(spec for spec in SAMPLE_FIELDS if spec[0] not in SUBORDINATE_COLUMNS)
 _V2_FIELDS = (
-    *(spec for spec in SAMPLE_FIELDS if spec[0] not in (*REACTION_COLUMNS, *VELOCITY_COLUMNS)),
+    *(spec for spec in _V3_FIELDS if spec[0] not in (*REACTION_COLUMNS, *VELOCITY_COLUMNS)),
     ("compute", "s", "haptic step compute time"),
-    *(spec for spec in SAMPLE_FIELDS if spec[0] in REACTION_COLUMNS),
+    *(spec for spec in _V3_FIELDS if spec[0] in REACTION_COLUMNS),
 )
 SAMPLE_SCHEMA_V2 = pa.schema(
     [_field(*spec) for spec in _V2_FIELDS],
@@ -105,7 +125,11 @@ SAMPLE_SCHEMA_V1 = pa.schema(
     [_field(*spec) for spec in _V2_FIELDS if spec[0] not in REACTION_COLUMNS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": "1"},
 )
-OLDER_SAMPLE_SCHEMAS = {1: SAMPLE_SCHEMA_V1, 2: SAMPLE_SCHEMA_V2}
+SAMPLE_SCHEMA_V3 = pa.schema(
+    [_field(*spec) for spec in _V3_FIELDS],
+    metadata={"vascsim.schema": "samples", "vascsim.schema_version": "3"},
+)
+OLDER_SAMPLE_SCHEMAS = {1: SAMPLE_SCHEMA_V1, 2: SAMPLE_SCHEMA_V2, 3: SAMPLE_SCHEMA_V3}
 
 
 def upgraded_samples(table: pa.Table) -> pa.Table:
@@ -124,6 +148,7 @@ EVENT_KINDS = tuple(
     dict.fromkeys(
         (
             *NEEDLE_EVENT_KINDS,
+            *FORCEPS_EVENT_KINDS,
             *RUNTIME_EVENT_KINDS,
             "stopped",
             "queue_overflow",

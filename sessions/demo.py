@@ -33,7 +33,7 @@ from sessions.config import cache_dir
 from sessions.models import Study
 from sessions.runner import SessionPlan, run_session
 from sessions.standards import set_standard
-from sessions.synthetic import pass_parameters, profile_for
+from sessions.synthetic import profile_for, scripted_hands
 from sessions.tasks import task_spec, tissue_for
 
 DEMO_STUDY = "synthetic-demo"
@@ -184,7 +184,7 @@ def _run_planned(url: str, home: str, plan: SessionPlan, skills: tuple, seed: in
     """One demo session in a worker process (its own catalog connection, opened once)."""
     if url not in _WORKER_CATALOGS:
         _WORKER_CATALOGS[url] = Catalog(url, migrate=False)
-    run_session(_WORKER_CATALOGS[url], Path(home), plan, pass_parameters(skills[0], seed, skills[1]))
+    run_session(_WORKER_CATALOGS[url], Path(home), plan, scripted_hands(skills[0], seed, skills[1]))
     return plan
 
 
@@ -194,7 +194,7 @@ def _run_all(catalog: Catalog, home: Path, runs: list, workers: int) -> Iterator
     yields each plan as its session is stored."""
     if workers <= 1:
         for plan, skills, session_seed in runs:
-            run_session(catalog, home, plan, pass_parameters(skills[0], session_seed, skills[1]))
+            run_session(catalog, home, plan, scripted_hands(skills[0], session_seed, skills[1]))
             yield plan
         return
     context = multiprocessing.get_context("spawn")  # no inherited database connections or threads

@@ -13,6 +13,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import pandas as pd
 from sqlalchemy import delete, select
@@ -35,7 +36,8 @@ from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
 from sessions.store import CatalogStore
 from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import region_presets, session_tissue, task_preset, task_simulation, task_spec
-from sim.devices import ScriptedDevice, SuturingPass
+from sim.devices import DeviceIdentity, ScriptedDevice, SuturingPass
+from sim.devices.assisting import ScriptedHands, assisting_hand, edge_grasp
 from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings
@@ -78,12 +80,32 @@ LIVE_SETTINGS = RuntimeSettings(display_delay_frames=0, display_on_haptic_core=T
 (sim.runtime.RuntimeSettings)."""
 
 
-def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: SuturingPassParameters | None):
-    """The device named by ``--device`` and the session's duration (s, None = until stopped)."""
+class OpenedDevice(NamedTuple):
+    """The device named by ``--device``, the session's duration (s, None = until stopped) and the
+    subordinate hand's device (None: one-handed)."""
+
+    device: object
+    duration: float | None
+    subordinate: object = None
+
+
+def open_device(
+    spec: str,
+    plan: SessionPlan,
+    catalog: Catalog,
+    parameters: SuturingPassParameters | ScriptedHands | None,
+) -> OpenedDevice:
+    """The device named by ``--device`` (and, for a scripted session given both hands' parameters
+    on a task with a wound edge, the subordinate hand's), and the session's duration."""
     task = task_spec(plan.task)
     if spec == "scripted":
+        hands = (
+            parameters
+            if isinstance(parameters, ScriptedHands)
+            else ScriptedHands(parameters or SuturingPassParameters())
+        )
         bites = task.bites()
-        each = bite_parameters(parameters or SuturingPassParameters(), len(bites))
+        each = bite_parameters(hands.needle, len(bites))
         approach = None
         if task.access is not None:  # the hand comes in from where the wound lets it
             approach = task.access["approach"]
@@ -92,10 +114,18 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
             SuturingPass(Needle.curved(), *bite, p, approach=approach)
             for bite, p in zip(bites, each, strict=True)
         ]
+        subordinate = None
+        if hands.assisting is not None and task.placement is not None:
+            wound = task.placement["wound_point"], task.placement["wound_normal"]
+            grasps = [edge_grasp(entry, normal, *wound) for entry, normal, _ in bites]
+            subordinate = ScriptedDevice(
+                assisting_hand(passes, grasps, hands.assisting),
+                identity=DeviceIdentity("scripted", "scripted subordinate hand (forceps)"),
+            )
         if len(passes) == 1:
-            return ScriptedDevice(passes[0].pose_and_grip), passes[0].duration
+            return OpenedDevice(ScriptedDevice(passes[0].pose_and_grip), passes[0].duration, subordinate)
         trajectory, duration = sequence_of_passes(passes)
-        return ScriptedDevice(trajectory), duration
+        return OpenedDevice(ScriptedDevice(trajectory), duration, subordinate)
     if spec.startswith("replay:"):
         from sim.devices import ReplayDevice
 
@@ -111,20 +141,20 @@ def open_device(spec: str, plan: SessionPlan, catalog: Catalog, parameters: Sutu
             recorded["grip"].to_numpy(),
             session=uid,
         )
-        return device, float(recorded["time"].iloc[-1])
+        return OpenedDevice(device, float(recorded["time"].iloc[-1]))
     if spec == "mouse":
         from sessions.running.scene import start_pose
         from sim.devices.mouse import MouseDevice
 
-        return MouseDevice(start_pose(task)), None
+        return OpenedDevice(MouseDevice(start_pose(task)), None)
     if spec == "spacemouse":
         from sim.devices.spacemouse import SpaceMouse
 
-        return SpaceMouse(), None  # mapped onto the task's scene by run_session
+        return OpenedDevice(SpaceMouse(), None)  # mapped onto the task's scene by run_session
     if spec == "openhaptics":
         from sim.devices.openhaptics import OpenHapticsDevice
 
-        return OpenHapticsDevice(), None
+        return OpenedDevice(OpenHapticsDevice(), None)
     raise CatalogError(
         f"unknown device {spec!r}; use scripted, mouse, spacemouse, openhaptics or replay:SESSION"
     )
@@ -134,7 +164,7 @@ def run_session(
     catalog: Catalog,
     home: Path,
     plan: SessionPlan,
-    parameters: SuturingPassParameters | Callable[[int], SuturingPassParameters] | None = None,
+    parameters: SuturingPassParameters | ScriptedHands | Callable[[int], object] | None = None,
     duration: float | None = None,
     score: bool = True,
     view: LiveView | None = None,
@@ -176,7 +206,7 @@ def run_session(
     if callable(parameters):
         parameters = parameters(row.trial)
     try:
-        device, natural = open_device(plan.device, plan, catalog, parameters)
+        device, natural, subordinate = open_device(plan.device, plan, catalog, parameters)
         if plan.device in MAPPED_DEVICES:  # the hand's workspace onto the task's scene, as shown
             from sessions.running.scene import mapped_onto_task
 
@@ -193,6 +223,8 @@ def run_session(
         if view is not None and plan.clock == "realtime":
             window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid), uid)
         options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
+        if subordinate is not None and plan.clock == "simulated":  # real time: the needle hand alone
+            options["subordinate"] = subordinate
         simulated = task_simulation(plan.task, device, cache_dir(home), **options)
     except BaseException:  # nothing was recorded: no row, journal or ring is left behind
         with catalog.session() as orm:

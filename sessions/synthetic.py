@@ -22,6 +22,7 @@ from metrics.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog, now
 from sessions.models import MetricResult, Participant, Session
 from sessions.tasks import task_spec
+from sim.devices.assisting import AssistingHandParameters, ScriptedHands
 from sim.devices.scripted import SuturingPassParameters
 
 PROFILES = ("expert", "trainee")
@@ -130,6 +131,34 @@ def pass_parameters(skill: float, seed: int, placement_skill: float | None = Non
         lateral_offset=across,
         seed=seed,
     )
+
+
+def assisting_parameters(skill: float, seed: int) -> AssistingHandParameters:
+    """The scripted subordinate hand for a given skill (0 = first-day trainee, 1 = expert): an expert
+    takes the edge by a third of the needle's approach and steadies it, lifted 0.25 mm; a first-day
+    trainee leaves it alone in about half the sessions, and when it does take it, takes it up to a
+    second late, lifts it up to about 1.9 mm (where the porcine artery's edge tears out of the jaws)
+    and shakes. The needle hand aims at the bite as planned at rest, so a lifted edge meets it tilted
+    (about 6 deg per 0.3 mm on the interrupted stitch, measured against the wall where it is). Drawn
+    from its own stream of ``seed``: the needle hand's draws are unchanged."""
+    rng = np.random.default_rng(seed + 104729)
+    clumsiness = 1.0 - min(max(skill, 0.0), 1.0)
+    grasps = bool(rng.random() >= 0.55 * clumsiness)
+    delay = float(clumsiness * rng.uniform(0.2, 1.1))
+    eversion = float(0.25e-3 + 1.2e-3 * clumsiness * rng.uniform(0.5, 1.5))
+    return AssistingHandParameters(
+        grasps=grasps,
+        grasp_delay=delay,
+        eversion=eversion,
+        tremor_amplitude=float(2e-5 + 3e-4 * clumsiness),
+        seed=seed,
+    )
+
+
+def scripted_hands(skill: float, seed: int, placement_skill: float | None = None) -> ScriptedHands:
+    """Both hands of a scripted session of a given skill: :func:`pass_parameters` and
+    :func:`assisting_parameters`."""
+    return ScriptedHands(pass_parameters(skill, seed, placement_skill), assisting_parameters(skill, seed))
 
 
 def bite_parameters(parameters: SuturingPassParameters, count: int) -> list[SuturingPassParameters]:

@@ -68,7 +68,7 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     from sessions.runner import SessionPlan, run_session
     from sessions.status import SCRIPTED_DEVICE
     from sessions.store import CatalogStore
-    from sessions.synthetic import pass_parameters
+    from sessions.synthetic import scripted_hands
 
     catalog, home = open_catalog()
     with catalog.session() as orm:  # who and where first: a wrong code is the one line said
@@ -84,7 +84,7 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
         click.echo("note: a scripted pass, not a person's hand: the session is marked synthetic", err=True)
     clock = "realtime" if realtime or device in LIVE_DEVICES else "simulated"
     plan = SessionPlan(study, participant, task, None, phase, device, clock)  # next trial, allocated
-    parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
+    parameters = (lambda trial: scripted_hands(skill, seed=trial)) if device == "scripted" else None
     with stderr_console().status(f"running {participant} on {device}..."):
         uid = run_session(
             catalog, home, plan, parameters, duration, view=view if clock == "realtime" else None

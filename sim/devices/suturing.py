@@ -274,6 +274,11 @@ needle carried straight across drags its tail through the wall (a contact a hand
 avoid)."""
 
 
+def pass_starts(passes: list[SuturingPass], gap: float = 0.5) -> list[float]:
+    """When each pass of :func:`sequence_of_passes` begins (s)."""
+    return np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]]).tolist()
+
+
 def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Trajectory, float]:
     """Several stitches one after another: a trajectory and its total duration (s).
 
@@ -284,7 +289,7 @@ def sequence_of_passes(passes: list[SuturingPass], gap: float = 0.5) -> tuple[Tr
     """
     if not passes:
         raise DeviceError("sequence_of_passes needs at least one pass")
-    starts = np.cumsum([0.0] + [p.duration + gap for p in passes[:-1]]).tolist()
+    starts = pass_starts(passes, gap)
     total = float(starts[-1] + passes[-1].duration)
     last = len(passes) - 1
     stops: dict[int, tuple[Pose, Pose, Pose]] = {}

@@ -413,11 +413,14 @@ class TissueModel:
         columns, block, rows = self._contact_columns(ids)
         return ContactHandle(ids, self.penalty, block, columns, rows)
 
-    def prescribed(self, nodes: ArrayLike) -> PrescribedHandle:
+    def prescribed(self, nodes: ArrayLike, at_nodes: ArrayLike | None = None) -> PrescribedHandle:
         """A per-tick handle for nodes held exactly where they are put (a grasp), answering the
-        displacement of the contact candidates (:class:`sim.fem.solution.PrescribedHandle`)."""
+        displacement of ``at_nodes`` (default: the contact candidates) (:class:`PrescribedHandle`)."""
         ids = checks.contact_ids(nodes, self.mesh.n_nodes)
         columns, block, rows = self._contact_columns(ids)
+        if at_nodes is not None:
+            rows = checks.node_ids(at_nodes, self.mesh.n_nodes, "at_nodes")
+            columns = self._nodes_columns(ids, node_dofs(rows))
         return PrescribedHandle(ids, block, columns, rows)
 
     def field_contact(self, nodes: ArrayLike) -> ContactHandle:

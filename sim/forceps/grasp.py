@@ -75,6 +75,8 @@ class ForcepsInteraction:
         self.forceps = forceps or Forceps()
         self._free = np.ones(tissue.mesh.n_nodes, dtype=bool)
         self._free[self.model.clamped_nodes] = False
+        surface = tissue.mesh.surface_nodes
+        self._moving = surface[self._free[surface]]  # the collision mesh's nodes a grasp can move
         self.jaw_point = np.zeros(3)
         """Where the jaws close (m, world): the subordinate device's tool point."""
         self.jaw_closed = False
@@ -84,7 +86,7 @@ class ForcepsInteraction:
         self._anchor = np.zeros(3)  # the jaw point when the grasp closed
         self._handle = None
         self._pending: list[ForcepsEvent] = []
-        self._forces = np.zeros((0, 3))  # the grasp's nodal forces at the last FEM step
+        self._hand_forces = np.zeros((0, 3))  # the hand's own part of the grasp's forces, last FEM step
         self._shown = False  # whether the collision mesh is away from rest
 
     @property
@@ -111,7 +113,7 @@ class ForcepsInteraction:
         if nodes.size == 0:
             return  # only clamped tissue under the jaws
         self.nodes, self.triangle, self._anchor = nodes, triangle, self.jaw_point.copy()
-        self._handle = self.model.prescribed(nodes)
+        self._handle = self.model.prescribed(nodes, self._moving)
         self._pending.append(
             ForcepsEvent(
                 "grasp",
@@ -123,7 +125,7 @@ class ForcepsInteraction:
         )
 
     def _let_go(self) -> None:
-        self.nodes, self._handle, self._forces = _NOTHING, None, np.zeros((0, 3))
+        self.nodes, self._handle, self._hand_forces = _NOTHING, None, np.zeros((0, 3))
 
     def fem_step(
         self, time: float, needle_nodes: NDArray[np.int64] | None = None, needle_forces: NDArray | None = None
@@ -134,11 +136,11 @@ class ForcepsInteraction:
         if not self.grasping:
             return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
         displacement = self.jaw_point - self._anchor
-        held = np.tile(displacement, (self.nodes.size, 1))
-        if needle_nodes is not None and len(needle_nodes):
+        hand = self._handle.forces(np.tile(displacement, (self.nodes.size, 1)))
+        forces = hand
+        if needle_nodes is not None and len(needle_nodes):  # what holds the nodes against the needle
             coupling = self.model.columns_at(needle_nodes, node_dofs(self.nodes))
-            held = held - (coupling @ np.reshape(needle_forces, -1)).reshape(-1, 3)
-        forces = self._handle.forces(held)
+            forces = hand - self._handle.forces((coupling @ np.reshape(needle_forces, -1)).reshape(-1, 3))
         total = forces.sum(axis=0)
         pull = float(np.linalg.norm(total))
         if pull > self.forceps.edge_tear_force:
@@ -150,15 +152,17 @@ class ForcepsInteraction:
             )
             events.append(ForcepsEvent("edge_torn", time, triangle, detail))
             return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
-        self._forces = forces
+        self._hand_forces = hand
         return ForcepsStep(total, displacement, self.nodes, forces, events)
 
     def surface_displacement(self) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
-        """(nodes, displacement (m)) of the surface under the grasp's forces at the last FEM step, or
-        None when nothing is held."""
+        """(nodes, displacement (m)) of the tissue's free surface as the hand alone holds it at the last
+        FEM step (G[:, P] G_PP^-1 a), or None when nothing is held. The rest of the field, the needle's
+        loads on the tissue the grasp holds (G[:, N] f_N - G[:, P] G_PP^-1 G_PN f_N), is the needle's
+        own deformation, which the collision mesh does not follow (PAPER.md section 7)."""
         if not self.grasping or self._handle is None:
             return None
-        return self._handle.surface_nodes, self._handle.surface_displacement(self._forces)
+        return self._handle.surface_nodes, self._handle.surface_displacement(self._hand_forces)
 
     def deform_collision(self) -> None:
         """Move the collision mesh to where the grasp holds the tissue (graphics rate; back to rest

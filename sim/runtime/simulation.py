@@ -33,6 +33,7 @@ from sim.devices.base import GRIP_BUTTON, STOP_BUTTON, Device, DeviceLostError
 from sim.errors import VascsimError
 from sim.fem import Tissue
 from sim.fem.kernel import warm_kernel_geometry
+from sim.forceps import Forceps, ForcepsEvent, ForcepsInteraction
 from sim.needle import Needle, Pose
 from sim.needle.forces import NeedleForces
 from sim.needle.interaction import NeedleEvent, NeedleInteraction, PiercingRules
@@ -228,12 +229,22 @@ class Simulation:
         on_sample: Callable[..., None] | None = None,
         forces: NeedleForces | None = None,
         region_forces: Mapping[int, NeedleForces] | None = None,
+        subordinate: Device | None = None,
+        forceps: Forceps | None = None,
     ) -> None:
         self.settings = settings or RuntimeSettings()
         self.device = device
         self.interaction = NeedleInteraction(
             tissue, needle, rules, forces=forces, region_forces=region_forces
         )
+        self.subordinate = subordinate
+        """The subordinate hand's device (its tool point is where the forceps' jaws close; its grip
+        button closes them), or None for a one-handed session."""
+        self.forceps = (
+            None if subordinate is None else ForcepsInteraction(tissue, self.interaction.collision, forceps)
+        )
+        self.subordinate_holder = Mailbox()
+        self.subordinate_sample = None  # the subordinate device's latest reading (haptic rate)
         self.safety = ForceSafety(device.limits, self.settings.safety, tick=self.settings.period("haptic"))
         self.holder = Mailbox()
         self.fem = Mailbox()
@@ -302,8 +313,23 @@ class Simulation:
             return
         if self.force_path is None:
             self.haptic_log.append(now, sample.position, grip, force)
+        if self.subordinate is not None:
+            self._read_subordinate(now)
         if self.on_sample is not None:
             self.on_sample(now, sample, force, self.fem.get())
+
+    def _read_subordinate(self, now: float) -> None:
+        """The subordinate hand's reading at the haptic rate (it is sent no force: the paper's
+        subordinate device, a SpaceMouse, renders none)."""
+        try:
+            sample = self.subordinate.read(now)
+        except DeviceLostError as error:
+            self._emit(RuntimeEvent("device_lost", now, "haptic", f"subordinate hand: {error}"))
+            self.stop("device_lost", now)
+            return
+        self.subordinate_sample = sample
+        pose = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
+        self.subordinate_holder.put(HolderSnapshot(now, pose, sample.velocity, sample.pressed(GRIP_BUTTON)))
 
     def fem_step(self, now: float) -> None:
         holder = self.holder.get()
@@ -326,6 +352,7 @@ class Simulation:
             self.contact_latencies[kind].append(wallclock.perf_counter() - posted)
         for event in step.events:
             self._emit(event)
+        grasp = self._forceps_step(now, step)
         self.forces.push(now, step.needle_force)
         contact = self.interaction.last_contact
         if contact is not None:
@@ -351,8 +378,21 @@ class Simulation:
                 interaction.stretch,
                 holder.time,
                 interaction.tip_velocity,
+                *grasp,
             )
         )
+
+    def _forceps_step(self, now: float, step) -> tuple:
+        """The subordinate hand's grasp at this FEM step, superposed with the needle's loads:
+        (the forceps' force on the tissue, the grasped tissue's displacement), or () with no hand."""
+        forceps, hand = self.forceps, self.subordinate_holder.get()
+        if forceps is None or hand is None:
+            return ()
+        forceps.hold(hand.time, hand.pose.position, hand.grip)
+        grasp = forceps.fem_step(now, step.contact_nodes, step.reaction_forces)
+        for event in grasp.events:
+            self._emit(event)
+        return grasp.force, grasp.displacement
 
     def graphics_step(self, now: float) -> None:
         fem = self.fem.get()
@@ -360,6 +400,8 @@ class Simulation:
             return
         if self._prefetcher is not None:  # first, so the FEM thread applying the query's result
             self._prefetch_ahead_of(fem)  # does not share the interpreter with this work
+        if self.forceps is not None:  # the needle meets the tissue where the other hand holds it
+            self.forceps.deform_collision()
         posted = wallclock.perf_counter()
         hits = self.interaction.collision.query(fem.needle_vertices)
         self.global_queue.append((now, fem.needle_vertices, hits, posted))
@@ -411,7 +453,7 @@ class Simulation:
             self.renderer.idle()  # a window still answers its keys and mouse before the first frame
 
     # -- events and stopping -----------------------------------------------------------------
-    def _emit(self, event: NeedleEvent | RuntimeEvent) -> None:
+    def _emit(self, event: NeedleEvent | RuntimeEvent | ForcepsEvent) -> None:
         self.events.append(event)
         if self.on_event is not None:
             self.on_event(event)
@@ -534,6 +576,11 @@ class Simulation:
         """Wall-clock time: the haptic layer in its own process, the others in threads."""
         from sim.runtime.realtime import process_prepared, run_realtime
 
+        if self.subordinate is not None:
+            raise RuntimeSettingsError(
+                "the subordinate hand runs in simulated time only so far: drop the second device "
+                "for a real-time run"
+            )
         self.interaction.live_stress = self.settings.live_stress_in_real_time
         with process_prepared():  # before the column worker is forked: it inherits the settings
             self._cast_candidate_depths()

@@ -40,6 +40,8 @@ class FemSnapshot(NamedTuple):
     stretch: float = math.nan  # the largest edge stretch around the contact in the field the display draws
     holder_time: float = math.nan  # s, the device sample the step's needle follows
     tip_velocity: NDArray[np.float64] | None = None  # m/s, the tip's between the last two FEM steps
+    grasp_force: NDArray[np.float64] | None = None  # N, the subordinate hand's forceps on the tissue
+    grasp_displacement: NDArray[np.float64] | None = None  # m, of the tissue the forceps hold
 
 
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}

@@ -185,7 +185,7 @@ def recorded_task(task: str, skill: float, seed: int, folder):
     from sessions.tasks import task_preset, task_simulation, task_spec
 
     spec, forces = task_spec(task), task_preset(task).forces
-    device, duration = open_device(
+    device, duration, _ = open_device(
         "scripted", SessionPlan("s", "p", task, 1), None, pass_parameters(skill, seed)
     )
     header = {"session_id": "s", "task": task, "placement": spec.placement, "needle_forces": forces.as_dict()}

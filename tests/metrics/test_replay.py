@@ -33,7 +33,7 @@ GOLDEN = Path(__file__).parents[1] / "data" / "golden"
 
 def record_pass(folder: Path, tissue, skill: float, seed: int, participant: str, label: str) -> Path:
     """One scripted stitch on the wall-stitch task, recorded as the runner records it."""
-    device, duration = open_device(
+    device, duration, _ = open_device(
         "scripted", SessionPlan("s", participant, "wall-stitch", 1), None, pass_parameters(skill, seed)
     )
     header = {

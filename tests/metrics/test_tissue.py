@@ -46,7 +46,7 @@ def test_reconstructed_contact_is_exactly_what_the_runtime_drove(wall, tmp_path,
     # on the mark (the pass this test was written for): a trainee's hand off it by ~1 mm can land
     # where the paper rule's tiny puncture force pierces at the first touch, leaving no indentation
     on_mark = dataclasses.replace(pass_parameters(skill, 5), entry_offset=0.0, lateral_offset=0.0)
-    device, duration = open_device("scripted", SessionPlan("s", "p", "wall-stitch", 1), None, on_mark)
+    device, duration, _ = open_device("scripted", SessionPlan("s", "p", "wall-stitch", 1), None, on_mark)
     writer = SessionWriter(tmp_path / "s", {"session_id": "s", "task": "wall-stitch"}, flush_interval=0.1)
     simulation = RuntimeRecorder(writer).attach(Simulation(wall, Needle.curved(), device, forces=PAPER))
     driven = []

@@ -10,7 +10,7 @@ import pytest
 from metrics.streams import from_recorded
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from recorder.schema import OLDER_SAMPLE_SCHEMAS, REACTION_COLUMNS
+from recorder.schema import OLDER_SAMPLE_SCHEMAS, REACTION_COLUMNS, SUBORDINATE_COLUMNS
 from recorder.writer import sha256_of
 from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.devices import ScriptedDevice, SuturingPass
@@ -79,11 +79,12 @@ def in_older_layout(table, schema):
     return pa.Table.from_arrays(columns, schema=schema)
 
 
-@pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.parametrize("version", [1, 2, 3])
 def test_an_older_session_reads_with_what_it_did_not_record_unknown(tmp_path, version):
     """Sessions recorded before schema 2 lack the reaction, before 3 the tip velocity vector and they
-    carry ``compute`` (0 in every sample): read with the missing columns NaN and ``compute`` dropped;
-    metrics use the sent force where the reaction is unknown."""
+    carry ``compute`` (0 in every sample), before 4 the subordinate hand's forceps: read with the
+    missing columns NaN and ``compute`` dropped; metrics use the sent force where the reaction is
+    unknown."""
     session = record(tmp_path / "s")
     old = in_older_layout(session.samples, OLDER_SAMPLE_SCHEMAS[version])
     pq.write_table(old, tmp_path / "s" / "samples.parquet")
@@ -94,7 +95,10 @@ def test_an_older_session_reads_with_what_it_did_not_record_unknown(tmp_path, ve
     again = open_session(tmp_path / "s")
     assert again.samples.schema.names == session.samples.schema.names
     assert "compute" not in again.samples.schema.names
-    assert np.all(np.isnan(again.samples.column("tip_vx").to_numpy()))
+    tip_velocity = again.samples.column("tip_vx").to_numpy()
+    assert np.all(np.isnan(tip_velocity)) if version < 3 else np.all(np.isfinite(tip_velocity[2:]))
+    for column in SUBORDINATE_COLUMNS:
+        assert np.all(np.isnan(again.samples.column(column).to_numpy())), column
     reaction = again.samples.column("reaction_x").to_numpy()
     assert (
         np.all(np.isnan(reaction))

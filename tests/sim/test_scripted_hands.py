@@ -18,7 +18,7 @@ from sessions.tasks import TASKS, task_simulation
 
 def run(task: str, skill: float, trial: int, cache: Path | None):
     plan = SessionPlan(study="s", participant="p", task=task, device="scripted", trial=trial)
-    device, duration = open_device("scripted", plan, None, pass_parameters(skill, seed=trial))
+    device, duration, _ = open_device("scripted", plan, None, pass_parameters(skill, seed=trial))
     simulation = task_simulation(task, device, cache)
     stretch = []
     simulation.on_sample = lambda now, sample, force, fem: stretch.append(fem.stretch) if fem else None
