@@ -23,6 +23,9 @@ EVENT_NAMES: dict[str, str] = {
     "overstress": "tissue stress at the needle above the damage threshold",
     "edge_overstress": "wound edge stressed past the damage threshold (tearing risk)",
     "tear": "the wall gave way under the needle (more force than it can carry)",
+    "grasp": "forceps took the wound edge",
+    "release_grasp": "forceps let go of the wound edge",
+    "edge_torn": "the wound edge tore out of the forceps (pulled harder than it holds)",
     "watchdog": "simulator fell behind (safety watchdog)",
     "watchdog_recovered": "simulator caught up",
     "force_clamped": "force to the device limited to its rating",
@@ -45,7 +48,15 @@ COLLAPSED: dict[str, str] = {
 """Kinds that come in runs: one line with a count and this explanation instead of one line each."""
 
 
-SAFETY_EVENTS = ("overstress", "edge_overstress", "tear", "force_clamped", "nonfinite_force", "device_lost")
+SAFETY_EVENTS = (
+    "overstress",
+    "edge_overstress",
+    "tear",
+    "edge_torn",
+    "force_clamped",
+    "nonfinite_force",
+    "device_lost",
+)
 """Kinds that say the patient (or the trainee's hand) was at risk: listed first, apart from the rest."""
 
 

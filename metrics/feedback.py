@@ -39,9 +39,12 @@ SAFETY_GROUP = (
     "stress_concentration",
     "peak_stretch",
     "time_above_strain_limit",
+    "forceps_tears",
+    "peak_grasp_force",
 )
 """What harms the patient: the never events, partial-thickness bites and extra punctures (leaks),
-excessive force, and the load on the tissue (stress, stretch, the wound edge)."""
+excessive force, the load on the tissue (stress, stretch, the wound edge), and an edge the forceps
+tear or crush."""
 
 QUALITY_GROUPS = ("placement",)
 

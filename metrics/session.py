@@ -11,7 +11,8 @@ import numpy as np
 import pandas as pd
 
 import metrics.definitions
-import metrics.placement_metrics  # noqa: F401  (registers the stitch-placement metrics)
+import metrics.placement_metrics  # registers the stitch-placement metrics
+import metrics.subordinate_hand  # noqa: F401  (registers the subordinate hand's metrics)
 from metrics.context import SessionContext
 from metrics.errors import MetricsError
 from metrics.registry import REGISTRY, REGISTRY_VERSION

@@ -90,13 +90,14 @@ class SessionStreams:
     exterior triangle touched (-1 none) with contact_barycentric (n, 3) weights of the
     contact point; tip_speed (n,) m/s;
     subordinate_displacement (n, 3) m from the subordinate hand's start; grip (n,)
-    1 closed. events: DataFrame with at least time and kind. stress_field: optional
-    table of the tissue surface at the moment of insertion (columns x, y, z, area,
-    von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known. stitches:
-    optional table of each stitch's entry and exit points on the tissue surface
-    (:func:`metrics.placement.stitch_points`, derived with the tissue mesh), with how the needle
-    went through the wall where the scene was recorded (:mod:`metrics.passage`). needle_frames:
-    the recorded scene (:class:`NeedleFrames`), if any.
+    1 closed; forceps_jaw (n,) the subordinate hand's jaws, 1 closed; grasp_force (n, 3) N the
+    forceps' force on the tissue they hold (zero when they hold none). events: DataFrame with at least
+    time and kind. stress_field: optional table of the tissue surface at the moment of insertion
+    (columns x, y, z, area, von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known.
+    stitches: optional table of each stitch's entry and exit points on the tissue surface
+    (:func:`metrics.placement.stitch_points`, derived with the tissue mesh), with how the needle went
+    through the wall where the scene was recorded (:mod:`metrics.passage`). needle_frames: the recorded
+    scene (:class:`NeedleFrames`), if any.
     """
 
     session_id: str
@@ -111,6 +112,8 @@ class SessionStreams:
     stretch: NDArray[np.float64] | None = None
     subordinate_displacement: NDArray[np.float64] | None = None
     grip: NDArray[np.int8] | None = None
+    forceps_jaw: NDArray[np.float64] | None = None
+    grasp_force: NDArray[np.float64] | None = None
     events: pd.DataFrame = field(default_factory=_empty_events)
     stress_field: pd.DataFrame | None = None
     contact_triangle: NDArray[np.int32] | None = None
@@ -139,6 +142,8 @@ class SessionStreams:
             ("tip_position", 3),
             ("force", 3),
             ("subordinate_displacement", 3),
+            ("forceps_jaw", 1),
+            ("grasp_force", 3),
             ("needle_state", 1),
             ("local_stress", 1),
             ("stretch", 1),
@@ -209,6 +214,9 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     from recorder.scene import read_scene
 
     scene = read_scene(session)
+    # the subordinate hand where one was recorded (schema 4, its tool point known); a one-handed
+    # session's zero displacement would read as a perfectly still hand, so it is left unmeasured
+    two_handed = bool(np.all(np.isfinite(columns("sub_x", "sub_y", "sub_z"))))
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),
         participant_id=participant_id or metadata.get("participant_id"),
@@ -220,8 +228,10 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
         needle_state=column("pierced").astype(np.int8),
         local_stress=None if np.all(np.isnan(stress)) else stress,
         stretch=None if np.all(np.isnan(stretch)) else stretch,
-        subordinate_displacement=columns("sub_dx", "sub_dy", "sub_dz"),
+        subordinate_displacement=columns("sub_dx", "sub_dy", "sub_dz") if two_handed else None,
         grip=column("grip").astype(np.int8),
+        forceps_jaw=column("sub_jaw").astype(np.float64) if two_handed else None,
+        grasp_force=columns("grasp_fx", "grasp_fy", "grasp_fz") if two_handed else None,
         contact_triangle=column("contact_triangle").astype(np.int32),
         contact_barycentric=columns("bary_0", "bary_1", "bary_2"),
         tip_speed=column("tip_speed").astype(np.float64),

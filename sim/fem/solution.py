@@ -151,6 +151,18 @@ class PrescribedHandle:
 
         return cho_solve(self._factor, np.reshape(prescribed, -1)).reshape(-1, 3)
 
+    @property
+    def columns(self) -> NDArray[np.float64]:
+        """(3 * rows, 3k) displacement of ``surface_nodes`` (m) per unit force (N) at each held dof."""
+        return self._columns
+
+    def forces_of(self, displacements: NDArray[np.float64]) -> NDArray[np.float64]:
+        """G_PP^-1 applied to each column of ``displacements`` (3k, q): the holding forces for q
+        displacement patterns of the held dofs at once."""
+        from scipy.linalg import cho_solve
+
+        return cho_solve(self._factor, displacements)
+
     def surface_displacement(self, forces: NDArray[np.float64]) -> NDArray[np.float64]:
         """(rows, 3) displacement of ``surface_nodes`` (m) under the grasp's nodal forces."""
         return (self._columns @ np.reshape(forces, -1)).reshape(-1, 3)

@@ -86,8 +86,12 @@ class ForcepsInteraction:
         self._anchor = np.zeros(3)  # the jaw point when the grasp closed
         self._handle = None
         self._pending: list[ForcepsEvent] = []
-        self._hand_forces = np.zeros((0, 3))  # the hand's own part of the grasp's forces, last FEM step
+        self._displacement = np.zeros(3)  # the hand's displacement since the grasp, last FEM step
+        # per unit displacement of the hand (every grasped node moved alike, so three patterns):
+        self._unit_forces = np.zeros((0, 3))  # (3k, 3) the grasp's nodal forces, G_PP^-1 T
+        self._unit_surface = np.zeros((0, 3))  # (3S, 3) the free surface's displacement, G_SP G_PP^-1 T
         self._shown = False  # whether the collision mesh is away from rest
+        self._against_key, self._against_matrix = b"", np.zeros((0, 0))  # see _against
 
     @property
     def grasping(self) -> bool:
@@ -114,6 +118,8 @@ class ForcepsInteraction:
             return  # only clamped tissue under the jaws
         self.nodes, self.triangle, self._anchor = nodes, triangle, self.jaw_point.copy()
         self._handle = self.model.prescribed(nodes, self._moving)
+        self._unit_forces = self._handle.forces_of(np.tile(np.eye(3), (nodes.size, 1)))
+        self._unit_surface = self._handle.columns @ self._unit_forces
         self._pending.append(
             ForcepsEvent(
                 "grasp",
@@ -125,7 +131,8 @@ class ForcepsInteraction:
         )
 
     def _let_go(self) -> None:
-        self.nodes, self._handle, self._hand_forces = _NOTHING, None, np.zeros((0, 3))
+        self.nodes, self._handle, self._displacement = _NOTHING, None, np.zeros(3)
+        self._against_key = b""
 
     def fem_step(
         self, time: float, needle_nodes: NDArray[np.int64] | None = None, needle_forces: NDArray | None = None
@@ -136,11 +143,10 @@ class ForcepsInteraction:
         if not self.grasping:
             return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
         displacement = self.jaw_point - self._anchor
-        hand = self._handle.forces(np.tile(displacement, (self.nodes.size, 1)))
+        hand = (self._unit_forces @ displacement).reshape(-1, 3)
         forces = hand
         if needle_nodes is not None and len(needle_nodes):  # what holds the nodes against the needle
-            coupling = self.model.columns_at(needle_nodes, node_dofs(self.nodes))
-            forces = hand - self._handle.forces((coupling @ np.reshape(needle_forces, -1)).reshape(-1, 3))
+            forces = hand - (self._against(needle_nodes) @ np.reshape(needle_forces, -1)).reshape(-1, 3)
         total = forces.sum(axis=0)
         pull = float(np.linalg.norm(total))
         if pull > self.forceps.edge_tear_force:
@@ -152,8 +158,19 @@ class ForcepsInteraction:
             )
             events.append(ForcepsEvent("edge_torn", time, triangle, detail))
             return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
-        self._hand_forces = hand
+        self._displacement = displacement
         return ForcepsStep(total, displacement, self.nodes, forces, events)
+
+    def _against(self, needle_nodes: NDArray[np.int64]) -> NDArray[np.float64]:
+        """G_PP^-1 G_PN: the grasp's nodal forces per unit needle load on ``needle_nodes``, built once
+        per needle contact set (the needle's kernel keeps its nodes for many FEM steps)."""
+        key = needle_nodes.tobytes()
+        if key != self._against_key:
+            # G_PN = (G_NP)^T: rows of the grasped nodes' own columns, which the grasp solved whole
+            coupling = self.model.columns_at(self.nodes, node_dofs(needle_nodes)).T
+            self._against_matrix = self._handle.forces_of(coupling)
+            self._against_key = key
+        return self._against_matrix
 
     def surface_displacement(self) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
         """(nodes, displacement (m)) of the tissue's free surface as the hand alone holds it at the last
@@ -162,7 +179,7 @@ class ForcepsInteraction:
         own deformation, which the collision mesh does not follow (PAPER.md section 7)."""
         if not self.grasping or self._handle is None:
             return None
-        return self._handle.surface_nodes, self._handle.surface_displacement(self._hand_forces)
+        return self._handle.surface_nodes, (self._unit_surface @ self._displacement).reshape(-1, 3)
 
     def deform_collision(self) -> None:
         """Move the collision mesh to where the grasp holds the tissue (graphics rate; back to rest
