@@ -116,7 +116,10 @@ def edge_held_at_insertion(context: SessionContext) -> float:
     "peak_grasp_force",
     advice="Hold the edge gently: lift it only as far as the needle needs.",
     unit="N",
-    definition="Largest force of the subordinate hand's forceps on the tissue they hold.",
+    definition=(
+        "Largest force of the subordinate hand's forceps on the tissue they hold (not measured when "
+        "they never held any)."
+    ),
     streams=("grasp_force",),
     better=LOWER,
     reference="Heijnsdijk et al. 2004, Surg Endosc 18:974 (grasper forces and tissue damage)",
@@ -124,7 +127,7 @@ def edge_held_at_insertion(context: SessionContext) -> float:
 )
 def peak_grasp_force(context: SessionContext) -> float:
     force = context.streams.grasp_force
-    if force is None:
+    if force is None or not force.any():
         return NAN
     return float(np.linalg.norm(force, axis=1).max())
 

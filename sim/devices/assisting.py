@@ -31,13 +31,13 @@ class AssistingHandParameters:
         approach): a late hand closes during the insertion.
     eversion: how far (m) the grasped edge is lifted out of the wall.
     hover: how far above the edge (m) the open forceps wait between bites.
-    tremor_amplitude (m), tremor_frequency (Hz): the hand's tremor while it holds.
+    tremor_amplitude (m), tremor_frequency (Hz): the hand's tremor.
     seed: the tremor's phases.
     """
 
     grasps: bool = True
     grasp_delay: float = 0.0
-    eversion: float = 0.25e-3
+    eversion: float = 0.12e-3
     hover: float = 0.004
     tremor_amplitude: float = 0.0
     tremor_frequency: float = 7.0
@@ -135,7 +135,7 @@ def assisting_hand(
         else:
             held = True
             position = _blend(rims[k], everted[k], (local - closes) / (0.5 * approach))
-        if p.tremor_amplitude and held:
+        if p.tremor_amplitude:  # a hand shakes holding or not
             position = position + p.tremor_amplitude * np.sin(omega * t + phase)
         return Pose.unchecked(position, rotation), held
 

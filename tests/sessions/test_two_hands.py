@@ -43,7 +43,9 @@ def test_a_scripted_expert_grasps_the_edge_lifts_it_and_lets_go_after_the_pull_t
     assert "edge_torn" not in kinds and "implausible_hit" not in kinds
     frame = two_handed.samples_frame()
     lifted = np.linalg.norm(frame[["grasp_dx", "grasp_dy", "grasp_dz"]].to_numpy(), axis=1)
-    assert lifted.max() >= 0.2e-3  # the grasped tissue moved at least 0.2 mm
+    assert lifted.max() >= 0.1e-3  # the grasped tissue steadied, lifted 0.1 mm and more
+    hand = np.linalg.norm(frame[["sub_dx", "sub_dy", "sub_dz"]].to_numpy(), axis=1)
+    assert hand.max() >= 0.2e-3  # the subordinate hand moved: to the edge, then lifting it
     held = frame["sub_jaw"].to_numpy() == 1
     force = np.linalg.norm(frame[["grasp_fx", "grasp_fy", "grasp_fz"]].to_numpy(), axis=1)
     assert 0.05 < force[held].max() < 1.35  # lifting a porcine artery's edge, short of tearing it
@@ -80,7 +82,7 @@ def test_the_synthetic_assisting_hand_follows_skill():
     assert all(p.grasps for p in experts)
     assert 0.3 < np.mean([not p.grasps for p in trainees]) < 0.7  # about half leave the edge alone
     assert max(p.grasp_delay for p in experts) < min(p.grasp_delay for p in trainees)
-    assert max(p.eversion for p in experts) < 0.35e-3 < np.median([p.eversion for p in trainees])
+    assert max(p.eversion for p in experts) < 0.2e-3 < np.median([p.eversion for p in trainees])
     assert max(p.tremor_amplitude for p in experts) < min(p.tremor_amplitude for p in trainees)
     with pytest.raises(DeviceError, match="eversion"):
         AssistingHandParameters(eversion=-1e-3)

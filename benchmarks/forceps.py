@@ -1,0 +1,124 @@
+"""The subordinate hand's figures of issue 46: which grasp rule converges, and what both hands cost.
+
+Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|cost|all]
+
+- convergence: the force to lift a 1.5 mm wall patch's wound edge 0.5 mm with the forceps (the
+  porcine-artery preset's soft phase, 300 kPa), by the jaws rule (every surface node within the
+  1.5 mm jaws' footprint) and the source paper's triangle rule (the nearest triangle's three nodes),
+  on uniform meshes of 0.5, 0.3, 0.2 and 0.15 mm cells;
+- cost: on the interrupted stitch's 10k-node artery, a scripted expert's whole stitch in simulated
+  time with both hands against the needle hand alone: the FEM step's median and p99 compute (the
+  budget: <= 200 us), the haptic step's, and the wall time of building a grasp (the grasped nodes'
+  K0^-1 columns solved, then the three unit patterns), median over ``--repeats``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+# This folder holds scripts named like our packages (metrics.py, recorder.py): keep it off the path.
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+
+from sim.calibration.presets import tissue_preset  # noqa: E402
+from sim.collision.mesh import CollisionMesh  # noqa: E402
+from sim.fem import Material, TissueModel  # noqa: E402
+from sim.forceps import Forceps, ForcepsInteraction  # noqa: E402
+from sim.mesh import box_mesh  # noqa: E402
+
+LIFT = 0.5e-3
+SIZE = (0.012, 0.01, 0.0015)
+
+
+def lifting_force(cell: float, rule: str) -> tuple[int, int, float]:
+    """(nodes in the mesh, nodes grasped, force (N)) to lift the patch's free edge by LIFT."""
+    divisions = tuple(max(1, round(s / cell)) for s in SIZE)
+    mesh = box_mesh(SIZE, divisions)
+    fixed = np.concatenate([mesh.node_sets[k] for k in ("x0", "y0", "y1")])
+    soft = tissue_preset("porcine-artery").biphase
+    model = TissueModel(mesh, Material(soft.soft_modulus, soft.poisson_ratio), fixed)
+    hand = ForcepsInteraction(model, CollisionMesh(mesh), Forceps(rule=rule))
+    jaw = np.array([SIZE[0], SIZE[1] / 2, SIZE[2] / 2])  # on the cut face, mid-wall
+    hand.hold(0.0, jaw, True)
+    hand.hold(0.0, jaw + np.array([0.0, 0.0, LIFT]), True)
+    step = hand.fem_step(0.0)
+    return mesh.n_nodes, step.nodes.size, float(np.linalg.norm(step.force))
+
+
+def convergence() -> None:
+    print(f"force to lift the wound edge {LIFT * 1e3:g} mm (porcine-artery soft phase), by rule and cell:")
+    heads = ("cell (mm)", "nodes", "jaws: grasped", "force (mN)", "triangle", "force (mN)")
+    print("  ".join(f"{h:>{w}}" for h, w in zip(heads, (9, 6, 13, 10, 8, 10), strict=True)))
+    for cell in (0.5e-3, 0.3e-3, 0.2e-3, 0.15e-3):
+        n, jaws_nodes, jaws = lifting_force(cell, "jaws")
+        _, tri_nodes, triangle = lifting_force(cell, "triangle")
+        line = f"{cell * 1e3:9.2f}  {n:6d}  {jaws_nodes:13d}  {jaws * 1e3:10.1f}  "
+        print(line + f"{tri_nodes:8d}  {triangle * 1e3:10.1f}")
+
+
+def cost(repeats: int) -> None:
+    from sessions.runner import SessionPlan, open_device
+    from sessions.synthetic import scripted_hands
+    from sessions.tasks import task_simulation, task_spec, tissue_for
+    from sim.devices.assisting import edge_grasp
+
+    task = "interrupted-stitch"
+    tissue = tissue_for(task)
+    print(f"{task}: {tissue.mesh.n_nodes} nodes; a scripted expert's whole stitch, simulated time")
+    rows = {}
+    for hands in ("needle hand alone", "both hands"):
+        fem, haptic, walls = [], [], []
+        for seed in range(repeats):
+            both = scripted_hands(0.95, seed)
+            plan = SessionPlan("benchmark", "E", task, 1)
+            given = both if hands == "both hands" else both.needle
+            device, duration, subordinate = open_device("scripted", plan, None, given)
+            options = {} if subordinate is None else {"subordinate": subordinate}
+            simulation = task_simulation(task, device, **options)
+            began = time.perf_counter()
+            simulation.run_simulated(duration)
+            walls.append(time.perf_counter() - began)
+            fem.append(simulation.telemetry["fem"].computes)
+            haptic.append(simulation.telemetry["haptic"].computes)
+        fem_all, haptic_all = np.concatenate(fem), np.concatenate(haptic)
+        rows[hands] = (
+            np.median(fem_all),
+            np.percentile(fem_all, 99),
+            np.median(haptic_all),
+            np.median(walls),
+        )
+    print(f"{'':>18}  {'FEM p50 (us)':>12}  {'FEM p99 (us)':>12}  {'haptic p50 (us)':>15}  {'wall (s)':>8}")
+    for hands, (p50, p99, h50, wall) in rows.items():
+        print(f"{hands:>18}  {p50 * 1e6:12.0f}  {p99 * 1e6:12.0f}  {h50 * 1e6:15.1f}  {wall:8.2f}")
+    builds = []
+    for _ in range(repeats):
+        tissue.base.drop_cached_columns()
+        hand = ForcepsInteraction(tissue, CollisionMesh(tissue.mesh))
+        spec = task_spec(task)
+        rim, _ = edge_grasp(
+            spec.entry, spec.normal, spec.placement["wound_point"], spec.placement["wound_normal"]
+        )
+        began = time.perf_counter()
+        hand.hold(0.0, rim, True)
+        builds.append(time.perf_counter() - began)
+    built = np.median(builds) * 1e3
+    print(f"building a grasp ({hand.nodes.size} nodes, columns from cold): median {built:.0f} ms")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--part", choices=("convergence", "cost", "all"), default="all")
+    args = parser.parse_args()
+    if args.part in ("convergence", "all"):
+        convergence()
+    if args.part in ("cost", "all"):
+        cost(args.repeats)
+
+
+if __name__ == "__main__":
+    main()
