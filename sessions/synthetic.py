@@ -137,8 +137,9 @@ def assisting_parameters(skill: float, seed: int) -> AssistingHandParameters:
     """The scripted subordinate hand for a given skill (0 = first-day trainee, 1 = expert): an expert
     takes the edge by a third of the needle's approach and steadies it, lifted 0.12 mm; a first-day
     trainee leaves it alone in about half the sessions, and when it does take it, takes it up to a
-    second late and lifts it up to about 1.9 mm (where the porcine artery's edge tears out of the
-    jaws); it shakes, holding or not. The needle hand aims at the bite as planned at rest, so a lifted
+    second late and lifts it up to about 1.4 mm (an edge lifted about 1.9 mm tears out of the jaws
+    and stops the needle piercing; no synthetic hand goes that far, so every scripted bite still
+    pierces); it shakes, holding or not. The needle hand aims at the bite as planned at rest, so a lifted
     edge meets it tilted (about 2 deg per 0.1 mm on the interrupted stitch, measured against the wall
     where it is: an edge lifted too far costs the entry angle). Drawn from its own stream of
     ``seed``: the needle hand's draws are unchanged."""
@@ -146,7 +147,7 @@ def assisting_parameters(skill: float, seed: int) -> AssistingHandParameters:
     clumsiness = 1.0 - min(max(skill, 0.0), 1.0)
     grasps = bool(rng.random() >= 0.55 * clumsiness)
     delay = float(clumsiness * rng.uniform(0.2, 1.1))
-    eversion = float(0.12e-3 + 1.3e-3 * clumsiness * rng.uniform(0.5, 1.5))
+    eversion = float(0.12e-3 + 0.9e-3 * clumsiness * rng.uniform(0.5, 1.5))
     return AssistingHandParameters(
         grasps=grasps,
         grasp_delay=delay,
