@@ -131,7 +131,12 @@ def test_export_then_import_elsewhere_reproduces_identical_metrics(small_study, 
         streams = from_recorded(open_session(other_home / "sessions" / uid))
         direct = metrics_of(with_tissue_fields(streams, session_tissue(streams, other_home / "cache")))
         stored = after.set_index("session_id").loc[uid, list(direct)]
-        np.testing.assert_array_equal(np.asarray(stored, float), np.asarray(list(direct.values()), float))
+        # equal to rounding: a tissue-derived metric computed once with the columns freshly
+        # solved and once from them cached goes two summation orders (TissueModel.load_response):
+        # 1 ulp of stress_concentration was seen on a clean clone (0.2820929488967394 vs ...936)
+        np.testing.assert_allclose(
+            np.asarray(stored, float), np.asarray(list(direct.values()), float), rtol=1e-12, atol=0.0
+        )
     with pytest.raises(CatalogError, match="already exists; this bundle was already imported"):
         import_bundle(target, other_home, bundle)
 
