@@ -18,7 +18,7 @@ from metrics.errors import MetricsError
 if TYPE_CHECKING:
     from metrics.context import SessionContext
 
-REGISTRY_VERSION = "9"
+REGISTRY_VERSION = "10"
 """8: ``stretch`` (peak_stretch, time_above_strain_limit) is the largest edge stretch around the contact
 in the field the display draws, no longer 1 + |d|/h (issue 43). 9: the subordinate hand's metrics from
 its recorded forceps (edge_held_at_insertion, peak_grasp_force, forceps_tears added), and not measured

@@ -146,3 +146,38 @@ def forceps_tears(context: SessionContext) -> float:
     if context.streams.grasp_force is None:
         return NAN
     return float(np.sum(context.streams.events["kind"].to_numpy() == "edge_torn"))
+
+
+@metric(
+    "bimanual_dexterity",
+    advice="Move the assisting hand with the needle hand: present the edge as the needle comes.",
+    unit="1",
+    definition=(
+        "Correlation (Pearson, -1 to 1) of the two hands' speeds over the session, each path resampled "
+        "to 100 Hz and low-passed as path_length's is: 1 when they speed up and slow down together, "
+        "about 0 when one works while the other waits, not measured when a hand never moves."
+    ),
+    streams=("subordinate_displacement",),
+    better=HIGHER,
+    reference="Hofstad et al. 2013, Surg Endosc 27:854 (bimanual dexterity: the instruments' velocity "
+    "correlation)",
+    group="subordinate",
+    bounds=(-1.0, 1.0),
+)
+def bimanual_dexterity(context: SessionContext) -> float:
+    moved = context.streams.subordinate_displacement
+    if moved is None or not np.all(np.isfinite(moved)):
+        return NAN
+    needle = context.motion
+    assisting = kinematics.UniformMotion.of(context.streams.time, moved, needle.rate)
+    return speed_correlation(needle.speed, assisting.speed)
+
+
+def speed_correlation(first: np.ndarray, second: np.ndarray) -> float:
+    """Pearson correlation of two speed profiles on the same grid (NaN when either is constant)."""
+    n = min(first.size, second.size)
+    a, b = first[:n] - first[:n].mean(), second[:n] - second[:n].mean()
+    spread = math.sqrt(float(a @ a) * float(b @ b))
+    if not spread > 0:
+        return NAN
+    return float(np.clip((a @ b) / spread, -1.0, 1.0))

@@ -251,7 +251,7 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path, copy_de
     _cli(home, "score", "--study", DEMO_STUDY)
     listed = json.loads(_cli(home, "sessions", "list", "--json").stdout)
     assert all(r["metrics"] == "current" for r in listed), listed
-    assert REGISTRY_VERSION == "9"
+    assert REGISTRY_VERSION == "10"
     catalog.close()
 
 
