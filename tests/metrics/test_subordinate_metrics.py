@@ -132,7 +132,7 @@ def test_an_assisting_hand_that_never_moves_has_no_bimanual_dexterity():
     phase=st.floats(0.0, 2 * np.pi),
     scale=st.floats(0.1, 10.0),
 )
-def test_bimanual_dexterity_is_symmetric_bounded_and_blind_to_scale(first_period, second_period, phase, scale):
+def test_bimanual_dexterity_is_symmetric_bounded_and_scale_free(first_period, second_period, phase, scale):
     one = reach(first_period)
     other = reach(second_period, phase, axis=1)
     value = metrics_of(two_hands(one, other))["bimanual_dexterity"]
