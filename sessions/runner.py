@@ -223,7 +223,7 @@ def run_session(
         if view is not None and plan.clock == "realtime":
             window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid), uid)
         options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
-        if subordinate is not None and plan.clock == "simulated":  # real time: the needle hand alone
+        if subordinate is not None:
             options["subordinate"] = subordinate
         simulated = task_simulation(plan.task, device, cache_dir(home), **options)
     except BaseException:  # nothing was recorded: no row, journal or ring is left behind

@@ -520,6 +520,21 @@ def session_tissue(streams, cache_dir: Path | None = None):
     return tissue_for(task, cache_dir) if task is not None and known_task(task) else None
 
 
+def grasp_sites(spec: TaskSpec) -> np.ndarray:
+    """(k, 3) points (m) where the subordinate hand takes the wound edge for the task's bites: the rim
+    beside each entry (:func:`sim.devices.assisting.edge_grasp`); none on a task without a wound."""
+    from sim.devices.assisting import edge_grasp
+
+    placement = spec.placement or {}
+    if placement.get("wound_point") is None:
+        return np.zeros((0, 3))
+    sites = [
+        edge_grasp(entry, normal, placement["wound_point"], placement["wound_normal"])[0]
+        for entry, normal, _ in spec.bites()
+    ]
+    return np.asarray(sites, dtype=np.float64)
+
+
 def task_simulation(task: str, device, cache_dir: Path | None = None, **options):
     """A :class:`sim.runtime.Simulation` of ``task`` driven by ``device``: the task's tissue, the
     curved needle, its preset's needle forces and its regions' own (a calcified plaque pierces at
@@ -528,6 +543,8 @@ def task_simulation(task: str, device, cache_dir: Path | None = None, **options)
     from sim.runtime import Simulation
 
     tissue = tissue_for(task, cache_dir)
+    if options.get("subordinate") is not None and "grasp_sites" not in options:
+        options["grasp_sites"] = grasp_sites(task_spec(task))
     return Simulation(
         tissue,
         Needle.curved(),

@@ -417,10 +417,14 @@ class TissueModel:
         """A per-tick handle for nodes held exactly where they are put (a grasp), answering the
         displacement of ``at_nodes`` (default: the contact candidates) (:class:`PrescribedHandle`)."""
         ids = checks.contact_ids(nodes, self.mesh.n_nodes)
-        columns, block, rows = self._contact_columns(ids)
-        if at_nodes is not None:
-            rows = checks.node_ids(at_nodes, self.mesh.n_nodes, "at_nodes")
-            columns = self._nodes_columns(ids, node_dofs(rows))
+        if at_nodes is None:
+            columns, block, rows = self._contact_columns(ids)
+            return PrescribedHandle(ids, block, columns, rows)
+        rows = checks.node_ids(at_nodes, self.mesh.n_nodes, "at_nodes")
+        block = self._nodes_columns(ids, node_dofs(ids))
+        # the held nodes' own rows when asked for them alone: the block (no second gather)
+        same = rows.size == ids.size and np.array_equal(rows, ids)
+        columns = block if same else self._nodes_columns(ids, node_dofs(rows))
         return PrescribedHandle(ids, block, columns, rows)
 
     def field_contact(self, nodes: ArrayLike) -> ContactHandle:

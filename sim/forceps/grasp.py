@@ -31,6 +31,8 @@ from sim.fem.condensation import node_dofs
 from sim.forceps.jaws import Forceps, closest_surface_point, jaw_nodes
 
 FORCEPS_EVENT_KINDS = ("grasp", "release_grasp", "edge_torn")
+PREFETCH_MARGIN = 0.5e-3
+"""A surface cell's size (m) on the arteries (0.3-0.5 mm): the grasped triangle's corners lie within it."""
 
 
 @dataclass(frozen=True)
@@ -90,8 +92,17 @@ class ForcepsInteraction:
         # per unit displacement of the hand (every grasped node moved alike, so three patterns):
         self._unit_forces = np.zeros((0, 3))  # (3k, 3) the grasp's nodal forces, G_PP^-1 T
         self._unit_surface = np.zeros((0, 3))  # (3S, 3) the free surface's displacement, G_SP G_PP^-1 T
+        self._grasped: tuple | None = None  # (nodes, unit forces) of the grasp held
+        self._unit_surface_of: tuple | None = None  # the grasp _unit_surface belongs to
         self._shown = False  # whether the collision mesh is away from rest
         self._against_key, self._against_matrix = b"", np.zeros((0, 0))  # see _against
+
+    @property
+    def prefetch_radius(self) -> float:
+        """How far from the open jaws (m) a node may be that closing them now would hold: the reach,
+        half the jaws' width and a cell's margin for the triangle's corners (the column prefetcher
+        solves these ahead, so a grasp waits for no solve)."""
+        return self.forceps.grasp_reach + 0.5 * self.forceps.jaw_width + PREFETCH_MARGIN
 
     @property
     def grasping(self) -> bool:
@@ -116,10 +127,12 @@ class ForcepsInteraction:
         nodes = jaw_nodes(self.collision, triangle, point, self.forceps, self._free)
         if nodes.size == 0:
             return  # only clamped tissue under the jaws
-        self.nodes, self.triangle, self._anchor = nodes, triangle, self.jaw_point.copy()
-        self._handle = self.model.prescribed(nodes, self._moving)
-        self._unit_forces = self._handle.forces_of(np.tile(np.eye(3), (nodes.size, 1)))
-        self._unit_surface = self._handle.columns @ self._unit_forces
+        # the FEM step needs only the grasped nodes' own block (3k x 3k): the free surface's answer
+        # (3S x 3k, milliseconds to gather) is left to the graphics layer, which moves the mesh
+        handle = self.model.prescribed(nodes, nodes)
+        self._unit_forces = handle.forces_of(np.tile(np.eye(3), (nodes.size, 1)))
+        self._grasped = (nodes, self._unit_forces)
+        self.nodes, self.triangle, self._anchor, self._handle = nodes, triangle, self.jaw_point.copy(), handle
         self._pending.append(
             ForcepsEvent(
                 "grasp",
@@ -131,7 +144,7 @@ class ForcepsInteraction:
         )
 
     def _let_go(self) -> None:
-        self.nodes, self._handle, self._displacement = _NOTHING, None, np.zeros(3)
+        self.nodes, self._handle, self._displacement, self._grasped = _NOTHING, None, np.zeros(3), None
         self._against_key = b""
 
     def fem_step(
@@ -177,9 +190,14 @@ class ForcepsInteraction:
         FEM step (G[:, P] G_PP^-1 a), or None when nothing is held. The rest of the field, the needle's
         loads on the tissue the grasp holds (G[:, N] f_N - G[:, P] G_PP^-1 G_PN f_N), is the needle's
         own deformation, which the collision mesh does not follow (PAPER.md section 7)."""
-        if not self.grasping or self._handle is None:
+        grasped, displacement = self._grasped, self._displacement  # one grasp's, read once (two threads)
+        if grasped is None or not self.grasping:
             return None
-        return self._handle.surface_nodes, (self._unit_surface @ self._displacement).reshape(-1, 3)
+        if self._unit_surface_of is not grasped:  # first frame of this grasp: G_SP G_PP^-1 T
+            nodes, unit_forces = grasped
+            self._unit_surface = self.model.columns_at(nodes, node_dofs(self._moving)) @ unit_forces
+            self._unit_surface_of = grasped
+        return self._moving, (self._unit_surface @ displacement).reshape(-1, 3)
 
     def deform_collision(self) -> None:
         """Move the collision mesh to where the grasp holds the tissue (graphics rate; back to rest

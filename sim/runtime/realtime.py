@@ -94,8 +94,11 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         + SharedGraphics.doubles()
         + SharedFem.doubles()
         + SharedTelemetry.doubles(display_capacity)
+        + (0 if simulation.subordinate is None else SharedHolder.doubles())
     )
     simulation.holder = SharedHolder(arena)
+    if simulation.subordinate is not None:  # the second hand's device is read in the haptic process too
+        simulation.subordinate_holder = SharedHolder(arena)
     simulation.forces = SharedForceHistory(arena)
     shared_log = SharedHapticLog(arena, capacity)
     simulation.haptic_log = shared_log
@@ -323,6 +326,8 @@ def _haptic_process(
     if simulation.on_haptic_start is not None:
         simulation.on_haptic_start()
     simulation.device.read(0.0)  # warm caches and lazy imports before the first deadline
+    if simulation.subordinate is not None:
+        simulation.subordinate.read(0.0)
     simulation.forces.at(0.0)
     telemetry, force_path_telemetry = telemetries
     settings = simulation.settings

@@ -85,6 +85,8 @@ FEM_LAYOUT = SlotLayout(
         ("local_stress", 1),
         ("stretch", 1),
         ("tip_velocity", 3),
+        ("grasp_force", 3),
+        ("grasp_displacement", 3),
     )
 )
 """The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""
@@ -360,19 +362,20 @@ class ControlBlock:
 
 class SharedGraphics:
     """The latest graphics snapshot for the display process: the needle, the FEM step's nodal loads on
-    the tissue and the holder sample's time (seqlock).
+    the tissue, the forceps' jaws and the holder sample's time (seqlock).
 
-    Layout: [seq, time, n_vertices, vertices (64 x 3), n_loaded, nodes (192), forces (192 x 3),
-    soft share, holder time].
+    Layout: [seq, time, n_vertices, vertices (64 x 3), n_loaded, nodes (256), forces (256 x 3),
+    jaw point (3), jaws closed (nan: no forceps), soft share, holder time].
     """
 
-    MAX_VERTICES, MAX_CONTACT = 64, 192  # a needle through a wall: two force kernels of up to ~90 nodes
+    MAX_VERTICES = 64
+    MAX_CONTACT = 256  # a needle through a wall (two force kernels of up to ~90 nodes) and a grasp (~50)
 
     @classmethod
     def doubles(cls) -> int:
         """Its size in the arena: a header, the needle's vertices, the loaded nodes and their forces,
-        the soft share and the holder sample's time."""
-        return 3 + 3 * cls.MAX_VERTICES + 1 + cls.MAX_CONTACT * 4 + 2
+        the jaws, the soft share and the holder sample's time."""
+        return 3 + 3 * cls.MAX_VERTICES + 1 + cls.MAX_CONTACT * 4 + 4 + 2
 
     def __init__(self, arena: Arena) -> None:
         self._slot = arena.take(self.doubles())
@@ -393,6 +396,9 @@ class SharedGraphics:
             slot[base + 1 : base + 1 + count] = loads[0][:count]
             start = base + 1 + self.MAX_CONTACT
             slot[start : start + 3 * count] = loads[1][:count].ravel()
+        jaws = snapshot.jaws
+        slot[-6:-3] = math.nan if jaws is None else jaws[0]
+        slot[-3] = math.nan if jaws is None else float(jaws[1])
         slot[-2] = math.nan if loads is None else loads[2]
         slot[-1] = snapshot.holder_time
         slot[0] += 1
@@ -410,7 +416,8 @@ class SharedGraphics:
             nodes = copy[base + 1 : base + 1 + count].astype(np.int64)
             start = base + 1 + self.MAX_CONTACT
             loads = (nodes, copy[start : start + 3 * count].reshape(count, 3), float(copy[-2]))
-        return GraphicsSnapshot(float(copy[1]), vertices, "", None, None, float(copy[-1]), loads)
+        jaws = None if math.isnan(copy[-3]) else (copy[-6:-3], bool(copy[-3]))
+        return GraphicsSnapshot(float(copy[1]), vertices, "", None, None, float(copy[-1]), loads, jaws)
 
 
 class SharedFem:
@@ -447,6 +454,10 @@ class SharedFem:
         slot[at.local_stress] = snapshot.local_stress
         slot[at.stretch] = snapshot.stretch
         slot[at.tip_velocity] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
+        slot[at.grasp_force] = math.nan if snapshot.grasp_force is None else snapshot.grasp_force
+        slot[at.grasp_displacement] = (
+            math.nan if snapshot.grasp_displacement is None else snapshot.grasp_displacement
+        )
         slot[0] += 1
 
     def get(self):
@@ -475,4 +486,6 @@ class SharedFem:
             float(copy[at.stretch]),
             math.nan,
             copy[at.tip_velocity],
+            None if math.isnan(copy[at.grasp_force][0]) else copy[at.grasp_force],
+            None if math.isnan(copy[at.grasp_displacement][0]) else copy[at.grasp_displacement],
         )

@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from sim.devices.base import GRIP_BUTTON, STOP_BUTTON, Device, DeviceLostError
 from sim.errors import VascsimError
@@ -200,6 +200,21 @@ class RunResult:
         return self.stop_reason == "completed"
 
 
+def with_grasp(
+    loads: tuple[NDArray[np.int64], NDArray[np.float64], float] | None,
+    nodes: NDArray[np.int64],
+    forces: NDArray[np.float64],
+) -> tuple[NDArray[np.int64], NDArray[np.float64], float]:
+    """The needle's nodal ``loads`` (or none) and the grasp's (``nodes``, ``forces`` (k, 3) N) as one
+    set of loads on distinct nodes (a node both hold carries the sum)."""
+    if loads is None:
+        return nodes, forces, math.nan
+    every, at = np.unique(np.concatenate([loads[0], nodes]), return_inverse=True)
+    total = np.zeros((every.size, 3))
+    np.add.at(total, at, np.concatenate([loads[1], forces]))
+    return every, total, loads[2]
+
+
 def _on_demand(tissue: Tissue) -> bool:
     """Whether some contact could need columns solved on demand (no precomputation, or free
     surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through;
@@ -231,6 +246,7 @@ class Simulation:
         region_forces: Mapping[int, NeedleForces] | None = None,
         subordinate: Device | None = None,
         forceps: Forceps | None = None,
+        grasp_sites: ArrayLike | None = None,
     ) -> None:
         self.settings = settings or RuntimeSettings()
         self.device = device
@@ -245,6 +261,10 @@ class Simulation:
         )
         self.subordinate_holder = Mailbox()
         self.subordinate_sample = None  # the subordinate device's latest reading (haptic rate)
+        self.grasp_sites = np.zeros((0, 3)) if grasp_sites is None else np.asarray(grasp_sites, float)
+        """Where the task expects the forceps to take the edge (m, (k, 3)): a real-time run solves the
+        columns of the nodes the jaws would hold there before its clock starts, and those of the nodes
+        near the open jaws as they come (the graphics layer), so a grasp waits for no solve."""
         self.safety = ForceSafety(device.limits, self.settings.safety, tick=self.settings.period("haptic"))
         self.holder = Mailbox()
         self.fem = Mailbox()
@@ -271,10 +291,11 @@ class Simulation:
         self.error_layer: str | None = None
         self._previous_frame: GraphicsSnapshot | None = None
         self._safety_seen = 0
-        self.contact_latencies: dict[str, list[float]] = {"contact_start": [], "exit": []}
+        self.contact_latencies: dict[str, list[float]] = {"contact_start": [], "exit": [], "grasp": []}
         """Wall seconds from finding a contact change to the end of the FEM step that gave the exact
         forces for its triangle: a first touch, found by the FEM step's own continuous collision test
-        (from that step's start); the exit face, found by a graphics frame (from its posting)."""
+        (from that step's start); the exit face, found by a graphics frame (from its posting); a grasp,
+        from the FEM step reading the closed jaws to the grasp's forces."""
         self._tissue = tissue
         tissue.warm_contact_caches()
         if self.interaction.forces.load == "kernel":
@@ -388,11 +409,15 @@ class Simulation:
         forceps, hand = self.forceps, self.subordinate_holder.get()
         if forceps is None or hand is None:
             return ()
+        was_grasping, began = forceps.grasping, wallclock.perf_counter()
         forceps.hold(hand.time, hand.pose.position, hand.grip)
         grasp = forceps.fem_step(now, step.contact_nodes, step.reaction_forces)
+        if forceps.grasping and not was_grasping:
+            self.contact_latencies["grasp"].append(wallclock.perf_counter() - began)
         for event in grasp.events:
             self._emit(event)
-        return grasp.force, grasp.displacement
+        held = (grasp.nodes.copy(), grasp.nodal_forces.copy()) if grasp.nodes.size else None
+        return grasp.force, grasp.displacement, held, (forceps.jaw_point.copy(), forceps.jaw_closed)
 
     def graphics_step(self, now: float) -> None:
         fem = self.fem.get()
@@ -400,6 +425,8 @@ class Simulation:
             return
         if self._prefetcher is not None:  # first, so the FEM thread applying the query's result
             self._prefetch_ahead_of(fem)  # does not share the interpreter with this work
+            if self.forceps is not None and not self.forceps.jaw_closed:  # what the jaws may take next
+                self._prefetcher.near(self.forceps.jaw_point, self.forceps.prefetch_radius)
         if self.forceps is not None:  # the needle meets the tissue where the other hand holds it
             self.forceps.deform_collision()
         posted = wallclock.perf_counter()
@@ -409,8 +436,12 @@ class Simulation:
         loads = None
         if fem.state != "free" and len(fem.contact_nodes):
             loads = (fem.contact_nodes, fem.reaction_forces, fem.soft_share)
+        if fem.grasp_loads is not None:  # the display draws the wall where both hands put it
+            loads = with_grasp(loads, *fem.grasp_loads)
         self.graphics.put(
-            GraphicsSnapshot(now, fem.needle_vertices, fem.state, hits, fem.contact, fem.holder_time, loads)
+            GraphicsSnapshot(
+                now, fem.needle_vertices, fem.state, hits, fem.contact, fem.holder_time, loads, fem.jaws
+            )
         )
         if self.on_graphics is not None:
             self.on_graphics(now, fem)
@@ -500,6 +531,20 @@ class Simulation:
         if model.precomputation is not None:
             model.cast_depths(model.contact_nodes)
 
+    def _solve_grasp_sites(self) -> None:
+        """Before the clock: the whole K0^-1 columns of the surface nodes the jaws could hold at each
+        of :attr:`grasp_sites` (the grasp's handle reads their free-surface rows)."""
+        if self.forceps is None or not len(self.grasp_sites):
+            return
+        mesh = self._tissue.mesh
+        surface = mesh.surface_nodes
+        reach = self.forceps.prefetch_radius
+        for site in self.grasp_sites.reshape(-1, 3):
+            near = surface[np.linalg.norm(mesh.points[surface] - site, axis=1) <= reach]
+            near = np.setdiff1d(near, self.forceps.model.clamped_nodes)
+            if near.size:
+                self.forceps.model.prefetch(near, full=True)
+
     def _start_prefetching(self, whole_columns: bool = False) -> None:
         """Start solving on-demand columns ahead of contact, if some contact could need them (with
         ``whole_columns``, as the live local stress in real time does: whole columns of precomputed
@@ -573,18 +618,15 @@ class Simulation:
         return self.run_result(min(now, duration), wallclock.perf_counter() - start_wall)
 
     def run_realtime(self, duration: float, pin_cpus: bool = True) -> RunResult:
-        """Wall-clock time: the haptic layer in its own process, the others in threads."""
+        """Wall-clock time: the haptic layer in its own process (both hands' devices), the others in
+        threads."""
         from sim.runtime.realtime import process_prepared, run_realtime
 
-        if self.subordinate is not None:
-            raise RuntimeSettingsError(
-                "the subordinate hand runs in simulated time only so far: drop the second device "
-                "for a real-time run"
-            )
         self.interaction.live_stress = self.settings.live_stress_in_real_time
         with process_prepared():  # before the column worker is forked: it inherits the settings
             self._cast_candidate_depths()
             self._start_prefetching(whole_columns=self.interaction.live_stress)
+            self._solve_grasp_sites()
             try:
                 return run_realtime(self, duration, pin_cpus)
             finally:

@@ -42,6 +42,8 @@ class FemSnapshot(NamedTuple):
     tip_velocity: NDArray[np.float64] | None = None  # m/s, the tip's between the last two FEM steps
     grasp_force: NDArray[np.float64] | None = None  # N, the subordinate hand's forceps on the tissue
     grasp_displacement: NDArray[np.float64] | None = None  # m, of the tissue the forceps hold
+    grasp_loads: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # grasped nodes, forces (k, 3) N
+    jaws: tuple[NDArray[np.float64], bool] | None = None  # the forceps' jaw point (m) and whether closed
 
 
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
@@ -55,8 +57,10 @@ class GraphicsSnapshot(NamedTuple):
     contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # driven nodes, intended (m)
     holder_time: float = math.nan  # s, the device sample whose needle the frame shows (motion to photon)
     loads: tuple[NDArray[np.int64], NDArray[np.float64], float] | None = None
-    """The FEM step's nodal loads on the tissue: node ids, forces (k, 3) N, and the biphase soft share
-    (nan: one phase); the display shows their displacement field with one solve."""
+    """The FEM step's nodal loads on the tissue (the needle's and the forceps' grasp): node ids, forces
+    (k, 3) N, and the biphase soft share (nan: one phase); the display shows their displacement field
+    with one solve."""
+    jaws: tuple[NDArray[np.float64], bool] | None = None  # the forceps' jaw point (m), closed; None: one hand
 
 
 @dataclass(frozen=True)

@@ -15,16 +15,20 @@ from sim.devices.assisting import AssistingHandParameters
 from sim.devices.base import DeviceError
 
 
-@pytest.fixture(scope="module")
-def two_handed(tmp_path_factory):
-    """An expert's scripted interrupted stitch with both hands, recorded and scored (SQLite)."""
+@pytest.fixture(scope="module", params=["simulated", "realtime"])
+def two_handed(request, tmp_path_factory):
+    """An expert's scripted interrupted stitch with both hands, recorded and scored (SQLite), in
+    simulated time and on the real-time clock (both devices read in the haptic process)."""
     home = tmp_path_factory.mktemp("home")
     catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
     with catalog.session() as orm:
         study = catalog.study(orm, "S", create=True)
         catalog.add_participant(orm, study, "E1", level="expert")
     uid = run_session(
-        catalog, home, SessionPlan("S", "E1", "interrupted-stitch", None), scripted_hands(0.95, 3)
+        catalog,
+        home,
+        SessionPlan("S", "E1", "interrupted-stitch", None, clock=request.param),
+        scripted_hands(0.95, 3),
     )
     with catalog.session() as orm:
         directory = catalog.recorded_session(orm, uid).directory
@@ -86,3 +90,27 @@ def test_the_synthetic_assisting_hand_follows_skill():
     assert max(p.tremor_amplitude for p in experts) < min(p.tremor_amplitude for p in trainees)
     with pytest.raises(DeviceError, match="eversion"):
         AssistingHandParameters(eversion=-1e-3)
+
+
+def test_a_real_time_grasp_waits_for_no_column_solve():
+    """The grasp's nodes are solved before the clock (the task's grasp sites) or ahead of the jaws (the
+    prefetcher), so the FEM step that closes the jaws solves nothing on the spot; the display gets the
+    jaws and the grasp's loads."""
+    from sessions.tasks import task_simulation
+
+    plan = SessionPlan("S", "E1", "interrupted-stitch", 1)
+    device, duration, subordinate = open_device("scripted", plan, None, scripted_hands(0.95, 5))
+    simulation = task_simulation("interrupted-stitch", device, subordinate=subordinate)
+    assert len(simulation.grasp_sites) == 1
+    seen = []  # each graphics frame: the FEM step's grasp, and what the display process reads
+    simulation.on_graphics = lambda now, fem: seen.append((fem.grasp_loads, simulation.graphics.get()))
+    result = simulation.run_realtime(duration)
+    assert result.completed
+    kinds = [event.kind for event in result.events]
+    assert kinds.count("grasp") == 1 and len(simulation.contact_latencies["grasp"]) == 1
+    holding = [(grasp, shown) for grasp, shown in seen if grasp is not None]
+    assert holding and all(shown.jaws is not None and shown.jaws[1] for _, shown in holding)
+    for grasp, shown in holding:  # the display draws the grasp's loads (with the needle's, if any)
+        assert set(grasp[0].tolist()) <= set(shown.loads[0].tolist())
+    held = set(np.concatenate([grasp[0] for grasp, _ in holding]).tolist())
+    assert not held & set(simulation.forceps.model.spot_solved)

@@ -100,6 +100,8 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
             local_stress=5e5,
             stretch=1.1,
             tip_velocity=np.array([1e-3, 2e-3, 3e-3]),
+            grasp_force=np.array([0.0, 0.2, 0.1]),
+            grasp_displacement=np.array([0.0, 0.0, 3e-4]),
         )
     )
     fem._owner = -1  # read as the haptic process does, from the slot
@@ -111,4 +113,43 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
     assert np.array_equal(seen.needle_force, [0.1, 0.2, 0.3])
     assert np.array_equal(seen.needle_vertices, [[7, 8, 9]]) and np.array_equal(seen.tip_tangent, [0, 0, 1])
     assert np.array_equal(seen.tip_velocity, [1e-3, 2e-3, 3e-3])
-    assert FEM_LAYOUT.size == SharedFem.doubles() == 22
+    assert np.array_equal(seen.grasp_force, [0, 0.2, 0.1])
+    assert np.array_equal(seen.grasp_displacement, [0, 0, 3e-4])
+    assert FEM_LAYOUT.size == SharedFem.doubles() == 28
+
+
+def test_a_one_handed_snapshot_reads_back_with_no_grasp():
+    from sim.runtime.shared import SharedFem
+    from sim.runtime.snapshots import FemSnapshot
+
+    fem = SharedFem(Arena(SharedFem.doubles()))
+    fem.put(
+        FemSnapshot(0.1, np.zeros(3), np.zeros((1, 3)), "free", np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    )
+    fem._owner = -1
+    seen = fem.get()
+    assert seen.grasp_force is None and seen.grasp_displacement is None
+
+
+def test_the_display_gets_both_hands_loads_and_the_jaws():
+    """The graphics slot carries the forceps' jaws and the needle's and the grasp's loads as one set
+    (a node both load carries the sum), which the display process solves for the wall it draws."""
+    from sim.runtime.shared import SharedGraphics
+    from sim.runtime.simulation import with_grasp
+    from sim.runtime.snapshots import GraphicsSnapshot
+
+    graphics = SharedGraphics(Arena(SharedGraphics.doubles()))
+    needle = (np.array([3, 7]), np.array([[0.0, 0.0, -0.1], [0.0, 0.0, -0.2]]), 0.5)
+    loads = with_grasp(needle, np.array([7, 9]), np.array([[0.0, 0.05, 0.0], [0.0, 0.05, 0.0]]))
+    assert loads[0].tolist() == [3, 7, 9] and loads[2] == 0.5
+    np.testing.assert_array_equal(loads[1], [[0, 0, -0.1], [0, 0.05, -0.2], [0, 0.05, 0]])
+    jaws = (np.array([1e-3, 2e-3, 3e-3]), True)
+    graphics.put(GraphicsSnapshot(0.2, np.zeros((4, 3)), "contact", None, None, 0.19, loads, jaws))
+    seen = graphics.get()
+    assert seen.loads[0].tolist() == [3, 7, 9] and np.array_equal(seen.loads[1], loads[1])
+    assert np.array_equal(seen.jaws[0], jaws[0]) and seen.jaws[1] is True
+    graphics.put(GraphicsSnapshot(0.3, np.zeros((4, 3)), "free", None, None, 0.29, None, None))
+    seen = graphics.get()
+    assert seen.jaws is None and seen.loads is None
+    alone = with_grasp(None, np.array([9]), np.array([[0.0, 0.05, 0.0]]))
+    assert alone[0].tolist() == [9] and np.isnan(alone[2])
