@@ -1,6 +1,6 @@
 """The subordinate hand's figures of issue 46: which grasp rule converges, and what both hands cost.
 
-Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|cost|all]
+Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|cost|realtime|all]
 
 - convergence: the force to lift a 1.5 mm wall patch's wound edge 0.5 mm with the forceps (the
   porcine-artery preset's soft phase, 300 kPa), by the jaws rule (every surface node within the
@@ -9,7 +9,10 @@ Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|c
 - cost: on the interrupted stitch's 10k-node artery, a scripted expert's whole stitch in simulated
   time with both hands against the needle hand alone: the FEM step's median and p99 compute (the
   budget: <= 200 us), the haptic step's, and the wall time of building a grasp (the grasped nodes'
-  K0^-1 columns solved, then the three unit patterns), median over ``--repeats``.
+  K0^-1 columns solved, then the three unit patterns), median over ``--repeats``;
+- realtime: the same stitch on the real-time clock, ``--repeats`` runs: the grasp's contact change
+  (the FEM step reading the closed jaws to the grasp's forces; the task's grasp sites solved before
+  the clock), and the FEM and haptic steps' compute with both hands.
 """
 
 from __future__ import annotations
@@ -109,15 +112,48 @@ def cost(repeats: int) -> None:
     print(f"building a grasp ({hand.nodes.size} nodes, columns from cold): median {built:.0f} ms")
 
 
+def realtime(repeats: int) -> None:
+    """A scripted expert's two-handed stitch on the real-time clock, ``repeats`` seeds: the grasp's
+    contact change (the FEM step reading the closed jaws to the grasp's forces), warm (the task's grasp
+    sites solved before the clock, the prefetcher ahead of the jaws) and the layers' compute."""
+    from sessions.runner import SessionPlan, open_device
+    from sessions.synthetic import scripted_hands
+    from sessions.tasks import task_simulation
+
+    task = "interrupted-stitch"
+    grasps, fem50, fem99, haptic50 = [], [], [], []
+    for seed in range(repeats):
+        plan = SessionPlan("benchmark", "E", task, 1)
+        device, duration, subordinate = open_device("scripted", plan, None, scripted_hands(0.95, seed))
+        simulation = task_simulation(task, device, subordinate=subordinate)
+        result = simulation.run_realtime(duration)
+        grasps += simulation.contact_latencies["grasp"]
+        fem50.append(result.telemetry["fem"].compute_p50)
+        fem99.append(result.telemetry["fem"].compute_p99)
+        haptic50.append(result.telemetry["haptic"].compute_p50)
+    latency = np.array(grasps) * 1e3
+    print(f"{task}, real time, both hands, {repeats} runs, {latency.size} grasps:")
+    print(
+        f"  grasp contact change: median {np.median(latency):.2f} ms, "
+        f"p99 {np.percentile(latency, 99):.2f} ms, max {latency.max():.2f} ms"
+    )
+    print(
+        f"  FEM step compute: p50 {np.median(fem50) * 1e6:.0f} us, p99 {np.median(fem99) * 1e6:.0f} us "
+        f"(medians over runs); haptic step p50 {np.median(haptic50) * 1e6:.0f} us"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--part", choices=("convergence", "cost", "all"), default="all")
+    parser.add_argument("--part", choices=("convergence", "cost", "realtime", "all"), default="all")
     args = parser.parse_args()
     if args.part in ("convergence", "all"):
         convergence()
     if args.part in ("cost", "all"):
         cost(args.repeats)
+    if args.part in ("realtime", "all"):
+        realtime(args.repeats)
 
 
 if __name__ == "__main__":
