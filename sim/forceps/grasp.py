@@ -93,6 +93,7 @@ class ForcepsInteraction:
         self._unit_forces = np.zeros((0, 3))  # (3k, 3) the grasp's nodal forces, G_PP^-1 T
         self._unit_surface = np.zeros((0, 3))  # (3S, 3) the free surface's displacement, G_SP G_PP^-1 T
         self._grasped: tuple | None = None  # (nodes, unit forces) of the grasp held
+        self._ready: tuple | None = None  # (nodes, handle, unit forces) prepared ahead (see prepare)
         self._unit_surface_of: tuple | None = None  # the grasp _unit_surface belongs to
         self._shown = False  # whether the collision mesh is away from rest
         self._against_key, self._against_matrix = b"", np.zeros((0, 0))  # see _against
@@ -119,6 +120,45 @@ class ForcepsInteraction:
             self._let_go()
             self._pending.append(ForcepsEvent("release_grasp", time, self.triangle, "jaws opened"))
 
+    def rehearse(self, point: NDArray[np.float64]) -> None:
+        """Close and open the jaws at ``point`` with nothing recorded (before a real-time clock starts:
+        the grasp's code paths and the linear-algebra routines it calls are warm for the first real
+        one); the hand's state is as before."""
+        if self.jaw_closed or self.grasping:
+            return
+        kept = self.jaw_point
+        self.hold(0.0, point, True)
+        if self.grasping:
+            self._against(self.nodes[:1])  # the needle's coupling, too
+            self.surface_displacement()
+        self.hold(0.0, point, False)
+        self.jaw_point, self._pending = kept, []
+
+    def _grasp_of(self, nodes: NDArray[np.int64]) -> tuple:
+        """(handle, unit forces (3k, 3)) holding ``nodes``. Only the grasped nodes' own block (3k x 3k):
+        the free surface's answer (3S x 3k, milliseconds to gather) is left to the graphics layer,
+        which moves the collision mesh."""
+        handle = self.model.prescribed(nodes, nodes)
+        return handle, handle.forces_of(np.tile(np.eye(3), (nodes.size, 1)))
+
+    def prepare(self) -> None:
+        """Graphics layer, jaws open: build the grasp that closing them where they are would make, so
+        the FEM step that closes them only checks that the nodes under the jaws are still these
+        (exact: the same nodes give the same grasp) and reuses it."""
+        if self.jaw_closed:
+            return
+        point = self.jaw_point
+        found = closest_surface_point(self.collision, point, self.forceps.grasp_reach)
+        if found is None:
+            return
+        nodes = jaw_nodes(self.collision, found[0], found[1], self.forceps, self._free)
+        ready = self._ready
+        if not nodes.size or (ready is not None and np.array_equal(ready[0], nodes)):
+            return
+        if any(self.model.needs_solve(int(node), full=True) for node in nodes):
+            return  # not solved yet (the prefetcher is on it): never a solve in the graphics layer
+        self._ready = (nodes, *self._grasp_of(nodes))
+
     def _close(self, time: float) -> None:
         found = closest_surface_point(self.collision, self.jaw_point, self.forceps.grasp_reach)
         if found is None:
@@ -127,10 +167,11 @@ class ForcepsInteraction:
         nodes = jaw_nodes(self.collision, triangle, point, self.forceps, self._free)
         if nodes.size == 0:
             return  # only clamped tissue under the jaws
-        # the FEM step needs only the grasped nodes' own block (3k x 3k): the free surface's answer
-        # (3S x 3k, milliseconds to gather) is left to the graphics layer, which moves the mesh
-        handle = self.model.prescribed(nodes, nodes)
-        self._unit_forces = handle.forces_of(np.tile(np.eye(3), (nodes.size, 1)))
+        ready = self._ready  # built by the graphics layer for the nodes under the open jaws, if these
+        if ready is not None and np.array_equal(ready[0], nodes):
+            handle, self._unit_forces = ready[1], ready[2]
+        else:
+            handle, self._unit_forces = self._grasp_of(nodes)
         self._grasped = (nodes, self._unit_forces)
         self.nodes, self.triangle, self._anchor, self._handle = nodes, triangle, self.jaw_point.copy(), handle
         self._pending.append(

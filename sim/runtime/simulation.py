@@ -427,6 +427,7 @@ class Simulation:
             self._prefetch_ahead_of(fem)  # does not share the interpreter with this work
             if self.forceps is not None and not self.forceps.jaw_closed:  # what the jaws may take next
                 self._prefetcher.near(self.forceps.jaw_point, self.forceps.prefetch_radius)
+                self.forceps.prepare()
         if self.forceps is not None:  # the needle meets the tissue where the other hand holds it
             self.forceps.deform_collision()
         posted = wallclock.perf_counter()
@@ -544,6 +545,7 @@ class Simulation:
             near = np.setdiff1d(near, self.forceps.model.clamped_nodes)
             if near.size:
                 self.forceps.model.prefetch(near, full=True)
+                self.forceps.rehearse(site)
 
     def _start_prefetching(self, whole_columns: bool = False) -> None:
         """Start solving on-demand columns ahead of contact, if some contact could need them (with

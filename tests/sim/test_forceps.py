@@ -230,3 +230,53 @@ def test_a_precomputed_model_grasps_as_the_on_demand_one(patch):
         )
         < 1e-9
     )
+
+
+def test_a_grasp_prepared_ahead_is_the_grasp_made_on_the_spot(patch):
+    """The graphics layer prepares the grasp under the open jaws (only from columns already solved);
+    closing them reuses it when the nodes under the jaws are the same, with forces and field equal to
+    a grasp built on the spot, and builds afresh when the hand has moved on to other nodes."""
+    jaw = np.array([0.012, 0.005, 0.00075])
+    lift = np.array([0.0, 0.2e-3, 0.5e-3])
+    fresh = ForcepsInteraction(patch, CollisionMesh(patch.mesh))
+    fresh.hold(0.0, jaw, True)
+    fresh.hold(0.01, jaw + lift, True)
+    expected = fresh.fem_step(0.01)
+    nodes = fresh.nodes.copy()
+    fresh.hold(0.02, jaw, False)
+    ahead = ForcepsInteraction(patch, CollisionMesh(patch.mesh))
+    ahead.hold(0.0, jaw, False)
+    ahead.prepare()
+    assert ahead._ready is not None and np.array_equal(ahead._ready[0], nodes)
+    prepared = ahead._ready[1]
+    ahead.hold(0.0, jaw, True)
+    assert ahead._handle is prepared  # reused, not rebuilt
+    ahead.hold(0.01, jaw + lift, True)
+    step = ahead.fem_step(0.01)
+    np.testing.assert_array_equal(step.nodal_forces, expected.nodal_forces)
+    np.testing.assert_array_equal(ahead.surface_displacement()[1], fresh_field(patch, jaw, lift))
+    ahead.hold(0.02, jaw, False)
+    elsewhere = jaw + np.array([-3e-3, 0.0, 0.0])  # the hand moved along the edge: other nodes
+    ahead.hold(0.03, elsewhere, True)
+    assert ahead._handle is not prepared and not np.array_equal(ahead.nodes, nodes)
+
+
+def fresh_field(patch, jaw, lift):
+    hand = ForcepsInteraction(patch, CollisionMesh(patch.mesh))
+    hand.hold(0.0, jaw, True)
+    hand.hold(0.01, jaw + lift, True)
+    hand.fem_step(0.01)
+    return hand.surface_displacement()[1]
+
+
+def test_nothing_is_prepared_from_columns_not_yet_solved(patch):
+    """The graphics layer never solves: with the nodes under the jaws not in the column cache, it
+    prepares nothing and the FEM step builds the grasp when the jaws close."""
+    model = TissueModel(patch.mesh, Material(20e3, 0.45), patch.clamped_nodes)  # its cache empty
+    jaw = np.array([0.012, 0.005, 0.00075])
+    hand = ForcepsInteraction(model, CollisionMesh(patch.mesh))
+    hand.hold(0.0, jaw, False)
+    hand.prepare()
+    assert hand._ready is None and hand.model.cached_columns == 0
+    hand.hold(0.01, jaw, True)
+    assert hand.grasping and hand.model.spot_solved
