@@ -31,6 +31,7 @@ from sessions.models import (
     StitchResult,
     StreamFile,
 )
+from sessions.running.hands import instruments, open_forceps_device
 from sessions.running.live import LiveView
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
 from sessions.store import CatalogStore
@@ -52,6 +53,8 @@ class SessionPlan:
     phase: str = "practice"
     device: str = "scripted"
     clock: str = "simulated"
+    sub_device: str | None = None  # the subordinate hand's forceps (sessions.running.hands), None: one hand
+    handedness: str = "right"  # left: the instruments swap devices, and hand-held devices are mirrored
 
 
 def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool) -> dict:
@@ -64,6 +67,7 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
         "synthetic": synthetic,
         "task": plan.task,
         "device": plan.device,
+        "sub_device": plan.sub_device or "none",
         "clock": plan.clock,
         "tissue_preset": task_preset(plan.task).name,
         "needle_forces": task_preset(plan.task).forces.as_dict(),
@@ -206,12 +210,15 @@ def run_session(
     if callable(parameters):
         parameters = parameters(row.trial)
     try:
-        device, natural, subordinate = open_device(plan.device, plan, catalog, parameters)
-        if plan.device in MAPPED_DEVICES:  # the hand's workspace onto the task's scene, as shown
+        left = plan.handedness == "left" or (view is not None and view.mapping.handedness == "left")
+        hands = instruments(plan.device, plan.sub_device, "left" if left else "right")
+        device, natural, subordinate = open_device(hands.needle, plan, catalog, parameters)
+        if hands.needle in MAPPED_DEVICES:  # the hand's workspace onto the task's scene, as shown
             from sessions.running.scene import mapped_onto_task
 
-            left = view is not None and view.mapping.handedness == "left"
             device = mapped_onto_task(device, spec, left_handed=left)
+        if hands.forceps is not None:  # a person's second hand: the forceps on their own device
+            subordinate = open_forceps_device(hands.forceps, spec, left, taken=hands.needle)
         if natural is not None and plan.device == SCRIPTED_DEVICE:  # a script's hand stops where it ends
             duration = natural if duration is None else min(duration, natural)
         duration = duration if duration is not None else natural

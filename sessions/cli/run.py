@@ -11,7 +11,7 @@ from sessions.cli.base import (
     user_errors,
 )
 from sessions.cli.lrs import push_after_scoring
-from sessions.cli.station import LIVE_DEVICES, view_options
+from sessions.cli.station import LIVE_DEVICES, sub_device_option, view_options
 
 
 @click.command()
@@ -52,9 +52,12 @@ from sessions.cli.station import LIVE_DEVICES, view_options
 @click.option(
     "--json", "as_json", is_flag=True, help="Print the session's verdict, feedback and metrics as JSON."
 )
+@sub_device_option
 @view_options
 @user_errors
-def run(study, participant, task, device, skill, phase, duration, realtime, as_json, view) -> None:
+def run(
+    study, participant, task, device, skill, phase, duration, realtime, as_json, sub_device, view, handedness
+) -> None:
     """Run one session: device + simulator + recorder + catalog entry, then scoring.
 
     A real-time session opens the live 3-D view in a window where a display exists (--view). The
@@ -83,7 +86,7 @@ def run(study, participant, task, device, skill, phase, duration, realtime, as_j
     if device == SCRIPTED_DEVICE:
         click.echo("note: a scripted pass, not a person's hand: the session is marked synthetic", err=True)
     clock = "realtime" if realtime or device in LIVE_DEVICES else "simulated"
-    plan = SessionPlan(study, participant, task, None, phase, device, clock)  # next trial, allocated
+    plan = SessionPlan(study, participant, task, None, phase, device, clock, sub_device, handedness)
     parameters = (lambda trial: scripted_hands(skill, seed=trial)) if device == "scripted" else None
     with stderr_console().status(f"running {participant} on {device}..."):
         uid = run_session(

@@ -46,7 +46,9 @@ def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
         default="right",
         show_default=True,
         help="Which hand holds the needle holder: left swaps the wrist-turn keys of the keyboard "
-        "and mouse (train both hands, as the paper asks).",
+        "and mouse and mirrors a hand-held device's axes (train both hands, as the paper asks); with "
+        "--sub-device, left also swaps the two devices' instruments (the needle on --sub-device's, the "
+        "forceps on --device's).",
     )
     @wraps(command)
     def wrapper(*args: Any, view: str | None, stereo, size, handedness, **kwargs: Any) -> Any:
@@ -62,9 +64,24 @@ def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
         live = None
         if chosen == "window":
             live = LiveView(ViewSettings(size=size, stereo=stereo), MouseMapping(handedness=handedness))
-        return command(*args, view=live, **kwargs)
+        return command(*args, view=live, handedness=handedness, **kwargs)
 
     return wrapper
+
+
+def sub_device_option(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``--sub-device``: the subordinate hand's forceps on a second device."""
+    from sessions.running.hands import SUB_DEVICES
+
+    return click.option(
+        "--sub-device",
+        type=click.Choice(SUB_DEVICES),
+        default="none",
+        show_default=True,
+        help="The subordinate hand's forceps (they hold the wound edge for the needle): a SpaceMouse (as "
+        "in the source paper) or a second Touch; its first button closes the jaws. The jaws start open "
+        "at the wound's edge beside the first entry mark. A scripted session brings its own.",
+    )(command)
 
 
 @click.command()
@@ -90,9 +107,10 @@ def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
 @click.option(
     "--skill", type=click.FloatRange(0, 1), default=0.9, show_default=True, help="Scripted hand's skill."
 )
+@sub_device_option
 @view_options
 @user_errors
-def station(study, participant, task, device, trials, skill, view) -> None:
+def station(study, participant, task, device, trials, skill, sub_device, view, handedness) -> None:
     """Run a course station: instructions, a trial with the live view, feedback, the next trial.
 
     The instruction screen says what the task asks, what the marks mean, the time budget and the
@@ -117,7 +135,7 @@ def station(study, participant, task, device, trials, skill, view) -> None:
     parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
 
     def run_trial() -> str:
-        plan = SessionPlan(study, participant, task, None, "practice", device, clock)
+        plan = SessionPlan(study, participant, task, None, "practice", device, clock, sub_device, handedness)
         return run_session(catalog, home, plan, parameters, None, view=view)
 
     uids = run_station(

@@ -41,6 +41,7 @@ FORCEPS_SHOWN_LENGTH = 0.008
 FORCEPS_OPEN_GAP = 0.0015
 """The open jaws' tips apart (m), as wide as the jaws' tips (:class:`sim.forceps.Forceps`)."""
 
+
 class WindowError(VascsimError):
     """The live window could not be opened or set up."""
 

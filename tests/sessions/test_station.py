@@ -434,6 +434,48 @@ def test_spacemouse_reports_drive_the_needle_in_the_window(display, course, tmp_
     assert "display" not in {e.layer for e in result.events if e.kind == "layer_failed"}
 
 
+def test_spacemouse_reports_drive_the_forceps_that_lift_the_wound_edge():
+    """A second hand at the station (--sub-device spacemouse): SpaceMouse report bytes (the cap's
+    button closes the jaws, a gentle push towards the user lifts the edge, the button let go opens
+    them) go through the live decoder in the haptic process beside the needle hand's device; the
+    forceps grasp the edge where they start, lift it and let it go, and the FEM layer holds it."""
+    import struct
+
+    from sessions.running.hands import forceps_on
+    from sessions.tasks import task_simulation
+    from sim.devices.mouse import MouseDevice
+    from sim.devices.spacemouse import FULL_SCALE, SpaceMouse
+    from sim.devices.workspace import view_axes
+
+    push = 20  # of +-350: 20 / 350 x 20 mm/s = 1.1 mm/s, for 0.4 s: a 0.46 mm lift
+    reports = [
+        # the reports' clock starts at the haptic set-up's warm read, the loop up to ~1.5 s later
+        (1.5, bytes([3]) + (1).to_bytes(4, "little")),  # button 1 down: the jaws close on the edge
+        (1.8, bytes([1]) + struct.pack("<6h", 0, 0, push, 0, 0, 0)),  # push towards the user
+        (2.2, bytes([1]) + struct.pack("<6h", 0, 0, 0, 0, 0, 0)),  # let go of the cap
+        (2.8, bytes([3]) + (0).to_bytes(4, "little")),  # button up: the jaws open
+    ]
+    spec = task_spec(TASK)
+    forceps = forceps_on(SpaceMouse(source=RecordedReports(reports)), spec)  # as the station maps it
+    needle = MouseDevice(start_pose(spec))  # the needle hand waits above the first mark
+    simulation = task_simulation(TASK, needle, subordinate=forceps)
+    held = []
+    simulation.on_graphics = lambda now, fem: held.append((now, fem.grasp_force, fem.grasp_displacement))
+    result = simulation.run_realtime(3.4)
+    kinds = [event.kind for event in result.events]
+    assert kinds.count("grasp") == 1 and kinds.count("release_grasp") == 1, kinds
+    assert "edge_torn" not in kinds
+    lifts = np.array([d for _, f, d in held if f is not None and np.any(f != 0)])
+    towards_you = view_axes(*task_camera(spec))[:, 2]
+    largest = lifts[np.argmax(np.linalg.norm(lifts, axis=1))]
+    expected = push / FULL_SCALE * 0.02 * 0.4  # m: the push's speed for its 0.4 s
+    assert np.linalg.norm(largest) == pytest.approx(expected, rel=0.1)
+    assert np.dot(largest, towards_you) / np.linalg.norm(largest) > 0.999
+    forces = np.array([np.linalg.norm(f) for _, f, _ in held if f is not None and np.any(f != 0)])
+    assert 0.01 < forces.max() < 1.35  # lifting the edge half a millimetre, short of tearing it
+    assert not np.any(held[-1][1])  # let go: the tissue is back at rest, the forceps hold nothing
+
+
 STEREO_SCRIPT = """
 import json, sys, time
 import numpy as np

@@ -1,0 +1,105 @@
+"""Which device holds which instrument at a station: the needle holder and the subordinate hand's
+forceps (``--device``, ``--sub-device``, ``--handedness``), and where the forceps start.
+
+A right-handed trainee holds the needle holder with ``--device`` and the forceps with
+``--sub-device``; ``--handedness left`` swaps the two devices' instruments (the station's devices
+stay where they are: a Touch on the right and a SpaceMouse on the left serve a left-handed trainee
+with the needle on the SpaceMouse and the forceps on the Touch), and mirrors each device's axes as
+the live view's mapping does. The keyboard-and-mouse device lives in the live window and drives the
+needle holder only. A subordinate device is mapped onto the task's scene like the needle's
+(:func:`sessions.running.scene.mapped_onto_task`), its jaws starting open at the wound's edge beside
+the first entry mark; its first button closes them.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from sessions.catalog import CatalogError
+from sessions.tasks import TaskSpec, grasp_sites
+from sim.needle import Pose
+
+SUB_DEVICES = ("none", "spacemouse", "openhaptics")
+"""``--sub-device`` choices for a person's station: no second hand, the paper's SpaceMouse, or a second
+Touch (OpenHaptics). A scripted session's second hand is the scripted assisting hand."""
+FORCEPS_START_HEIGHT_M = 0.3e-3
+"""The open jaws start this far above the wound's edge, along the access direction: within the
+forceps' reach (0.5 mm), so closing them there takes the edge."""
+
+
+class Instruments(NamedTuple):
+    """The device (a ``--device`` name) for each instrument; ``forceps`` is None when one-handed."""
+
+    needle: str
+    forceps: str | None
+
+
+def instruments(device: str, sub_device: str | None, handedness: str = "right") -> Instruments:
+    """Which device holds which instrument (see the module docstring); one line naming the options
+    when the choice cannot work."""
+    forceps = None if sub_device in (None, "none") else sub_device
+    if forceps is not None and forceps not in SUB_DEVICES:
+        raise CatalogError(f"unknown --sub-device {sub_device!r}; use {', '.join(SUB_DEVICES)}")
+    if forceps is not None and device == "scripted":
+        raise CatalogError(
+            "a scripted session brings its own assisting hand: drop --sub-device, or drive the needle "
+            "yourself (--device mouse, spacemouse or openhaptics)"
+        )
+    if forceps is None or handedness != "left":
+        return Instruments(device, forceps)
+    if device == "mouse":
+        raise CatalogError(
+            "the keyboard and mouse drive the needle holder only: for a left-handed trainee give the "
+            f"needle to --sub-device {forceps} with --device {forceps} and no --sub-device, or use two "
+            "hand-held devices"
+        )
+    return Instruments(forceps, device)
+
+
+def forceps_start(spec: TaskSpec) -> Pose:
+    """Where the subordinate hand's jaws start: open, just above the wound's edge beside the first
+    entry mark (the task's first grasp site), jaws pointing into the wall."""
+    sites = grasp_sites(spec)
+    if not len(sites):
+        raise CatalogError(
+            f"task {spec.name!r} has no wound edge for the forceps to hold: run it without --sub-device"
+        )
+    from sessions.running.scene import access_direction
+
+    return Pose(sites[0] + FORCEPS_START_HEIGHT_M * access_direction(spec), np.eye(3))
+
+
+def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, taken: str = ""):
+    """The subordinate hand's device ``name`` (a :data:`SUB_DEVICES` entry), mapped onto the task's
+    scene from :func:`forceps_start`; ``taken``: the needle's device name (two SpaceMice: the second
+    one found holds the forceps)."""
+    if name == "spacemouse":
+        from sim.devices.spacemouse import SpaceMouse, find_spacemice
+
+        identity = None
+        if taken == "spacemouse":
+            found = find_spacemice()
+            if len(found) < 2:
+                raise CatalogError(
+                    f"both hands on a SpaceMouse need two plugged in; found {len(found)} (`vascsim devices`)"
+                )
+            identity = found[1]
+        device = SpaceMouse(identity)
+    elif name == "openhaptics":
+        from sim.devices.openhaptics import OpenHapticsDevice
+
+        device = OpenHapticsDevice()
+    else:
+        raise CatalogError(f"unknown --sub-device {name!r}; use {', '.join(SUB_DEVICES[1:])}")
+    return forceps_on(device, spec, left_handed)
+
+
+def forceps_on(device, spec: TaskSpec, left_handed: bool = False):
+    """An open hand-held ``device`` as the forceps: its first reading is :func:`forceps_start`, its axes
+    the live view's (mirrored for a left hand), 1:1 (:class:`sim.devices.workspace.WorkspaceMapping`)."""
+    from sessions.running.scene import task_camera
+    from sim.devices.workspace import WorkspaceMapping, view_axes
+
+    return WorkspaceMapping(device, forceps_start(spec), view_axes(*task_camera(spec)), mirror=left_handed)
