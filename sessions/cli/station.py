@@ -123,6 +123,7 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
     """
     from sessions.replaying import replay_against_experts
     from sessions.runner import SessionPlan, run_session
+    from sessions.running.hands import instruments
     from sessions.running.station import StationPlan, run_station
     from sessions.synthetic import pass_parameters
     from sessions.tasks import task_spec
@@ -130,6 +131,7 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
     if view is None:
         raise click.UsageError("the station needs its window: run it on a display (--view window)")
     task_spec(task)  # an unknown task is refused before any window opens
+    hands = instruments(device, sub_device, handedness)  # and a pairing of devices that cannot work
     catalog, home = open_catalog()
     clock = "realtime"
     parameters = (lambda trial: pass_parameters(skill, seed=trial)) if device == "scripted" else None
@@ -141,7 +143,7 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
     uids = run_station(
         catalog,
         home,
-        StationPlan(study, participant, task, device),
+        StationPlan(study, participant, task, *hands),
         view,
         run_trial,
         replay=lambda uid: str(replay_against_experts(catalog, home, uid)),

@@ -46,16 +46,25 @@ DEVICE_CONTROLS = {
     ],
     "scripted": ["A scripted hand places the stitch (a demonstration: no hand of yours is needed)."],
 }
+FORCEPS_CONTROLS = (
+    "Your other hand holds the forceps ({device}): they start open at the wound's edge beside the first "
+    "white dot. Its first button closes the jaws on the edge; move it towards you to lift (evert) the "
+    "edge so the needle goes in square to it; press again to let go once the needle is through. Lift "
+    "gently: pulled too far, the edge tears out of the jaws."
+)
+FORCEPS_DEVICE_NAMES = {"spacemouse": "the SpaceMouse, a rate control", "openhaptics": "the second Touch"}
 
 
 @dataclass(frozen=True)
 class StationPlan:
-    """Who practises what with which device: study, participant code, task, device."""
+    """Who practises what with which devices: study, participant code, task, the needle holder's device
+    and the forceps' (None: one hand)."""
 
     study: str
     participant: str
     task: str
     device: str
+    sub_device: str | None = None
 
 
 def _clock(seconds: float) -> str:
@@ -63,8 +72,10 @@ def _clock(seconds: float) -> str:
     return f"{seconds // 60}:{seconds % 60:02d}"
 
 
-def instruction_lines(spec: TaskSpec, device: str, participant: str, standard_note: str = "") -> list[Line]:
-    """What the instruction screen says for ``spec`` with ``device``."""
+def instruction_lines(
+    spec: TaskSpec, device: str, participant: str, standard_note: str = "", sub_device: str | None = None
+) -> list[Line]:
+    """What the instruction screen says for ``spec`` with ``device`` (and the forceps on ``sub_device``)."""
     stitches = spec.stitch_count
     lines = [Line(f"{spec.name}: next trial for {participant}", "title")]
     lines += wrapped(spec.description)
@@ -83,6 +94,8 @@ def instruction_lines(spec: TaskSpec, device: str, participant: str, standard_no
     lines.append(Line("Controls", "heading"))
     for text in DEVICE_CONTROLS.get(device.split(":")[0], []):
         lines += wrapped(text)
+    if sub_device in FORCEPS_DEVICE_NAMES:
+        lines += wrapped(FORCEPS_CONTROLS.format(device=FORCEPS_DEVICE_NAMES[sub_device]))
     if standard_note:
         lines += wrapped(standard_note, "bad-small")
     lines.append(Line(""))
@@ -147,7 +160,7 @@ def run_station(
                 if experts_on_task(catalog, plan.study, plan.task)
                 else "No expert has recorded this task in this study yet: your trials are scored, not judged."
             )
-            screen.show(instruction_lines(spec, plan.device, plan.participant, note))
+            screen.show(instruction_lines(spec, plan.device, plan.participant, note, plan.sub_device))
             if screen.wait_for(START_KEYS) != "start":
                 break
             _countdown(screen)

@@ -48,6 +48,16 @@ def test_the_instruction_screen_says_the_task_marks_budget_controls_and_how_to_s
     assert "Time budget 3:00 for 3 stitches" in words
     assert "Drag with the left mouse button" in text and "G: open or close the jaws" in text
     assert "no experts yet" in text and "SPACE: start" in words[-1]
+    assert "forceps" not in text  # one hand: nothing about a second
+
+
+def test_with_a_second_device_the_instructions_say_how_the_forceps_hold_the_edge():
+    spec = task_spec("interrupted-stitch")
+    text = " ".join(
+        line.text for line in instruction_lines(spec, "openhaptics", "T07", sub_device="spacemouse")
+    )
+    assert "forceps (the SpaceMouse, a rate control)" in text
+    assert "closes the jaws on the edge" in text and "lift (evert) the edge" in text and "tears" in text
     spacemouse = " ".join(line.text for line in instruction_lines(spec, "spacemouse", "T07"))
     assert "rate control" in spacemouse
 
