@@ -99,6 +99,8 @@ class RuntimeRecorder:
             fem.needle_vertices,
             drive,
             fem.soft_share,
+            fem.grasp_loads,
+            fem.jaws,
         )
 
     def on_sample(

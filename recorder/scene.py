@@ -1,9 +1,11 @@
 """The scene stream: what the graphics layer saw, once per graphics frame (30 Hz by default).
 
 Per frame: time (s), needle state, tip speed (m/s), the reaction force on the needle
-(N), the needle's vertices (m, tip first) and the tissue drive (contact node ids and
-their intended displacements, m). With it a replay renders any frame straight from the
-recording, without re-running the simulation. It is written when the session closes,
+(N), the needle's vertices (m, tip first), the tissue drive (contact node ids and
+their intended displacements, m) and, with a subordinate hand, its grasp (the grasped
+node ids and the forceps' force on each, N) and its jaws (point, m, and closed). With
+it a replay renders any frame straight from the recording, without re-running the
+simulation; a scene recorded before the grasp columns reads with none. It is written when the session closes,
 verified and checksummed like the other files; a crashed session has none, and its
 replay re-simulates instead.
 """
@@ -46,10 +48,30 @@ SCENE_SCHEMA = pa.schema(
             pa.float64(),
             metadata={"unit": "1", "description": "biphase soft share of the drive (null: from its strain)"},
         ),
+        pa.field(
+            "grasp_nodes", pa.list_(pa.int32()), metadata={"description": "tissue node ids the forceps hold"}
+        ),
+        pa.field(
+            "grasp_forces",
+            pa.list_(pa.float64()),
+            metadata={"unit": "N", "description": "the forceps' force on each grasped node, xyz per node"},
+        ),
+        pa.field(
+            "jaws",
+            pa.list_(pa.float64()),
+            metadata={"unit": "m", "description": "jaw point xyz (empty: one hand)"},
+        ),
+        pa.field(
+            "jaws_closed",
+            pa.int8(),
+            metadata={"unit": "1", "description": "1 closed, 0 open, null: one hand"},
+        ),
     ],
     metadata={"stream": "scene"},
 )
-_SCENE_SCHEMA_BEFORE_SHARE = pa.schema(list(SCENE_SCHEMA)[:-1], metadata=SCENE_SCHEMA.metadata)
+GRASP_FIELDS = ("grasp_nodes", "grasp_forces", "jaws", "jaws_closed")
+_SCENE_SCHEMA_BEFORE_GRASP = pa.schema(list(SCENE_SCHEMA)[:-4], metadata=SCENE_SCHEMA.metadata)
+_SCENE_SCHEMA_BEFORE_SHARE = pa.schema(list(SCENE_SCHEMA)[:-5], metadata=SCENE_SCHEMA.metadata)
 
 
 class SceneLog:
@@ -67,8 +89,11 @@ class SceneLog:
         needle: NDArray[np.float64],
         drive: tuple[NDArray[np.int64], NDArray[np.float64]] | None,
         soft_share: float = math.nan,
+        grasp: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
+        jaws: tuple[NDArray[np.float64], bool] | None = None,
     ) -> None:
         nodes, intended = (np.zeros(0, np.int32), np.zeros(0)) if drive is None else drive
+        held, pulls = (np.zeros(0, np.int32), np.zeros(0)) if grasp is None else grasp
         self._rows.append(
             (
                 float(time),
@@ -79,6 +104,10 @@ class SceneLog:
                 np.asarray(nodes, dtype=np.int32).reshape(-1).copy(),
                 np.asarray(intended, dtype=np.float64).reshape(-1).copy(),
                 float(soft_share),
+                np.asarray(held, dtype=np.int32).reshape(-1).copy(),
+                np.asarray(pulls, dtype=np.float64).reshape(-1).copy(),
+                np.zeros(0) if jaws is None else np.asarray(jaws[0], dtype=np.float64).reshape(3).copy(),
+                None if jaws is None else int(bool(jaws[1])),
             )
         )
 
@@ -89,7 +118,7 @@ class SceneLog:
         columns = list(zip(*self._rows, strict=True)) if self._rows else [[] for _ in SCENE_SCHEMA]
         arrays = [
             pa.array(list(column), type=field.type, from_pandas=True)  # nan share: null (unknown)
-            if field.name in ("time", "state", "tip_speed", "drive_soft_share")
+            if field.name in ("time", "state", "tip_speed", "drive_soft_share", "jaws_closed")
             else pa.array([v.tolist() for v in column], type=field.type)
             for column, field in zip(columns, SCENE_SCHEMA, strict=True)
         ]
@@ -115,7 +144,20 @@ def read_scene(session) -> pa.Table | None:
         return None
     try:
         return read_checked(session.path, SCENE_FILE, record, True, SCENE_SCHEMA)
-    except RecorderError:  # recorded before the drive's soft share was: derive it from the drive
+    except RecorderError:  # recorded before the grasp columns, or before the drive's soft share
+        pass
+    try:
+        table = read_checked(session.path, SCENE_FILE, record, True, _SCENE_SCHEMA_BEFORE_GRASP)
+    except RecorderError:  # before the soft share too: derived from the drive
         table = read_checked(session.path, SCENE_FILE, record, True, _SCENE_SCHEMA_BEFORE_SHARE)
         share = pa.nulls(table.num_rows, pa.float64())
-        return table.append_column(SCENE_SCHEMA.field("drive_soft_share"), share)
+        table = table.append_column(SCENE_SCHEMA.field("drive_soft_share"), share)
+    for name in GRASP_FIELDS:  # one-handed: nothing held, no jaws
+        field = SCENE_SCHEMA.field(name)
+        column = (
+            pa.nulls(table.num_rows, field.type)
+            if name == "jaws_closed"
+            else pa.array([[]] * table.num_rows, type=field.type)
+        )
+        table = table.append_column(field, column)
+    return table

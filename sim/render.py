@@ -45,6 +45,7 @@ class RenderFrame:
     ghost: (P, 3) path to draw as a ghost (e.g. the expert's needle-tip path) or None.
     force: (3,) reaction force on the needle (N), drawn as an arrow at the tip, or None.
     ghost_needle: (S+1, 3) a second needle drawn translucent (e.g. the expert's, aligned) or None.
+    forceps: the subordinate hand's jaws, (jaw point (3,) m, closed), or None for a one-handed scene.
     """
 
     points: NDArray[np.float64]
@@ -54,6 +55,33 @@ class RenderFrame:
     ghost: NDArray[np.float64] | None = None
     force: NDArray[np.float64] | None = None
     ghost_needle: NDArray[np.float64] | None = None
+    forceps: tuple[NDArray[np.float64], bool] | None = None
+
+
+FORCEPS_SHOWN_LENGTH = 0.008
+"""How much of the forceps' jaws a scene draws (m) from their tips."""
+FORCEPS_OPEN_GAP = 0.0015
+"""The open jaws' tips apart (m), as wide as the jaws' tips (:class:`sim.forceps.Forceps`)."""
+FORCEPS_OPEN_COLOUR, FORCEPS_CLOSED_COLOUR = (0.31, 0.36, 0.4), (0.12, 0.45, 0.2)
+
+
+def forceps_points(
+    jaw_point: NDArray[np.float64], closed: bool, towards_viewer: NDArray[np.float64], up: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(4, 3) ends of the forceps' two jaws as a scene draws them: tips at ``jaw_point`` (touching when
+    ``closed``, :data:`FORCEPS_OPEN_GAP` apart when open), shafts rising towards the viewer and down
+    the view (the hand is below and in front of the screen), spread across it."""
+    point = np.asarray(jaw_point, dtype=np.float64)
+    out = np.asarray(towards_viewer, dtype=np.float64)
+    out = out / np.linalg.norm(out)
+    up = np.asarray(up, dtype=np.float64)
+    side = np.cross(out, up)
+    length = float(np.linalg.norm(side))
+    side = side / length if length > 0 else np.array([1.0, 0.0, 0.0])
+    tip = (0.05e-3 if closed else 0.5 * FORCEPS_OPEN_GAP) * side
+    back = point + FORCEPS_SHOWN_LENGTH * (out - 0.5 * up)
+    spread = FORCEPS_OPEN_GAP * side
+    return np.array([point + tip, back + spread, point - tip, back - spread])
 
 
 def stress_colours():
@@ -144,6 +172,9 @@ class TissueRenderer:
         self._ghost_needle_actor = self.plotter.add_mesh(
             self.ghost_needle, color="mediumseagreen", line_width=4
         )
+        self.forceps = pv.PolyData(np.zeros((4, 3)), lines=np.array([2, 0, 1, 2, 2, 3]))
+        self._forceps_actor = self.plotter.add_mesh(self.forceps, color=FORCEPS_OPEN_COLOUR, line_width=7)
+        self._forceps_actor.SetVisibility(False)
         # a unit arrow along +x, placed each frame by a user matrix (no new geometry per frame)
         self._arrow_actor = self.plotter.add_mesh(
             pv.Arrow(
@@ -249,6 +280,20 @@ class TissueRenderer:
             self.plotter.reset_camera()
             self.plotter.renderer.GetActiveCamera().Zoom(self.zoom)
             self._camera_set = True
+        self.place_forceps(frame.forceps)
+
+    def place_forceps(self, jaws: tuple[NDArray[np.float64], bool] | None) -> None:
+        """Draw the subordinate hand's jaws (:func:`forceps_points`, grey open, green closed) as the
+        camera sees them now; hide them for None."""
+        self._forceps_actor.SetVisibility(jaws is not None)
+        if jaws is None:
+            return
+        camera = self.plotter.renderer.GetActiveCamera()
+        towards = np.subtract(camera.GetPosition(), camera.GetFocalPoint())
+        self.forceps.points[:] = forceps_points(jaws[0], bool(jaws[1]), towards, np.array(camera.GetViewUp()))
+        self.forceps.Modified()
+        colour = FORCEPS_CLOSED_COLOUR if jaws[1] else FORCEPS_OPEN_COLOUR
+        self._forceps_actor.GetProperty().SetColor(*colour)
 
     def read_pixels(self) -> NDArray[np.uint8]:
         """Render and read the frame straight from the render window: (H, W, 3) uint8, top row first."""

@@ -103,18 +103,21 @@ class SceneReplay:
 
         track = self.track
         drive = track.drives[k]
+        grasp = track.grasps[k] if track.grasps is not None else None  # the other hand holds the edge
         if drive is None:
-            displacement, stress = self.fields.state(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+            none = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+            displacement, stress = self.fields.state(*none, grasp=grasp)
         else:
-            displacement, stress = self.fields.state(drive[0], drive[1], float(track.tip_speed[k]), drive[2])
+            speed = float(track.tip_speed[k])
+            displacement, stress = self.fields.state(drive[0], drive[1], speed, drive[2], grasp=grasp)
         shown = (
             self.insertion_point
             if self.pierce_time is not None and track.times[k] >= self.pierce_time
             else None
         )
-        return RenderFrame(
-            self.rest + displacement, stress, track.needle[k], shown, ghost, track.force[k], ghost_needle
-        )
+        jaws = track.jaws[k] if track.jaws is not None else None
+        points = self.rest + displacement
+        return RenderFrame(points, stress, track.needle[k], shown, ghost, track.force[k], ghost_needle, jaws)
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,9 @@ class ReplayTrack:
     """Per video frame: time (F,) s; needle (F, V, 3) m, tip first; state (F,) 0 free .. 3 exited;
     force (F, 3) N, the tissue's reaction on the needle; tip_speed (F,) m/s; drives: per frame the
     contact nodes, intended displacements (k, 3) m the tissue was driven at and the biphase soft share
-    of the drive (nan: derived from the drive), or None."""
+    of the drive (nan: derived from the drive), or None; grasps: per frame the nodes the subordinate
+    hand's forceps hold and their force on each (k, 3) N, or None; jaws: per frame the forceps' jaw
+    point (m) and whether closed, or None (one hand)."""
 
     times: NDArray[np.float64]
     needle: NDArray[np.float64]
@@ -38,6 +40,8 @@ class ReplayTrack:
     force: NDArray[np.float64]
     tip_speed: NDArray[np.float64]
     drives: list[tuple[NDArray[np.int64], NDArray[np.float64], float] | None]
+    grasps: list[tuple[NDArray[np.int64], NDArray[np.float64]] | None] | None = None
+    jaws: list[tuple[NDArray[np.float64], bool] | None] | None = None
 
     @property
     def tip(self) -> NDArray[np.float64]:
@@ -82,6 +86,8 @@ def scene_track(scene, fps: float = 30.0) -> ReplayTrack:
         else None
         for k in pick
     ]
+    held, pulls = scene.column("grasp_nodes").to_pylist(), scene.column("grasp_forces").to_pylist()
+    points, closed = scene.column("jaws").to_pylist(), scene.column("jaws_closed").to_pylist()
     return ReplayTrack(
         times=frame_times,
         needle=needle[pick],
@@ -89,6 +95,13 @@ def scene_track(scene, fps: float = 30.0) -> ReplayTrack:
         force=force[pick],
         tip_speed=scene.column("tip_speed").to_numpy()[pick],
         drives=drives,
+        grasps=[
+            (np.asarray(held[k], dtype=np.int64), np.asarray(pulls[k], dtype=np.float64).reshape(-1, 3))
+            if held[k]
+            else None
+            for k in pick
+        ],
+        jaws=[None if closed[k] is None else (np.asarray(points[k]), bool(closed[k])) for k in pick],
     )
 
 
@@ -117,7 +130,8 @@ def replay_track(session, tissue, fps: float = 30.0, needle: Needle | None = Non
     # the law it ran under: since the wall can tear and slide, the needle's path depends on it
     recorded = session.header.get("needle_forces")
     forces = NeedleForces.from_dict(dict(recorded)) if isinstance(recorded, dict) else None
-    simulation = Simulation(tissue, needle or Needle.curved(), device, forces=forces)
+    hand = _subordinate_hand(session, column)  # a two-handed session replays with both hands
+    simulation = Simulation(tissue, needle or Needle.curved(), device, forces=forces, subordinate=hand)
     state = {"next": 0}
 
     def on_sample(now, sample, force, fem) -> None:
@@ -142,6 +156,8 @@ def replay_track(session, tissue, fps: float = 30.0, needle: Needle | None = Non
     states = np.zeros(frames, dtype=np.int8)
     speeds = np.zeros(frames)
     drives: list = []
+    grasps: list = []
+    jaws: list = []
     for k, (_, fem, _) in enumerate(captured):
         fem = fem or first
         needle_path[k] = fem.needle_vertices
@@ -153,6 +169,8 @@ def replay_track(session, tissue, fps: float = 30.0, needle: Needle | None = Non
             if contact is None or len(contact[0]) == 0
             else (contact[0].copy(), contact[1].copy(), float(fem.soft_share))
         )
+        grasps.append(fem.grasp_loads)
+        jaws.append(fem.jaws)
     return ReplayTrack(
         times=np.array([when for when, _, _ in captured]),
         needle=needle_path,
@@ -160,4 +178,23 @@ def replay_track(session, tissue, fps: float = 30.0, needle: Needle | None = Non
         force=np.array([force for _, _, force in captured]),
         tip_speed=speeds,
         drives=drives,
+        grasps=grasps,
+        jaws=jaws,
+    )
+
+
+def _subordinate_hand(session, column) -> ReplayDevice | None:
+    """The recorded subordinate hand as a device (its tool point, orientation and jaws at every tick),
+    or None for a session recorded one-handed (its columns NaN or absent)."""
+    if "sub_jaw" not in session.samples.column_names:
+        return None
+    position = np.column_stack([column(n) for n in ("sub_x", "sub_y", "sub_z")])
+    if not np.all(np.isfinite(position)):
+        return None
+    return ReplayDevice(
+        column("time").astype(np.float64),
+        position,
+        np.column_stack([column(n) for n in ("sub_qw", "sub_qx", "sub_qy", "sub_qz")]),
+        column("sub_jaw"),
+        session=str(session.header.get("session_id", session.path.name)),
     )

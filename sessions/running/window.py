@@ -36,12 +36,6 @@ SHADOW_LIFT_M = 3e-5
 """The needle's shadow is drawn this far above the wall, so the wall never hides it."""
 
 
-FORCEPS_SHOWN_LENGTH = 0.008
-"""How much of the forceps' jaws the live view draws (m) from their tips."""
-FORCEPS_OPEN_GAP = 0.0015
-"""The open jaws' tips apart (m), as wide as the jaws' tips (:class:`sim.forceps.Forceps`)."""
-
-
 class WindowError(VascsimError):
     """The live window could not be opened or set up."""
 
@@ -208,7 +202,6 @@ class LiveWindow:
             frame = self.scene.frame_of(snapshot)
             renderer.update(frame)
             self._place_shadow(frame.needle)
-            self._place_forceps(getattr(snapshot, "jaws", None))
         self._show_bites()
         self._show_hud(now, force)
         renderer.plotter.render_window.Render()  # draws and swaps
@@ -235,9 +228,6 @@ class LiveWindow:
         )
         self._entry_actor.SetVisibility(False)
         self._exit_actor.SetVisibility(False)
-        self._forceps = pv.PolyData(np.zeros((4, 3)), lines=np.array([2, 0, 1, 2, 2, 3]))
-        self._forceps_actor = plotter.add_mesh(self._forceps, color="#4f5b66", line_width=7)
-        self._forceps_actor.SetVisibility(False)
         self._shown_bites = (0, 0)
         width, height = self.settings.size
         self._texts = {}
@@ -270,24 +260,6 @@ class LiveWindow:
         self._shadow.points = shadow
         self._shadow.lines = np.concatenate([[len(shadow)], np.arange(len(shadow))])
         self._shadow.Modified()
-
-    def _place_forceps(self, jaws) -> None:
-        """The subordinate hand's forceps: two jaws meeting at the jaw point (apart when open), their
-        shafts rising from the wall along its normal and leaning to the side away from the needle."""
-        self._forceps_actor.SetVisibility(jaws is not None)
-        if jaws is None:
-            return
-        point, closed = np.asarray(jaws[0], dtype=np.float64), bool(jaws[1])
-        normal = self.facts.surface_normal / np.linalg.norm(self.facts.surface_normal)
-        up = np.asarray(self.facts.camera[2], dtype=np.float64)
-        side = np.cross(normal, up)
-        side = side / np.linalg.norm(side) if np.linalg.norm(side) > 0 else np.array([1.0, 0.0, 0.0])
-        tip = (0.05e-3 if closed else FORCEPS_OPEN_GAP / 2) * side
-        back = point + FORCEPS_SHOWN_LENGTH * normal - 0.5 * FORCEPS_SHOWN_LENGTH * up
-        spread = FORCEPS_OPEN_GAP * side
-        self._forceps.points = np.array([point + tip, back + spread, point - tip, back - spread])
-        self._forceps.Modified()
-        self._forceps_actor.GetProperty().SetColor(*((0.12, 0.45, 0.2) if closed else (0.31, 0.36, 0.4)))
 
     def _locator(self):
         if not hasattr(self, "_cells"):

@@ -191,15 +191,18 @@ class TissueFieldReplay:
         intended: ArrayLike,
         needle_speed: float = 0.0,
         soft_share: float | None = None,
+        grasp: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(N, 3) displacement of every node (m) and (F,) von Mises stress (Pa) under each exterior
         triangle, for contact ``nodes`` driven to ``intended`` (k, 3) at ``needle_speed`` (m/s).
 
         soft_share: the biphase split the runtime applied (the force kernel's, from its own strain);
-        None or nan derives it from the drive (the barycentric rule's drive sums to the tip's)."""
+        None or nan derives it from the drive (the barycentric rule's drive sums to the tip's).
+        grasp: (nodes, forces (k, 3) N) of the subordinate hand's forceps on the tissue's base phase
+        (:mod:`sim.forceps`), superposed: the stress is that of the summed displacement."""
         if self._rows is not None:
             raise ModelError("a replay of chosen elements has no whole displacement; use stress()")
-        return self._replay(nodes, intended, needle_speed, soft_share, with_displacement=True)
+        return self._replay(nodes, intended, needle_speed, soft_share, with_displacement=True, grasp=grasp)
 
     def stress(
         self,
@@ -212,12 +215,27 @@ class TissueFieldReplay:
         return self._replay(nodes, intended, needle_speed, soft_share, with_displacement=False)[1]
 
     def _replay(
-        self, nodes: ArrayLike, intended: ArrayLike, needle_speed: float, soft_share, with_displacement: bool
+        self,
+        nodes: ArrayLike,
+        intended: ArrayLike,
+        needle_speed: float,
+        soft_share,
+        with_displacement: bool,
+        grasp: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         ids = np.asarray(nodes, dtype=np.int64).ravel()
         drive = np.asarray(intended, dtype=np.float64).reshape(-1, 3)
+        displacement = np.zeros((self.mesh.n_nodes, 3)) if with_displacement else None
+        stress = np.zeros((len(self._surface), 3, 3))
+        if grasp is not None and len(grasp[0]):  # the forceps' loads on the base phase: G[:, P] f_P
+            held = np.asarray(grasp[0], dtype=np.int64).ravel()
+            pulls = np.asarray(grasp[1], dtype=np.float64).reshape(-1)
+            _, columns, unit_stress = self._phase_parts(held)[0]
+            if with_displacement:
+                displacement += (columns @ pulls).reshape(-1, 3)
+            stress += np.tensordot(pulls, unit_stress, axes=1)
         if ids.size == 0:
-            return np.zeros((self.mesh.n_nodes, 3)), np.zeros(len(self._surface))
+            return displacement, von_mises_of_stress(stress)
         known = soft_share is not None and np.isfinite(soft_share)
         share = float(soft_share) if known else self.soft_share(ids, drive, needle_speed)
         parts = self._phase_parts(ids)
@@ -230,8 +248,6 @@ class TissueFieldReplay:
             reactions = parts[index][0].reaction_forces(fraction * drive).reshape(-1)
             for sums, value in ((displacement_reactions, reactions), (stress_reactions, scale * reactions)):
                 sums[index] = value if sums[index] is None else sums[index] + value
-        displacement = np.zeros((self.mesh.n_nodes, 3))
-        stress = np.zeros((len(self._surface), 3, 3))
         for (_, columns, unit_stress), moved, stressed in zip(
             parts, displacement_reactions, stress_reactions, strict=True
         ):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -62,7 +63,8 @@ class DisplayScene:
         """What the graphics ``snapshot`` shows: the deformed wall, its surface stress, the needle."""
         loads = getattr(snapshot, "loads", None)
         if loads is not None and len(loads[0]):
-            return self._under_loads(snapshot.needle_vertices, *loads)
+            frame = self._under_loads(snapshot.needle_vertices, *loads)
+            return dataclasses.replace(frame, forceps=getattr(snapshot, "jaws", None))
         points, stress, marker = self.mesh.points, self._rest_stress, None
         if snapshot.contact is not None and len(snapshot.contact[0]):
             nodes, intended = snapshot.contact
@@ -74,7 +76,8 @@ class DisplayScene:
             gradients = self._gradient_map.dot(reactions).reshape(-1, 3, 3)
             stress = self.model.surface_von_mises_of_gradients(gradients)  # surface elements only
             marker = points[nodes].mean(axis=0)
-        return RenderFrame(points, stress, snapshot.needle_vertices, marker)
+        jaws = getattr(snapshot, "jaws", None)
+        return RenderFrame(points, stress, snapshot.needle_vertices, marker, forceps=jaws)
 
     def _under_loads(self, needle, nodes, forces, soft_share: float) -> RenderFrame:
         share = soft_share if math.isfinite(soft_share) else 1.0

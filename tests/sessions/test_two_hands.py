@@ -35,6 +35,53 @@ def two_handed(request, tmp_path_factory):
     return open_session(directory)
 
 
+def test_the_scene_stream_keeps_the_grasp_and_the_replay_draws_the_wall_where_the_forceps_hold_it(
+    two_handed,
+):
+    """The recorded scene has the grasp (nodes, forces) and the jaws each frame; the replay's tissue is
+    the superposition, so while the needle is free the grasped nodes all move by one displacement, the
+    hand's (f_P = G_PP^-1 a puts each exactly there), and the frame carries the jaws to draw."""
+    from metrics.replay.export import SceneReplay
+    from metrics.streams import from_recorded as streams_of
+    from recorder.scene import read_scene
+    from sessions.tasks import tissue_for
+
+    scene = read_scene(two_handed)
+    closed = np.array([c == 1 for c in scene.column("jaws_closed").to_pylist()])
+    held = np.array([len(n) > 0 for n in scene.column("grasp_nodes").to_pylist()])
+    assert closed.any() and held.any() and not (held & ~closed).any()
+    tissue = tissue_for("interrupted-stitch")
+    replay = SceneReplay(two_handed, tissue, streams_of(two_handed), fps=30)
+    track = replay.track
+    checked = 0
+    for k in range(len(track)):
+        grasp = track.grasps[k]
+        if grasp is None or track.state[k] != 0:
+            continue
+        frame = replay.frame(k)
+        moved = frame.points[grasp[0]] - tissue.mesh.points[grasp[0]]
+        if np.linalg.norm(moved[0]) < 0.05e-3:
+            continue
+        np.testing.assert_allclose(moved, np.broadcast_to(moved[0], moved.shape), rtol=0, atol=1e-9 * 1e-3)
+        assert frame.forceps is not None and frame.forceps[1]
+        checked += 1
+    assert checked >= 3
+
+
+def test_a_two_handed_session_re_simulated_holds_the_edge_as_recorded(two_handed):
+    """A replay with no scene stream re-simulates the session with both recorded hands: the grasp
+    comes back on the same nodes the recorded scene has."""
+    from metrics.replay.track import replay_track
+    from recorder.scene import read_scene
+    from sessions.tasks import tissue_for
+
+    track = replay_track(two_handed, tissue_for("interrupted-stitch"), fps=30)
+    again = {tuple(g[0].tolist()) for g in track.grasps if g is not None}
+    recorded = {tuple(n) for n in read_scene(two_handed).column("grasp_nodes").to_pylist() if n}
+    assert again and again == recorded
+    assert any(j is not None and j[1] for j in track.jaws)
+
+
 def test_a_scripted_expert_grasps_the_edge_lifts_it_and_lets_go_after_the_pull_through(two_handed):
     events = two_handed.events_frame()
     kinds = events["kind"].tolist()

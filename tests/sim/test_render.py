@@ -132,3 +132,32 @@ def test_bite_marks_appear_as_they_are_made_in_their_colour():
     # (the stress colour bar has a few such pixels of its own)
     assert reds(after) > reds(before) + 10 and reds(hidden) == reds(before)
     assert whites(before) > 0  # the mark (and the white background) are there from the start
+
+
+def test_the_forceps_are_drawn_at_their_jaws_grey_open_and_green_closed():
+    """A frame with the subordinate hand's jaws draws two jaws meeting at the jaw point: grey while
+    open, green once closed; a one-handed frame draws none."""
+    from dataclasses import replace
+
+    from sim.render import FORCEPS_CLOSED_COLOUR, FORCEPS_OPEN_COLOUR, forceps_points
+
+    mesh, frame = pressed_cube_frame()
+    renderer = TissueRenderer(mesh, size=(320, 240), offscreen=True, stress_range=(0.0, 5e3))
+    jaw = np.array([*mesh.points[:, :2].mean(axis=0), mesh.points[:, 2].max()])
+    shown = {}
+    for name, jaws in (("none", None), ("open", (jaw, False)), ("closed", (jaw, True))):
+        shown[name] = renderer.render(replace(frame, forceps=jaws)).astype(int)
+    renderer.close()
+
+    def coloured(pixels, colour):
+        target = np.array(colour) * 255
+        return int((np.abs(pixels - target).max(axis=2) < 40).sum())
+
+    for name, colour in (("open", FORCEPS_OPEN_COLOUR), ("closed", FORCEPS_CLOSED_COLOUR)):
+        assert coloured(shown[name], colour) > 100 + coloured(shown["none"], colour), name
+    # the jaws' tips touch when closed, are 1.5 mm apart when open; the shafts spread wider
+    ends = forceps_points(np.zeros(3), False, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    assert np.linalg.norm(ends[0] - ends[2]) == pytest.approx(1.5e-3)
+    closed = forceps_points(np.zeros(3), True, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    assert np.linalg.norm(closed[0] - closed[2]) == pytest.approx(0.1e-3)
+    assert np.linalg.norm(closed[1] - closed[3]) > np.linalg.norm(closed[0] - closed[2])
