@@ -92,10 +92,11 @@ def subordinate_path_length(context: SessionContext) -> float:
 @metric(
     "edge_held_at_insertion",
     advice="Hold the wound edge with the forceps before the needle goes in.",
-    unit="1",
+    unit="fraction",
     definition=(
         "Share of the insertions' time (pierce to end of passage) during which the subordinate hand's "
-        "forceps held the tissue (0: never, 1: throughout): the access the other hand gives the needle."
+        "forceps held the tissue (stored 0-1, shown in per cent: 0 never, 100 throughout): the access the "
+        "other hand gives the needle."
     ),
     streams=("forceps_jaw", "grasp_force", "events"),
     better=HIGHER,

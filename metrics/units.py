@@ -2,7 +2,8 @@
 
 Metrics are computed and stored in SI (m, m/s, m^2, Pa, N, s, deg). What a person reads is in
 millimetres, mm/s, mm^2, kPa and millinewtons (suture-needle forces are 100-3000 mN, as the replay,
-the live view and the tissue tools show them), times in seconds, angles in degrees.
+the live view and the tissue tools show them), times in seconds, angles in degrees, a share of time
+(stored 0-1, unit "fraction") in per cent.
 :func:`display_unit` and :func:`in_display_units` are the only place that says so: the CLI, the
 dashboard and the report call them, so a value reads the same everywhere.
 """
@@ -21,6 +22,7 @@ DISPLAY_UNITS: dict[str, tuple[str, float]] = {
     "s": ("s", 1.0),
     "deg": ("deg", 1.0),
     "1": ("", 1.0),
+    "fraction": ("%", 100.0),
 }
 """SI unit -> (the unit shown, the factor from SI to it)."""
 

@@ -18,6 +18,7 @@ def test_known_conversions_by_hand():
     assert in_display_units(0.0015, "m") == pytest.approx(1.5) and display_unit("m") == "mm"
     assert in_display_units(0.004, "m/s") == pytest.approx(4.0) and display_unit("m/s") == "mm/s"
     assert in_display_units(6.8e-5, "m^2") == pytest.approx(68.0) and display_unit("m^2") == "mm^2"
+    assert in_display_units(0.5, "fraction") == pytest.approx(50.0) and display_unit("fraction") == "%"
     assert in_display_units(4.87e5, "Pa") == pytest.approx(487.0) and display_unit("Pa") == "kPa"
     assert in_display_units(0.8, "N") == pytest.approx(800.0) and display_unit("N") == "mN"
     assert in_display_units(3.0, "deg") == 3.0 and shown(0.83, "N") == "830 mN"
