@@ -280,3 +280,30 @@ def test_nothing_is_prepared_from_columns_not_yet_solved(patch):
     assert hand._ready is None and hand.model.cached_columns == 0
     hand.hold(0.01, jaw, True)
     assert hand.grasping and hand.model.spot_solved
+
+
+def test_a_hand_holding_still_leaves_the_collision_mesh_alone(patch):
+    """The graphics layer moves the collision mesh only when the grasp or the hand's displacement
+    changed since its last frame; a release puts it back at rest once."""
+    collision = CollisionMesh(patch.mesh)
+    hand = ForcepsInteraction(patch, collision)
+    jaw = np.array([0.012, 0.005, 0.00075])
+    hand.hold(0.0, jaw, True)
+    hand.hold(0.01, jaw + np.array([0.0, 0.0, 0.3e-3]), True)
+    hand.fem_step(0.01)
+    hand.deform_collision()
+    shown = collision.points
+    hand.fem_step(0.02)  # the hand has not moved
+    hand.deform_collision()
+    assert collision.points is shown
+    hand.hold(0.03, jaw + np.array([0.0, 0.0, 0.4e-3]), True)
+    hand.fem_step(0.03)
+    hand.deform_collision()
+    assert collision.points is not shown
+    assert np.linalg.norm(
+        collision.points[hand.nodes] - patch.mesh.points[hand.nodes], axis=1
+    ) == pytest.approx(0.4e-3, rel=1e-9)
+    hand.hold(0.04, jaw, False)
+    hand.fem_step(0.04)
+    hand.deform_collision()
+    assert np.array_equal(collision.points, patch.mesh.points)
