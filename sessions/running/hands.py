@@ -41,19 +41,18 @@ def instruments(device: str, sub_device: str | None, handedness: str = "right") 
     when the choice cannot work."""
     forceps = None if sub_device in (None, "none") else sub_device
     if forceps is not None and forceps not in SUB_DEVICES:
-        raise CatalogError(f"unknown --sub-device {sub_device!r}; use {', '.join(SUB_DEVICES)}")
+        raise CatalogError(f"unknown second device {sub_device!r}; one of {', '.join(SUB_DEVICES)}")
     if forceps is not None and device == "scripted":
         raise CatalogError(
-            "a scripted session brings its own assisting hand: drop --sub-device, or drive the needle "
-            "yourself (--device mouse, spacemouse or openhaptics)"
+            "a scripted session brings its own assisting hand: a second device is for a person's "
+            "session (the needle on the mouse, a SpaceMouse or a Touch)"
         )
     if forceps is None or handedness != "left":
         return Instruments(device, forceps)
     if device == "mouse":
         raise CatalogError(
-            "the keyboard and mouse drive the needle holder only: for a left-handed trainee give the "
-            f"needle to --sub-device {forceps} with --device {forceps} and no --sub-device, or use two "
-            "hand-held devices"
+            "the keyboard and mouse drive the needle holder only, not the forceps: a left-handed "
+            f"trainee with the forceps on the {forceps} needs a hand-held device for the needle too"
         )
     return Instruments(forceps, device)
 
@@ -64,7 +63,7 @@ def forceps_start(spec: TaskSpec) -> Pose:
     sites = grasp_sites(spec)
     if not len(sites):
         raise CatalogError(
-            f"task {spec.name!r} has no wound edge for the forceps to hold: run it without --sub-device"
+            f"task {spec.name!r} has no wound edge for the forceps to hold: it is a one-handed task"
         )
     from sessions.running.scene import access_direction
 
@@ -82,9 +81,7 @@ def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, ta
         if taken == "spacemouse":
             found = find_spacemice()
             if len(found) < 2:
-                raise CatalogError(
-                    f"both hands on a SpaceMouse need two plugged in; found {len(found)} (`vascsim devices`)"
-                )
+                raise CatalogError(f"both hands on a SpaceMouse need two plugged in; found {len(found)}")
             identity = found[1]
         device = SpaceMouse(identity)
     elif name == "openhaptics":
@@ -92,7 +89,7 @@ def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, ta
 
         device = OpenHapticsDevice()
     else:
-        raise CatalogError(f"unknown --sub-device {name!r}; use {', '.join(SUB_DEVICES[1:])}")
+        raise CatalogError(f"unknown second device {name!r}; one of {', '.join(SUB_DEVICES[1:])}")
     return forceps_on(device, spec, left_handed)
 
 

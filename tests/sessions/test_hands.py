@@ -33,7 +33,7 @@ def test_the_instruments_go_to_the_devices_the_trainee_holds_them_in(
     [
         ("mouse", "spacemouse", "left", "keyboard and mouse drive the needle holder only"),
         ("scripted", "spacemouse", "right", "brings its own assisting hand"),
-        ("mouse", "joystick", "right", "unknown --sub-device 'joystick'"),
+        ("mouse", "joystick", "right", "unknown second device 'joystick'"),
     ],
 )
 def test_a_choice_that_cannot_work_is_refused_in_one_line(device, sub_device, handedness, says):

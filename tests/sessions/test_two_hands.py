@@ -149,6 +149,7 @@ def test_a_real_time_grasp_waits_for_no_column_solve():
     device, duration, subordinate = open_device("scripted", plan, None, scripted_hands(0.95, 5))
     simulation = task_simulation("interrupted-stitch", device, subordinate=subordinate)
     assert len(simulation.grasp_sites) == 1
+    already = len(simulation.forceps.model.spot_solved)  # earlier runs in this process solved some
     seen = []  # each graphics frame: the FEM step's grasp, and what the display process reads
     simulation.on_graphics = lambda now, fem: seen.append((fem.grasp_loads, simulation.graphics.get()))
     result = simulation.run_realtime(duration)
@@ -160,4 +161,4 @@ def test_a_real_time_grasp_waits_for_no_column_solve():
     for grasp, shown in holding:  # the display draws the grasp's loads (with the needle's, if any)
         assert set(grasp[0].tolist()) <= set(shown.loads[0].tolist())
     held = set(np.concatenate([grasp[0] for grasp, _ in holding]).tolist())
-    assert not held & set(simulation.forceps.model.spot_solved)
+    assert not held & set(simulation.forceps.model.spot_solved[already:])
