@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from metrics.units import display_unit, in_display_units
+from sim.forceps import Forceps
 
 STATE_WORDS = {
     "free": "needle free",
@@ -29,7 +30,8 @@ class HudLimits:
     time_budget_s: the task's time budget; stitches: the task's stitch count; expert_force_n: the
     experts' middle half (q1, q3) of peak force on this task (N), or None before any expert session;
     device_max_n: the device's rated force (N; 0 for a device without actuators); damage_stress_pa and
-    edge_damage_stress_pa: the local and wound-edge stresses whose crossing is a damage event (Pa).
+    edge_damage_stress_pa: the local and wound-edge stresses whose crossing is a damage event (Pa);
+    edge_tear_n: the force on the grasped edge at which it tears out of the forceps (N).
     """
 
     time_budget_s: float
@@ -38,6 +40,7 @@ class HudLimits:
     device_max_n: float = 0.0
     damage_stress_pa: float | None = None
     gauge_full_n: float = 3.0
+    edge_tear_n: float = Forceps.edge_tear_force
 
 
 @dataclass
@@ -51,6 +54,7 @@ class HudReading:
     force_fraction: float
     state: str
     warning: str
+    forceps: str = ""  # the other hand's line ("" for a one-handed session)
 
 
 @dataclass
@@ -65,9 +69,21 @@ class HudTracker:
     _state: str = "free"
     _warning: str = ""
     _warning_until: float = -math.inf
+    _forceps: float | None = None  # the forceps' force on the edge (N); None: one hand
 
-    def update(self, now: float, state: str, force: np.ndarray, tip: np.ndarray, local_stress: float) -> None:
+    def update(
+        self,
+        now: float,
+        state: str,
+        force: np.ndarray,
+        tip: np.ndarray,
+        local_stress: float,
+        grasp_force: np.ndarray | None = None,
+    ) -> None:
+        """``grasp_force``: the subordinate hand's forceps' force on the tissue (N; zero when they hold
+        nothing), None for a one-handed session."""
         previous, self._state = self._state, state
+        self._forceps = None if grasp_force is None else float(np.linalg.norm(grasp_force))
         if previous in ("free", "contact") and state in ("pierced", "exited"):
             self.entries.append(np.array(tip, dtype=np.float64))
         if previous == "pierced" and state == "exited":
@@ -82,6 +98,11 @@ class HudTracker:
             self._warn(now, f"force at the device's limit ({_force(limits.device_max_n)}): ease off")
         elif limits.expert_force_n is not None and magnitude > 2.0 * limits.expert_force_n[1]:
             self._warn(now, "more than twice the experts' force: turn the wrist, do not push")
+        elif self._forceps is not None and self._forceps >= 0.8 * limits.edge_tear_n:
+            self._warn(
+                now,
+                f"the forceps pull hard on the edge: lift less (it tears at {_force(limits.edge_tear_n)})",
+            )
 
     def _warn(self, now: float, text: str) -> None:
         self._warning, self._warning_until = text, now + 2.0
@@ -98,8 +119,17 @@ class HudTracker:
             force=f"force {_force(magnitude)}" + self._force_context(),
             force_fraction=min(magnitude / limits.gauge_full_n, 1.0),
             state=STATE_WORDS.get(self._state, self._state),
+            forceps=self._forceps_words(),
             warning=self._warning if now <= self._warning_until else "",
         )
+
+    def _forceps_words(self) -> str:
+        """The other hand: what the forceps hold, and how hard (nothing for a one-handed session)."""
+        if self._forceps is None:
+            return ""
+        if self._forceps == 0.0:
+            return "forceps not holding the edge"
+        return f"forceps holding the edge, {_force(self._forceps)}"
 
     def _force_context(self) -> str:
         """What the gauge's marks are: the experts' middle half (green) and the device's limit (red)."""

@@ -197,7 +197,9 @@ class LiveWindow:
         fem = self.simulation.fem.get() if self.simulation is not None else None
         force = np.zeros(3) if fem is None else np.asarray(fem.needle_force)
         if fem is not None:
-            self.tracker.update(now, fem.state, force, fem.needle_vertices[0], fem.local_stress)
+            self.tracker.update(
+                now, fem.state, force, fem.needle_vertices[0], fem.local_stress, fem.grasp_force
+            )
         if snapshot is not None:
             frame = self.scene.frame_of(snapshot)
             renderer.update(frame)
@@ -236,6 +238,7 @@ class LiveWindow:
             ("clock", int(0.24 * width), height - 30, 18, True),
             ("force", int(0.42 * width), height - 30, 15, False),
             ("state", 12, height - 56, 14, False),
+            ("forceps", 12, height - 78, 14, False),
             ("warning", 12, 14, 16, True),
         ):
             actor = vtkTextActor()
@@ -294,6 +297,7 @@ class LiveWindow:
         texts["clock"].GetTextProperty().SetColor(*colour)
         texts["force"].SetInput(reading.force)
         texts["state"].SetInput(reading.state + "   (Esc: stop)")
+        texts["forceps"].SetInput(reading.forceps)
         texts["warning"].SetInput(reading.warning)
         self._gauge.show(float(np.linalg.norm(force)))
 

@@ -40,6 +40,23 @@ def test_the_strip_counts_stitches_marks_bites_and_says_what_is_unsafe():
     assert "device's limit (880 mN)" in hud.reading(76.0, np.zeros(3)).warning
 
 
+def test_the_strip_says_what_the_forceps_hold_and_warns_before_the_edge_tears():
+    hud = HudTracker(LIMITS)
+    tip = np.zeros(3)
+    hud.update(0.1, "free", np.zeros(3), tip, 0.0)
+    assert hud.reading(0.1, np.zeros(3)).forceps == ""  # one hand: nothing about forceps
+    hud.update(0.2, "free", np.zeros(3), tip, 0.0, np.zeros(3))
+    assert hud.reading(0.2, np.zeros(3)).forceps == "forceps not holding the edge"
+    hud.update(0.3, "contact", np.zeros(3), tip, 0.0, np.array([0.0, 0.3, 0.4]))
+    reading = hud.reading(0.3, np.zeros(3))
+    assert reading.forceps == "forceps holding the edge, 500 mN" and not reading.warning
+    assert reading.state == "needle touching the wall"
+    hud.update(0.4, "contact", np.zeros(3), tip, 0.0, np.array([0.0, 0.0, 1.2]))  # 0.89 of 1.35 N
+    assert hud.reading(0.4, np.zeros(3)).warning == (
+        "the forceps pull hard on the edge: lift less (it tears at 1350 mN)"
+    )
+
+
 def test_the_instruction_screen_says_the_task_marks_budget_controls_and_how_to_start():
     spec = task_spec("arteriotomy-closure")
     words = [line.text for line in instruction_lines(spec, "mouse", "T07", "no experts yet")]
