@@ -307,3 +307,38 @@ def test_a_hand_holding_still_leaves_the_collision_mesh_alone(patch):
     hand.fem_step(0.04)
     hand.deform_collision()
     assert np.array_equal(collision.points, patch.mesh.points)
+
+
+def test_a_needle_entering_square_to_the_everted_edge_is_credited_square(patch):
+    """The collision mesh follows the grasp, so a contact on the lifted edge carries the everted
+    wall's normal: a needle coming in along it enters at 0 deg, though it is tilted against the wall
+    at rest (the entry angle is measured against the tissue where it is)."""
+    from sim.collision.mesh import TriangleContact
+    from sim.needle.events import entry_angle_deg
+
+    collision = CollisionMesh(patch.mesh)
+    hand = ForcepsInteraction(patch, collision)
+    jaw = np.array([0.012, 0.005, 0.00075])  # the middle of the wound edge (the free x1 face)
+    hand.hold(0.0, jaw, True)
+    hand.hold(0.01, jaw + np.array([0.0, 0.0, 0.6e-3]), True)  # lift the edge 0.6 mm
+    hand.fem_step(0.01)
+    hand.deform_collision()
+    # a point on the top face 0.8 mm in from the edge: where a bite beside the held edge goes in
+    target = np.array([0.0112, 0.005, 0.0015])
+    start, end = target + np.array([0.0, 0.0, 2e-3]), target - np.array([0.0, 0.0, 2e-3])
+    found = collision.query(np.array([start, end]))
+    top = int(np.argmin(np.abs(found.t - 0.5)))
+    triangle = int(found.triangle[top])
+    everted = collision.normals[triangle]
+    rest_normal = np.cross(*(np.diff(patch.mesh.points[collision.triangles[triangle]], axis=0)))
+    rest_normal /= np.linalg.norm(rest_normal) * np.sign(rest_normal[2])
+    tilt = entry_angle_deg(-everted, rest_normal)
+    assert tilt > 5.0, tilt  # the lifted edge leans well away from the wall at rest
+    # the needle comes in square to the everted surface, through that triangle's centre
+    centre = collision.corners[triangle].mean(axis=0)
+    path = np.array([centre + 1e-3 * everted, centre - 1e-3 * everted])
+    hits = collision.query(path)
+    k = int(np.flatnonzero(hits.triangle == triangle)[0])
+    contact = TriangleContact.from_hit(collision, hits, k, centre)
+    assert entry_angle_deg(-everted, contact.normal) == pytest.approx(0.0, abs=1e-6)
+    assert entry_angle_deg(-everted, rest_normal) == pytest.approx(tilt)
