@@ -62,9 +62,10 @@ FORCEPS_SHOWN_LENGTH = 0.008
 """How much of the forceps' jaws a scene draws (m) from their tips."""
 FORCEPS_OPEN_GAP = 0.0015
 """The open jaws' tips apart (m), as wide as the jaws' tips (:class:`sim.forceps.Forceps`)."""
-FORCEPS_OPEN_COLOUR, FORCEPS_CLOSED_COLOUR = (0.45, 0.49, 0.53), (0.16, 0.18, 0.45)
-"""Steel grey open, dark indigo closed: neither is the experts' green of a replay's ghost (a blinded
-replay is checked for green)."""
+FORCEPS_OPEN_COLOUR, FORCEPS_CLOSED_COLOUR = (0.56, 0.58, 0.6), (0.1, 0.1, 0.12)
+"""Steel grey open, near black closed: colourless, so that neither they nor the video codec's colour
+fringes along them read as the experts' green or the stress map's orange (a blinded replay is checked
+for both: dark indigo jaws left a few orange pixels after H.264's chroma subsampling)."""
 
 
 def forceps_points(
@@ -285,7 +286,7 @@ class TissueRenderer:
         self.place_forceps(frame.forceps)
 
     def place_forceps(self, jaws: tuple[NDArray[np.float64], bool] | None) -> None:
-        """Draw the subordinate hand's jaws (:func:`forceps_points`, grey open, indigo closed) as the
+        """Draw the subordinate hand's jaws (:func:`forceps_points`, grey open, near black closed) as the
         camera sees them now; hide them for None."""
         self._forceps_actor.SetVisibility(jaws is not None)
         if jaws is None:

@@ -134,9 +134,9 @@ def test_bite_marks_appear_as_they_are_made_in_their_colour():
     assert whites(before) > 0  # the mark (and the white background) are there from the start
 
 
-def test_the_forceps_are_drawn_at_their_jaws_grey_open_and_indigo_closed():
+def test_the_forceps_are_drawn_at_their_jaws_grey_open_and_black_closed():
     """A frame with the subordinate hand's jaws draws two jaws meeting at the jaw point: grey while
-    open, dark indigo once closed; a one-handed frame draws none."""
+    open, near black once closed; a one-handed frame draws none."""
     from dataclasses import replace
 
     from sim.render import FORCEPS_CLOSED_COLOUR, FORCEPS_OPEN_COLOUR, forceps_points
