@@ -28,16 +28,22 @@ def decoded_frames(video: Path | bytes) -> list[np.ndarray]:
 
 
 def expected_panels(
-    size: tuple[int, int], marks: bool, wound: bool
+    size: tuple[int, int], marks: bool, wound: bool, forceps: bool = False
 ) -> tuple[FrameLayout, np.ndarray, np.ndarray]:
-    """The blind layout, strip and key at ``size`` for a session with/without marks and a wound."""
+    """The blind layout, strip and key at ``size`` for a session with/without marks, a wound and the
+    subordinate hand's forceps."""
     from sim.render import stress_colours
 
     title, lines = blind.readout()
     layout = FrameLayout.of(size, 1, [(title, lines)])
     strip = draw_strip(layout.view_size[0], layout.strip, title, lines, layout.scale)
     key = draw_key(
-        layout.height, layout.panel, layout.scale, None, stress_colours(), blind.blind_keys(marks, wound)
+        layout.height,
+        layout.panel,
+        layout.scale,
+        None,
+        stress_colours(),
+        blind.blind_keys(marks, wound, forceps),
     )
     return layout, strip, key
 
@@ -56,17 +62,20 @@ def judged_pixels(view: np.ndarray) -> dict[str, int]:
 
 
 def blind_problems(
-    frames: list[np.ndarray], marks: bool | None = None, wound: bool | None = None
+    frames: list[np.ndarray],
+    marks: bool | None = None,
+    wound: bool | None = None,
+    forceps: bool | None = None,
 ) -> list[str]:
-    """What in ``frames`` a blinded rater must not see (empty when the video is blind). ``marks`` and
-    ``wound``: whether the session's task has target marks and a wound (None: whichever blind key
-    the first frame carries)."""
-    if marks is None or wound is None:
-        readings = [blind_problems(frames[:1], m, w) for m in (False, True) for w in (False, True)]
-        best = min(range(4), key=lambda k: len(readings[k]))
-        marks, wound = bool(best // 2), bool(best % 2)
+    """What in ``frames`` a blinded rater must not see (empty when the video is blind). ``marks``,
+    ``wound`` and ``forceps``: whether the session's task has target marks and a wound, and the session
+    a subordinate hand (None: whichever blind key the first frame carries)."""
+    if marks is None or wound is None or forceps is None:
+        combinations = [(m, w, f) for m in (False, True) for w in (False, True) for f in (False, True)]
+        readings = [blind_problems(frames[:1], *combination) for combination in combinations]
+        marks, wound, forceps = combinations[min(range(len(combinations)), key=lambda k: len(readings[k]))]
     height, width = frames[0].shape[:2]
-    layout, strip, key = expected_panels((width, height), marks, wound)
+    layout, strip, key = expected_panels((width, height), marks, wound, forceps)
     view_width = layout.view_size[0]
     problems = []
     for index, frame in enumerate(frames):

@@ -46,11 +46,23 @@ def neutral_bites(count: int) -> np.ndarray:
     return np.tile(np.array(BITE_COLOUR, dtype=np.uint8), (count, 1))
 
 
-def blind_keys(marks: bool, wound: bool) -> list[Key]:
+def forceps_keys() -> list[Key]:
+    """The subordinate hand's forceps, as :class:`sim.render.TissueRenderer` draws them."""
+    from sim.render import FORCEPS_CLOSED_COLOUR, FORCEPS_OPEN_COLOUR
+
+    return [
+        Key("line", (tuple(round(255 * c) for c in FORCEPS_OPEN_COLOUR),), "forceps, open"),
+        Key("line", (tuple(round(255 * c) for c in FORCEPS_CLOSED_COLOUR),), "forceps, closed"),
+    ]
+
+
+def blind_keys(marks: bool, wound: bool, forceps: bool = False) -> list[Key]:
     """The blind key: what each thing in the scene is, with no scale and no verdict."""
     keys = [Key("line", ((192, 192, 192),), "needle"), Key("dot", ((0, 191, 255),), "entry point")]
     if marks:
         keys += [Key("dot", ((255, 255, 255),), "target marks"), Key("dot", (BITE_COLOUR,), "bites")]
     if wound:
         keys.append(Key("line", ((107, 10, 26),), "wound edge"))
+    if forceps:
+        keys += forceps_keys()
     return keys

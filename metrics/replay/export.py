@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from metrics.alignment import PHASES, phase_starts
 from metrics.errors import MetricsError
 from metrics.replay import blind
-from metrics.replay.blind import blind_keys
+from metrics.replay.blind import blind_keys, forceps_keys
 from metrics.replay.hud import FrameLayout, HudLine, Key, draw_key, value_line
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
@@ -359,7 +359,11 @@ class ReplayCanvas:
         for renderer in self.renderers:
             renderer.show_outline(wound)
         stress_kpa = None if blind else tuple(v / 1e3 for v in self.renderers[0].stress_range)
-        shown = {"marks": marks is not None, "wound": len(wound) > 0}
+        shown = {
+            "marks": marks is not None,
+            "wound": len(wound) > 0,
+            "forceps": streams.forceps_jaw is not None,
+        }
         keys = blind_keys(**shown) if blind else replay_keys(ghost=ghost, **shown)
         layout = self.layout
         self.key = draw_key(layout.height, layout.panel, layout.scale, stress_kpa, stress_colours(), keys)
@@ -393,9 +397,9 @@ def wound_outline(streams: SessionStreams, mesh) -> NDArray[np.int64]:
     return outline_edges(mesh.surface_triangles, wound_nodes(mesh, point, normal))
 
 
-def replay_keys(ghost: bool, marks: bool, wound: bool) -> list[Key]:
+def replay_keys(ghost: bool, marks: bool, wound: bool, forceps: bool = False) -> list[Key]:
     """What the key says, for what the video shows (colours as :class:`sim.render.TissueRenderer`
-    draws them)."""
+    draws them); ``forceps``: a two-handed session's subordinate hand."""
     from metrics.placement import MARK_COLOURS
     from sim.render import FORCE_ARROW_M_PER_N
 
@@ -422,6 +426,8 @@ def replay_keys(ghost: bool, marks: bool, wound: bool) -> list[Key]:
         ]
     if wound:
         keys.append(Key("line", ((107, 10, 26),), "wound edge"))
+    if forceps:
+        keys += forceps_keys()
     return keys
 
 

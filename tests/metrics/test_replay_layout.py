@@ -48,6 +48,22 @@ def test_the_key_fits_its_panel_with_every_entry():
     assert ink.max() < 720 - 10  # the last entry drawn above the bottom edge, none cut off
 
 
+def test_a_two_handed_session_s_key_names_the_forceps_in_the_colours_drawn_and_still_fits():
+    from metrics.replay.blind import blind_keys
+    from sim.render import FORCEPS_CLOSED_COLOUR, FORCEPS_OPEN_COLOUR
+
+    layout = FrameLayout.of((1280, 720), 1)
+    keys = replay_keys(ghost=True, marks=True, wound=True, forceps=True)
+    assert [k.text for k in keys][-2:] == ["forceps, open", "forceps, closed"] and len(keys) == 10
+    drawn = [np.array(k.colours[0]) / 255 for k in keys[-2:]]
+    np.testing.assert_allclose(drawn, [FORCEPS_OPEN_COLOUR, FORCEPS_CLOSED_COLOUR], atol=0.5 / 255)
+    assert [k.text for k in blind_keys(True, True, forceps=True)][-2:] == ["forceps, open", "forceps, closed"]
+    assert "forceps, open" not in [k.text for k in blind_keys(True, True)]  # one-handed: no forceps
+    panel = draw_key(720, layout.panel, layout.scale, (0.0, 500.0), stress_colours(), keys)
+    ink = np.flatnonzero((panel < 128).any(axis=2).any(axis=1))
+    assert ink.max() < 720 - 10
+
+
 def test_a_cut_face_outline_is_its_rim():
     # two triangles making the unit square (nodes 0-3), one more off the face (node 4)
     triangles = np.array([[0, 1, 2], [0, 2, 3], [2, 3, 4]])
