@@ -36,9 +36,16 @@ from sessions.running.live import LiveView
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
 from sessions.store import CatalogStore
 from sessions.synthetic import bite_parameters, in_restricted_access
-from sessions.tasks import region_presets, session_tissue, task_preset, task_simulation, task_spec
+from sessions.tasks import (
+    edge_grasps,
+    region_presets,
+    session_tissue,
+    task_preset,
+    task_simulation,
+    task_spec,
+)
 from sim.devices import DeviceIdentity, ScriptedDevice, SuturingPass
-from sim.devices.assisting import ScriptedHands, assisting_hand, edge_grasp
+from sim.devices.assisting import ScriptedHands, assisting_hand
 from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings
@@ -119,9 +126,8 @@ def open_device(
             for bite, p in zip(bites, each, strict=True)
         ]
         subordinate = None
-        if hands.assisting is not None and task.placement is not None:
-            wound = task.placement["wound_point"], task.placement["wound_normal"]
-            grasps = [edge_grasp(entry, normal, *wound) for entry, normal, _ in bites]
+        grasps = edge_grasps(task)
+        if hands.assisting is not None and grasps:
             subordinate = ScriptedDevice(
                 assisting_hand(passes, grasps, hands.assisting),
                 identity=DeviceIdentity("scripted", "scripted subordinate hand (forceps)"),

@@ -520,19 +520,22 @@ def session_tissue(streams, cache_dir: Path | None = None):
     return tissue_for(task, cache_dir) if task is not None and known_task(task) else None
 
 
-def grasp_sites(spec: TaskSpec) -> np.ndarray:
-    """(k, 3) points (m) where the subordinate hand takes the wound edge for the task's bites: the rim
-    beside each entry (:func:`sim.devices.assisting.edge_grasp`); none on a task without a wound."""
+def edge_grasps(spec: TaskSpec) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per bite, where the subordinate hand takes the wound edge and the way it lifts it
+    (:func:`sim.devices.assisting.edge_grasp`: the rim beside the entry); none without a wound."""
     from sim.devices.assisting import edge_grasp
 
     placement = spec.placement or {}
     if placement.get("wound_point") is None:
-        return np.zeros((0, 3))
-    sites = [
-        edge_grasp(entry, normal, placement["wound_point"], placement["wound_normal"])[0]
-        for entry, normal, _ in spec.bites()
-    ]
-    return np.asarray(sites, dtype=np.float64)
+        return []
+    wound = placement["wound_point"], placement["wound_normal"]
+    return [edge_grasp(entry, normal, *wound) for entry, normal, _ in spec.bites()]
+
+
+def grasp_sites(spec: TaskSpec) -> np.ndarray:
+    """(k, 3) points (m) where the subordinate hand takes the wound edge for the task's bites
+    (:func:`edge_grasps`), (0, 3) on a task without a wound."""
+    return np.asarray([rim for rim, _ in edge_grasps(spec)], dtype=np.float64).reshape(-1, 3)
 
 
 def task_simulation(task: str, device, cache_dir: Path | None = None, **options):

@@ -146,28 +146,29 @@ class ForcepsInteraction:
         """Graphics layer, jaws open: build the grasp that closing them where they are would make, so
         the FEM step that closes them only checks that the nodes under the jaws are still these
         (exact: the same nodes give the same grasp) and reuses it."""
-        if self.jaw_closed:
-            return
-        point = self.jaw_point
-        found = closest_surface_point(self.collision, point, self.forceps.grasp_reach)
-        if found is None:
-            return
-        nodes = jaw_nodes(self.collision, found[0], found[1], self.forceps, self._free)
+        under = None if self.jaw_closed else self._under_jaws()
         ready = self._ready
-        if not nodes.size or (ready is not None and np.array_equal(ready[0], nodes)):
+        if under is None or (ready is not None and np.array_equal(ready[0], under[1])):
             return
+        nodes = under[1]
         if any(self.model.needs_solve(int(node), full=True) for node in nodes):
             return  # not solved yet (the prefetcher is on it): never a solve in the graphics layer
         self._ready = (nodes, *self._grasp_of(nodes))
 
-    def _close(self, time: float) -> None:
+    def _under_jaws(self) -> tuple[int, NDArray[np.int64]] | None:
+        """(triangle, the nodes closing the jaws now would hold), or None: out of reach of the surface
+        (closing on air) or only clamped tissue under them."""
         found = closest_surface_point(self.collision, self.jaw_point, self.forceps.grasp_reach)
         if found is None:
-            return  # closed on air
-        triangle, point = found
-        nodes = jaw_nodes(self.collision, triangle, point, self.forceps, self._free)
-        if nodes.size == 0:
-            return  # only clamped tissue under the jaws
+            return None
+        nodes = jaw_nodes(self.collision, found[0], found[1], self.forceps, self._free)
+        return (found[0], nodes) if nodes.size else None
+
+    def _close(self, time: float) -> None:
+        under = self._under_jaws()
+        if under is None:
+            return  # closed on air, or on clamped tissue only
+        triangle, nodes = under
         ready = self._ready  # built by the graphics layer for the nodes under the open jaws, if these
         if ready is not None and np.array_equal(ready[0], nodes):
             handle, self._unit_forces = ready[1], ready[2]
