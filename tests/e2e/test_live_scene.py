@@ -25,6 +25,9 @@ from sessions.store import CatalogStore
 from tests.dashboard.conftest import PASSWORD, running_server
 from tests.e2e.browser import chromium
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 VASCSIM = str(Path(sys.executable).with_name("vascsim"))
 SNAPSHOT = """() => {
   const image = document.getElementById("live-scene");

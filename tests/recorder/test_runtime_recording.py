@@ -11,6 +11,9 @@ from sim.needle import Needle, rotation_about
 from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 

@@ -17,6 +17,9 @@ from sessions.cli import main
 from tests.processes import descendants, still_running
 from tests.recorder.test_recorder import rows
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 
 def invoke(*args):
     return CliRunner().invoke(main, list(args))

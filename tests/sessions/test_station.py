@@ -28,6 +28,9 @@ from sessions.tasks import task_spec
 from sim.devices.mouse import MouseMapping, needle_circle
 from sim.needle import Needle, rotation_about
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 TASK = "interrupted-stitch"
 VASCSIM = str(Path(sys.executable).with_name("vascsim"))
 WINDOW = (960, 540)

@@ -14,6 +14,9 @@ from sessions.synthetic import assisting_parameters, scripted_hands
 from sim.devices.assisting import AssistingHandParameters
 from sim.devices.base import DeviceError
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 
 @pytest.fixture(scope="module", params=["simulated", "realtime"])
 def two_handed(request, tmp_path_factory):

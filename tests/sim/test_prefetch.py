@@ -13,6 +13,9 @@ from sim.fem import BiphaseTissue, Material, TissueModel
 from sim.needle.forces import NeedleForces
 from sim.runtime.prefetch import ColumnWorker, Prefetcher, arc_ahead, line_ahead
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 

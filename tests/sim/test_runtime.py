@@ -16,6 +16,9 @@ from sim.needle.forces import NeedleForces
 from sim.runtime import RunResult, RuntimeSettings, SafetySettings, Simulation
 from sim.runtime.safety import ForceSafety
 
+# the real-time clock needs the machine to itself (scripts/test runs these after the rest)
+pytestmark = pytest.mark.exclusive
+
 PAPER = NeedleForces.paper()  # these tests drive the paper's soft tissue with its needle rule
 
 LIMITS = DeviceLimits(max_force=0.02, max_force_rate=2.0)  # tight, so the pass exercises the limits
