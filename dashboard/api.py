@@ -171,7 +171,7 @@ def validity(request: Request, study_id: Id, viewer: Staff) -> dict:
     responses=CONFLICT,
 )
 def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
-    from metrics.report import validity_download
+    from metrics.reading.tables import validity_download
 
     state = _state(request)
     name = state.store.study(study_id, viewer, whole=True).name
@@ -223,7 +223,7 @@ def _plain(name: str) -> str:
     summary="A report figure (box plots or ROC, PNG or SVG)",
 )
 def figure(request: Request, study_id: Id, name: str, viewer: Staff) -> FileResponse:
-    from metrics.report import write_report
+    from metrics.reading.report import write_report
 
     if name not in FIGURES:
         raise not_found(f"figure {name!r}")

@@ -13,10 +13,9 @@ import pandas as pd
 
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
-from metrics.feedback import metric_groups, participant_feedback, session_feedback
 from metrics.proficiency import benchmarks_heading, drift_line
-from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.report import (
+from metrics.reading.feedback import metric_groups, participant_feedback, session_feedback
+from metrics.reading.tables import (
     composite_summary,
     concurrent_for_reading,
     display_scale,
@@ -25,6 +24,7 @@ from metrics.report import (
     standards_tables,
     summary_in_display_units,
 )
+from metrics.registry import REGISTRY, REGISTRY_VERSION
 from metrics.study import practice_mask
 from metrics.units import display_unit, in_display_units
 from recorder.layout import SAMPLES_JOURNAL
@@ -326,7 +326,7 @@ def validity_report(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer
 
 def _shown(frame: pd.DataFrame) -> dict:
     """A table as the page shows it: its column names and rows of display text."""
-    from metrics.report import table_text
+    from metrics.reading.tables import table_text
 
     return {
         "columns": [str(c) for c in frame.columns],

@@ -50,7 +50,7 @@ class Metric:
     bounds: tuple[float, float] = (-math.inf, math.inf)
     advice: str = ""
     """What a better attempt does, in a sentence a supervisor would say (the feedback a trainee reads
-    when the metric is worse than the experts': :mod:`metrics.feedback`)."""
+    when the metric is worse than the experts': :mod:`metrics.reading.feedback`)."""
 
     def __post_init__(self) -> None:
         if self.better not in (LOWER, HIGHER):

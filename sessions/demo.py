@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy import select
 
-from metrics.report import write_report
+from metrics.reading.report import write_report
 from metrics.study import StudyAnalysis, StudySettings
 from sessions.analysis import analyse_catalog_study, declare_analysis
 from sessions.catalog import Catalog, CatalogError, WrongState

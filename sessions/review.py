@@ -2,7 +2,7 @@
 
 The dashboard's session page and ``vascsim sessions show`` both call
 :func:`session_against_experts`, so a value reads the same wherever it is shown; the reading itself
-is :func:`metrics.band.against_band` (re-exported here).
+is :func:`metrics.reading.band.against_band` (re-exported here).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import pandas as pd
 from sqlalchemy import select
 
-from metrics.band import against_band, expert_quartiles
+from metrics.reading.band import against_band, expert_quartiles
 from metrics.registry import REGISTRY_VERSION, display_name
 from sessions.catalog import Catalog
 from sessions.models import MetricResult, Participant, Session, StitchResult
@@ -88,7 +88,7 @@ class SessionReview:
     (the study has none for this task yet: ``standard`` says why); benchmarks: one dict per
     benchmarked metric (metric, value, mark, direction, pass condition, passed, and a line in display
     units and direction words);
-    work_on and strengths: :func:`metrics.feedback.session_feedback`'s items.
+    work_on and strengths: :func:`metrics.reading.feedback.session_feedback`'s items.
     """
 
     uid: str
@@ -109,7 +109,7 @@ def review_session(catalog: Catalog, uid: str, rows: list[dict] | None = None) -
     session's task) and against the experts' band: one function, so the station's feedback screen and
     ``vascsim run`` say the same thing (what to work on is the same function as ``sessions show``'s).
     ``rows``: the session against the experts' band when the caller has read it already."""
-    from metrics.feedback import session_feedback
+    from metrics.reading.feedback import session_feedback
 
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)

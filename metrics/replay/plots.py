@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.figures import new_figure
+from metrics.reading.figures import new_figure
 from metrics.replay.reference import SIGNALS, ExpertReference, signal_of
 from metrics.streams import SessionStreams
 

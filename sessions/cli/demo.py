@@ -52,7 +52,7 @@ def demo(small: bool, as_json: bool) -> None:
     Re-running replaces the previous demo study; participants are labelled
     synthetic everywhere.
     """
-    from metrics.report import compact_caption, compact_summary, composite_summary, summary_table
+    from metrics.reading.tables import compact_caption, compact_summary, composite_summary, summary_table
     from sessions.demo import DEMO_STUDY, DemoSize, run_demo
     from sessions.store import CatalogStore
 

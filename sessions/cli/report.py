@@ -50,7 +50,7 @@ def report(
     registry are scored on Dask first (otherwise the report leaves them out and says so).
     """
 
-    from metrics.report import write_report
+    from metrics.reading.report import write_report
     from sessions.analysis import analyse_catalog_study
 
     catalog, home = open_catalog()

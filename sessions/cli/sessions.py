@@ -106,7 +106,7 @@ def sessions_show(uid: str, as_json: bool) -> None:
         "error": facts.error,
         "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in facts.files],
     }
-    from metrics.feedback import metric_groups, session_feedback
+    from metrics.reading.feedback import metric_groups, session_feedback
     from sessions.review import review_session, session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)

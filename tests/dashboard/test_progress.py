@@ -11,7 +11,7 @@ from sqlalchemy import select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
-from metrics.feedback import participant_feedback
+from metrics.reading.feedback import participant_feedback
 from sessions.accounts import create_user
 from sessions.analysis import analyse_catalog_study
 from sessions.demo import DEMO_STUDY

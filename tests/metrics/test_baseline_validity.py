@@ -9,7 +9,7 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from metrics.report import write_report
+from metrics.reading.report import write_report
 from metrics.study import StudySettings, analyse_study
 from sessions.analysis import settings_from_json
 from sessions.catalog import CatalogError

@@ -14,7 +14,7 @@ from sqlalchemy import select
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
 from metrics.errors import MetricsError
-from metrics.feedback import (
+from metrics.reading.feedback import (
     band_widths_outside,
     feedback_line,
     kind_of,

@@ -8,8 +8,8 @@ import pytest
 from markupsafe import escape
 
 from metrics import compute_session_metrics
+from metrics.reading.report import write_report
 from metrics.registry import REGISTRY_VERSION, display_name
-from metrics.report import write_report
 from metrics.study import StudySettings, analyse_study
 from metrics.synthetic import synthetic_study
 
@@ -55,7 +55,7 @@ def test_primary_metrics_discriminate_and_trainees_get_a_status(analysis):
 def test_the_trainee_table_reads_in_words_and_display_units(analysis):
     """Issue 25: the report's trainee table was 2,281 px wide of raw columns; it now says each trainee's
     status in words and the retention changes in display units with unit and direction."""
-    from metrics.report import trainee_summary
+    from metrics.reading.tables import trainee_summary
 
     table = trainee_summary(analysis).set_index("trainee")
     raw = analysis.trainees.set_index("participant_id")
@@ -73,8 +73,8 @@ def test_the_trainee_table_reads_in_words_and_display_units(analysis):
 
 
 def test_participant_feedback_is_the_median_of_the_last_practice_sessions_against_the_experts(analysis):
-    from metrics.band import against_band
-    from metrics.feedback import participant_feedback, what_to_work_on
+    from metrics.reading.band import against_band
+    from metrics.reading.feedback import participant_feedback, what_to_work_on
 
     table = analysis.sessions
     code = analysis.trainees["participant_id"].iloc[0]
@@ -108,7 +108,7 @@ def test_participant_feedback_is_the_median_of_the_last_practice_sessions_agains
 
 
 def test_the_report_lists_each_trainees_feedback_and_its_csvs_say_their_units(analysis, tmp_path):
-    from metrics.feedback import participant_feedback
+    from metrics.reading.feedback import participant_feedback
 
     page = write_report(analysis, tmp_path / "report")
     text = page.read_text()
@@ -136,7 +136,7 @@ def test_the_report_lists_each_trainees_feedback_and_its_csvs_say_their_units(an
 
 
 def test_concurrent_validity_reads_rho_with_its_interval_and_no_metric_unit():
-    from metrics.report import concurrent_for_reading
+    from metrics.reading.tables import concurrent_for_reading
 
     table = pd.DataFrame(
         [

@@ -221,9 +221,9 @@ def test_what_counts_as_retention_is_declared_and_used(tmp_path, copy_demo):
 
 
 def _method(analysis):
-    from metrics.report import _method_lines
+    from metrics.reading.report import method_lines
 
-    return _method_lines(analysis)
+    return method_lines(analysis)
 
 
 def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path, copy_demo):

@@ -56,7 +56,7 @@ def change_sessions(catalog: Catalog, changes: list[str]) -> int:
 @settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(changes=st.lists(CHANGES, min_size=4, max_size=16))
 def test_exports_of_a_study_with_missing_failed_and_unscored_sessions(copy_demo, changes):
-    from metrics.report import write_report
+    from metrics.reading.report import write_report
     from sessions.analysis import analyse_catalog_study
     from sessions.bundle_export import export_study
     from sessions.progress import progress_table, write_progress

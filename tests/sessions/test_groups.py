@@ -73,7 +73,7 @@ def test_an_older_catalogs_labels_are_lower_cased_and_unknown_ones_kept_as_decla
 def test_every_report_accounts_for_every_participant(tmp_path, copy_demo):
     """A participant with no session, one of a group the analysis does not compare: both are named in
     the report with the reason, not silently missing."""
-    from metrics.report import write_report
+    from metrics.reading.report import write_report
     from sessions.analysis import analyse_catalog_study
     from sessions.demo import DEMO_STUDY
 

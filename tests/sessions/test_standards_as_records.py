@@ -9,7 +9,7 @@ import json
 from click.testing import CliRunner
 from sqlalchemy import select, update
 
-from metrics.report import write_report
+from metrics.reading.report import write_report
 from sessions.analysis import analyse_catalog_study
 from sessions.catalog import Catalog
 from sessions.cli import main

@@ -19,7 +19,7 @@ from collections.abc import Mapping, Sequence
 
 import pandas as pd
 
-from metrics.band import against_band, expert_quartiles
+from metrics.reading.band import against_band, expert_quartiles
 from metrics.registry import REGISTRY, display_name
 from metrics.standards import SAFETY_METRICS
 from metrics.study import StudyAnalysis, practice_mask
@@ -69,7 +69,7 @@ def band_widths_outside(value: float, q1: float, q3: float, better: str, side: s
 
 
 def what_to_work_on(rows: Sequence[dict], limit: int = 3) -> list[dict]:
-    """The metrics a session did worse on than the experts (rows as :func:`metrics.band.against_band`
+    """The metrics a session did worse on than the experts (rows as :func:`metrics.reading.band.against_band`
     gives them): the never events, then safety, quality and efficiency, each kind by distance outside
     the band; at most ``limit`` items, every never event kept. Each: metric, kind, widths, advice."""
     items = _ranked(rows, ("worse",), "worse")
@@ -168,7 +168,7 @@ def _numbers(row: dict) -> tuple[str, str]:
 def session_feedback(
     rows: Sequence[dict], limit: int = 3, benchmarks: pd.DataFrame | None = None
 ) -> dict[str, list[dict]]:
-    """What to work on and strengths for rows as :func:`metrics.band.against_band` gives them, each
+    """What to work on and strengths for rows as :func:`metrics.reading.band.against_band` gives them, each
     item ready to show: metric, kind, line. What to work on leads with the pass marks of
     ``benchmarks`` (the study's, for this task) the values miss (:func:`benchmark_gaps`: what stops
     the next pass), then the never events and safety, then the rest, at most ``limit`` after the

@@ -1,0 +1,161 @@
+"""What a task becomes to run: its mesh, contact candidates, tissue presets, the precomputed tissue,
+the subordinate hand's grasp sites and the simulation."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from sessions.tasks.spec import TaskSpec
+from sessions.tasks.user import check_task_mesh, known_task, task_spec, user_tasks_dir
+
+
+def task_mesh(spec: TaskSpec):
+    """The task's mesh: for a patch, ``stitch_cell_m`` cells over the stitch region (x and y) and
+    through the wall, graded to ``cell_m`` elsewhere, so the needle's force kernel spans 3 cells;
+    for a vessel patch, a wall segment with its arteriotomy at uniform divisions."""
+    from sim.mesh import Calcification, Wound, grid_box_mesh, refined_coordinates, vessel_mesh
+
+    p = spec.parameters
+    if spec.scenario == "mesh_file":
+        from sim.mesh import load_mesh
+
+        return load_mesh(user_tasks_dir() / spec.name / p["mesh_file"])
+    if spec.scenario == "vessel_patch":
+        wound = p["wound"]
+        plaque = p.get("calcification")
+        return vessel_mesh(
+            inner_radius=p["inner_radius_m"],
+            wall_thickness=p["wall_m"],
+            length=p["length_m"],
+            arc_deg=p["arc_deg"],
+            circumferential_divisions=p["divisions"][0],
+            radial_divisions=p["divisions"][1],
+            axial_divisions=p["divisions"][2],
+            wound=Wound(wound["angle_deg"], *wound["z_m"], gap=wound["gap_m"]),
+            calcification=None
+            if plaque is None
+            else Calcification(tuple(plaque["angle_deg"]), tuple(plaque["z_m"]), tuple(plaque["layers"])),
+        )
+    (length, width, thickness), coarse, fine = p["size_m"], p["cell_m"], p["stitch_cell_m"]
+    (x0, x1), (y0, y1) = p["stitch_region_m"]
+    return grid_box_mesh(
+        refined_coordinates(length, coarse, fine, x0, x1),
+        refined_coordinates(width, coarse, fine, y0, y1),
+        refined_coordinates(thickness, coarse, fine, 0.0, thickness),
+    )
+
+
+def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
+    """Surface nodes in the task's stitch region (a patch: an x, y box at every depth; a vessel
+    patch: an angle and z range of the adventitia): the contact candidates."""
+    points = mesh.points[mesh.surface_nodes]
+    if spec.scenario == "mesh_file":
+        outer = mesh.node_sets.get("outer", mesh.surface_nodes)
+        near = (
+            np.linalg.norm(mesh.points[outer] - np.asarray(spec.entry), axis=1)
+            <= spec.parameters["stitch_radius_m"]
+        )
+        return np.asarray(outer)[near]
+    if spec.scenario == "vessel_patch":
+        region = spec.parameters["stitch_region"]
+        angle = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
+        (a0, a1), (z0, z1) = region["angle_deg"], region["z_m"]
+        inside = (angle >= a0) & (angle <= a1) & (points[:, 2] >= z0 - 1e-9) & (points[:, 2] <= z1 + 1e-9)
+        outer = np.isin(mesh.surface_nodes, mesh.node_sets["outer"])
+        return mesh.surface_nodes[inside & outer]
+    (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
+    inside = (points[:, 0] >= x0 - 1e-9) & (points[:, 0] <= x1 + 1e-9)
+    inside &= (points[:, 1] >= y0 - 1e-9) & (points[:, 1] <= y1 + 1e-9)
+    return mesh.surface_nodes[inside]
+
+
+def task_preset(task: str):
+    """The task's tissue preset (:mod:`sim.calibration.presets`): biphase parameters and needle forces."""
+    from sim.calibration.presets import tissue_preset
+
+    return tissue_preset(task_spec(task).parameters.get("tissue", "paper"))
+
+
+def region_presets(task: str) -> dict:
+    """Mesh region name -> tissue preset for the task's regions that differ from its wall (e.g. a
+    calcified plaque); empty for a uniform wall."""
+    from sim.calibration.presets import tissue_preset
+
+    return {
+        region: tissue_preset(name)
+        for region, name in task_spec(task).parameters.get("region_tissue", {}).items()
+    }
+
+
+def region_forces(task: str, mesh) -> dict:
+    """Mesh region id -> the needle forces of that region's preset (see :func:`region_presets`)."""
+    ids = {name: rid for rid, name in mesh.region_names.items()}
+    return {ids[region]: preset.forces for region, preset in region_presets(task).items()}
+
+
+@cache
+def tissue_for(task: str, cache_dir: Path | None = None):
+    """The task's precomputed tissue model (built once per process, cached on disk): the preset's
+    biphase wall on the task mesh, its condensed inverse over the stitch region's surface nodes."""
+    from sim.fem import BiphaseTissue
+
+    spec = task_spec(task)
+    mesh = task_mesh(spec)
+    if spec.scenario == "mesh_file":  # a stored task file can be edited by hand after `tasks add`
+        check_task_mesh(mesh, spec.parameters["fixed"], spec.entry, spec.parameters["stitch_radius_m"])
+    fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
+    candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
+    regions = {region: preset.biphase for region, preset in region_presets(task).items()}
+    tissue = BiphaseTissue.build(
+        mesh, fixed, task_preset(task).biphase, region_parameters=regions, contact_nodes=candidates
+    )
+    tissue.precompute(cache_dir=cache_dir)
+    return tissue
+
+
+def session_tissue(streams, cache_dir: Path | None = None):
+    """The tissue model a recorded session ran on (from its header's ``task``), or None for
+    sessions of other origins (imported data, unknown tasks)."""
+    task = streams.attributes.get("task")
+    return tissue_for(task, cache_dir) if task is not None and known_task(task) else None
+
+
+def edge_grasps(spec: TaskSpec) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per bite, where the subordinate hand takes the wound edge and the way it lifts it
+    (:func:`sim.devices.assisting.edge_grasp`: the rim beside the entry); none without a wound."""
+    from sim.devices.assisting import edge_grasp
+
+    placement = spec.placement or {}
+    if placement.get("wound_point") is None:
+        return []
+    wound = placement["wound_point"], placement["wound_normal"]
+    return [edge_grasp(entry, normal, *wound) for entry, normal, _ in spec.bites()]
+
+
+def grasp_sites(spec: TaskSpec) -> np.ndarray:
+    """(k, 3) points (m) where the subordinate hand takes the wound edge for the task's bites
+    (:func:`edge_grasps`), (0, 3) on a task without a wound."""
+    return np.asarray([rim for rim, _ in edge_grasps(spec)], dtype=np.float64).reshape(-1, 3)
+
+
+def task_simulation(task: str, device, cache_dir: Path | None = None, **options):
+    """A :class:`sim.runtime.Simulation` of ``task`` driven by ``device``: the task's tissue, the
+    curved needle, its preset's needle forces and its regions' own (a calcified plaque pierces at
+    its own threshold). ``options`` go to the Simulation (e.g. ``settings``)."""
+    from sim.needle import Needle
+    from sim.runtime import Simulation
+
+    tissue = tissue_for(task, cache_dir)
+    if options.get("subordinate") is not None and "grasp_sites" not in options:
+        options["grasp_sites"] = grasp_sites(task_spec(task))
+    return Simulation(
+        tissue,
+        Needle.curved(),
+        device,
+        forces=task_preset(task).forces,
+        region_forces=region_forces(task, tissue.mesh),
+        **options,
+    )

@@ -1,0 +1,47 @@
+"""A task: its scenario (mesh, materials, held nodes), its bites and what it scores against."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    name: str
+    scenario: str
+    description: str
+    entry: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    bite_direction: tuple[float, float, float]
+    parameters: dict
+    placement: dict | None = None
+    """The wound edge and target marks placement metrics score against (SI units; see
+    :class:`metrics.placement.PlacementTargets`); recorded in each session's header."""
+    more_bites: tuple = ()
+    """Further bites after the first, in the order they are made: (entry, normal, bite_direction)."""
+    access: dict | None = None
+    """Restricted access: ``approach`` (unit vector from the entry point: the only direction the
+    hand can come from) and ``tilt_deg`` (its angle from the wall's normal); None: open access."""
+    time_budget_s: float = 60.0
+    """The time a course allows for the task (s): chosen at about ten times a scripted expert's."""
+
+    @property
+    def stitch_count(self) -> int:
+        """The stitches the task asks for (one per target entry mark; one without marks)."""
+        return len(self.placement["entry_targets"]) if self.placement else 1
+
+    @property
+    def primary_metrics(self) -> tuple[str, ...]:
+        """The metrics a study of this task analyses unless it declares others, chosen before any data:
+        the source paper's proposed needle velocity near the insertion point (before and after
+        piercing), its perpendicular-entry criterion, the hand's smoothness (the wrist should turn the
+        needle smoothly), and, where the task marks targets, where the bite went against its mark. A
+        short declared list keeps the multiple-comparison correction from diluting what matters."""
+        needle = ("tip_speed_before_pierce", "tip_speed_after_pierce", "entry_angle_error_deg")
+        hand = ("spectral_arc_length",)
+        placement = ("entry_to_target",) if self.placement else ()
+        return needle + hand + placement
+
+    def bites(self) -> list[tuple]:
+        """Every bite of the task, in order: (entry, normal, bite_direction) each (m, unit vectors)."""
+        return [(self.entry, self.normal, self.bite_direction), *self.more_bites]
