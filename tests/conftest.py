@@ -1,6 +1,7 @@
 """Shared fixtures: small meshes and models used across the sim tests."""
 
 import os
+import re
 import uuid
 from pathlib import Path
 
@@ -178,6 +179,51 @@ def display():
     yield name
     server.terminate()
     server.wait(10)
+
+
+SHARED_DEMO_GROUP = "reduced-demo"
+DEMO_FIXTURES = ("demo_template", "copy_demo", "demo_catalog")
+
+
+def files_reading_the_demo() -> set[str]:
+    """The test files (paths from the repository's root) that name a fixture of the shared reduced
+    demo: the file level is all that pytest-xdist's controller sees when it hands out work."""
+    root = Path(__file__).parent
+    named = re.compile(r"\b(" + "|".join(DEMO_FIXTURES) + r")\b")
+    return {
+        path.relative_to(root.parent).as_posix()
+        for path in root.rglob("test_*.py")
+        if named.search(path.read_text(encoding="utf-8"))
+    }
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """How scripts/test's two workers share the tests: a file's tests stay together (its module
+    fixtures are built once), and the files that read the shared reduced demo all go to one worker,
+    so the demo runs once in the suite, not once per worker."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    demo_files = files_reading_the_demo()
+
+    class ByFileDemoTogether(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            file = nodeid.split("::", 1)[0]
+            return SHARED_DEMO_GROUP if file in demo_files else file
+
+    return ByFileDemoTogether(config, log)
+
+
+def pytest_collection_modifyitems(config, items):
+    """A test that reads the demo through a fixture its file does not name would build the demo
+    on a second worker: say so rather than silently paying for it."""
+    demo_files = files_reading_the_demo()
+    missed = {item.nodeid.split("::", 1)[0] for item in items if "demo_template" in item.fixturenames}
+    missed -= demo_files
+    if missed:
+        raise pytest.UsageError(
+            f"{', '.join(sorted(missed))} read(s) the shared reduced demo without naming one of "
+            f"{', '.join(DEMO_FIXTURES)}: name it in the file so the demo's tests share one worker"
+        )
 
 
 RINGS = Path("/dev/shm")

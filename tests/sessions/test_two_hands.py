@@ -15,10 +15,10 @@ from sim.devices.assisting import AssistingHandParameters
 from sim.devices.base import DeviceError
 
 # the real-time clock needs the machine to itself (scripts/test runs these after the rest)
-pytestmark = pytest.mark.exclusive
+REAL_TIME = pytest.param("realtime", marks=pytest.mark.exclusive)
 
 
-@pytest.fixture(scope="module", params=["simulated", "realtime"])
+@pytest.fixture(scope="module", params=["simulated", REAL_TIME])
 def two_handed(request, tmp_path_factory):
     """An expert's scripted interrupted stitch with both hands, recorded and scored (SQLite), in
     simulated time and on the real-time clock (both devices read in the haptic process)."""
@@ -142,6 +142,7 @@ def test_the_synthetic_assisting_hand_follows_skill():
         AssistingHandParameters(eversion=-1e-3)
 
 
+@pytest.mark.exclusive
 def test_a_real_time_grasp_waits_for_no_column_solve():
     """The grasp's nodes are solved before the clock (the task's grasp sites) or ahead of the jaws (the
     prefetcher), so the FEM step that closes the jaws solves nothing on the spot; the display gets the
