@@ -4,7 +4,7 @@ LOPO composite looks good by chance on JIGSAWS-sized samples with no real differ
 Run:  .venv/bin/python benchmarks/auc_coverage.py [--simulations 20000]
 
 Coverage: two normal groups of n, shifted by delta SDs (true AUC = Phi(delta / sqrt 2), from 0.5
-to 0.998); the share of simulated samples whose 95 % interval (metrics.statistics.auc_interval)
+to 0.998); the share of simulated samples whose 95 % interval (metrics.study.statistics.auc_interval)
 holds the true AUC. The old percentile bootstrap is printed beside it at 6 v 6 for comparison.
 Composite: 4 v 4 participants (JIGSAWS suturing has 2 experts, 2 intermediates and 4 novices; we
 take 4 v 4) x 5 trials, 6 metrics of pure noise: share of simulations with out-of-fold AUC >= 0.75,
@@ -24,8 +24,8 @@ from scipy import stats
 
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
-from metrics.composite import validate_composite  # noqa: E402
-from metrics.statistics import auc_interval, bootstrap_auc  # noqa: E402
+from metrics.study.composite import validate_composite  # noqa: E402
+from metrics.study.statistics import auc_interval, bootstrap_auc  # noqa: E402
 
 SHIFTS = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
 

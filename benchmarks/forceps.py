@@ -64,7 +64,7 @@ def convergence() -> None:
 
 
 def cost(repeats: int) -> None:
-    from sessions.runner import SessionPlan, open_device
+    from sessions.running.runner import SessionPlan, open_device
     from sessions.synthetic import scripted_hands
     from sessions.tasks import task_simulation, task_spec, tissue_for
     from sim.devices.assisting import edge_grasp
@@ -116,7 +116,7 @@ def realtime(repeats: int) -> None:
     """A scripted expert's two-handed stitch on the real-time clock, ``repeats`` seeds: the grasp's
     contact change (the FEM step reading the closed jaws to the grasp's forces), warm (the task's grasp
     sites solved before the clock, the prefetcher ahead of the jaws) and the layers' compute."""
-    from sessions.runner import SessionPlan, open_device
+    from sessions.running.runner import SessionPlan, open_device
     from sessions.synthetic import scripted_hands
     from sessions.tasks import task_simulation
 

@@ -25,7 +25,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 
 from metrics import compute_session_metrics, metrics_of  # noqa: E402
 from metrics.reading.report import write_report  # noqa: E402
-from metrics.study import StudySettings, analyse_study  # noqa: E402
+from metrics.study.analysis import StudySettings, analyse_study  # noqa: E402
 from metrics.synthetic import synthetic_session, synthetic_study  # noqa: E402
 
 

@@ -4,12 +4,12 @@ Run:  .venv/bin/python benchmarks/placement.py [--repeats 200]
 
 One scripted arteriotomy-closure session (three stitches) is recorded through the runner's device
 (simulated time); then, medians of ``--repeats``:
-- deriving its stitch points on the tissue mesh (``metrics.placement.stitch_points``);
-- how the needle went through the wall (``metrics.passage.passage_columns``: track offset and swept
+- deriving its stitch points on the tissue mesh (``metrics.signals.placement.stitch_points``);
+- how the needle went through the wall (``metrics.signals.passage.passage_columns``: track offset and swept
   area from the scene, wound-edge stress through the tissue model), cold (a fresh process: the
   kernel nodes' K0^-1 columns solved) and warm (columns cached, as right after recording);
 - the registered placement metrics from them (``metrics_of`` restricted to the placement group);
-- the per-stitch table that is stored (``metrics.placement.stitch_table``);
+- the per-stitch table that is stored (``metrics.signals.placement.stitch_table``);
 and, for scale, the whole registry on the same session.
 """
 
@@ -26,12 +26,12 @@ import numpy as np
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
 from metrics import REGISTRY, from_recorded, metrics_of  # noqa: E402
-from metrics.passage import passage_columns  # noqa: E402
-from metrics.placement import stitch_points, stitch_table  # noqa: E402
-from metrics.tissue import with_tissue_fields  # noqa: E402
+from metrics.signals.passage import passage_columns  # noqa: E402
+from metrics.signals.placement import stitch_points, stitch_table  # noqa: E402
+from metrics.signals.tissue import with_tissue_fields  # noqa: E402
 from recorder import SessionWriter, open_session  # noqa: E402
 from recorder.runtime import RuntimeRecorder  # noqa: E402
-from sessions.runner import SessionPlan, open_device  # noqa: E402
+from sessions.running.runner import SessionPlan, open_device  # noqa: E402
 from sessions.synthetic import pass_parameters  # noqa: E402
 from sessions.tasks import task_preset, task_simulation, task_spec, tissue_for  # noqa: E402
 

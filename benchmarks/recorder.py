@@ -17,7 +17,7 @@ Run:  .venv/bin/python benchmarks/recorder.py
 - durability lag: time from record() to the sample being fsynced, p50/p99/max.
 
 Network ingest (``--part ingest``): one central-recorder server process (uvicorn,
-``recorder.ingest``) on this machine; N simulated stations (default 50, asyncio in
+``recorder.remote.ingest``) on this machine; N simulated stations (default 50, asyncio in
 this process) each send their session header, then generate 1 kHz samples and
 send a 100-sample batch every 100 ms (their local flush interval) over WebSocket
 or HTTP on loopback, for ``--seconds``. Printed: per-sample durability lag (sample generated -> its batch
@@ -46,7 +46,7 @@ import numpy as np
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
 from recorder import COLUMN, SAMPLE_COLUMNS, SessionWriter  # noqa: E402
-from recorder.remote import encode_batch, pack_frame  # noqa: E402
+from recorder.remote.protocol import encode_batch, pack_frame  # noqa: E402
 from recorder.writer import samples_batch  # noqa: E402
 from sessions.config import prepare_rendering  # noqa: E402
 from sim.calibration.presets import tissue_preset  # noqa: E402
@@ -234,7 +234,7 @@ def throughput(directory: str, samples: int = 3_000_000) -> float:
 
 SERVER = """
 import sys, json, uvicorn
-from recorder.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore, create_app
 
 tokens = json.loads(sys.argv[2])
 uvicorn.run(create_app(IngestStore(sys.argv[1], tokens)), host="127.0.0.1", port=int(sys.argv[3]),

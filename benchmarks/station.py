@@ -66,8 +66,8 @@ def bare_window_fps(mesh, size: tuple[int, int], seconds: float = 5.0) -> float:
 
 def station_run(size: tuple[int, int] | None, seconds: float, delay_frames: int) -> dict:
     from sessions.config import cache_dir, data_home
-    from sessions.runner import LIVE_SETTINGS
     from sessions.running.hud import HudLimits
+    from sessions.running.runner import LIVE_SETTINGS
     from sessions.running.scene import scene_facts
     from sessions.running.window import LiveWindow, ViewSettings
     from sessions.tasks import task_preset, task_simulation, task_spec, tissue_for

@@ -25,7 +25,7 @@ import numpy as np
 # This folder holds scripts named like our packages (metrics.py, recorder.py): keep it off the path.
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
-from sessions.runner import SessionPlan, open_device  # noqa: E402
+from sessions.running.runner import SessionPlan, open_device  # noqa: E402
 from sessions.synthetic import pass_parameters  # noqa: E402
 from sessions.tasks import TASKS, region_forces, task_preset, tissue_for  # noqa: E402
 from sim.needle import Needle  # noqa: E402

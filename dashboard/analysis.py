@@ -1,7 +1,7 @@
 """Study analyses for the dashboard, computed once per catalog state and kept in memory.
 
 A study's analysis (construct validity, benchmarks, proficiency, learning curves) is
-the same computation as `vascsim report`: :func:`sessions.analysis.analyse_catalog_study`
+the same computation as `vascsim report`: :func:`sessions.scoring.analysis.analyse_catalog_study`
 from the study's declared analysis. It depends only on the study's scored
 sessions and its declaration, so it is cached under a fingerprint of the catalog's sessions,
 metric results, participants and declarations: any new score, session, relabelling or
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from metrics.study import StudyAnalysis, oriented
-from sessions.analysis import analyse_catalog_study
+from metrics.study.analysis import StudyAnalysis, oriented
+from sessions.scoring.analysis import analyse_catalog_study
 from sessions.store import CatalogStore
 
 CACHED_STUDIES = 16

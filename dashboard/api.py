@@ -19,8 +19,9 @@ from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_foun
 from dashboard.live import live_stream
 from dashboard.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
-from sessions import accounts, ratings
+from sessions import accounts
 from sessions.running.live import live_view_path
+from sessions.scoring import ratings
 from sessions.status import SessionStatus
 from sessions.store import STAFF, UserRecord
 
@@ -193,7 +194,7 @@ def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
 def progress_file(request: Request, study_id: Id, kind: str, viewer: Staff) -> Response:
     import tempfile
 
-    from sessions.progress import progress_table, write_progress
+    from sessions.exchange.progress import progress_table, write_progress
 
     if kind not in ("csv", "xlsx"):
         raise not_found(f"progress.{kind}")

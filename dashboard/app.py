@@ -19,10 +19,10 @@ from dashboard.limits import BodyLimit
 from dashboard.replay_jobs import ReplayJobs
 from dashboard.settings import DashboardSettings
 from dashboard.signals import SignalCache
-from metrics.registry import display_name
+from metrics.session.registry import display_name
 from metrics.units import significant
-from recorder.ingest import IngestStore
-from recorder.ingest import create_app as create_ingest_app
+from recorder.remote.ingest import IngestStore
+from recorder.remote.ingest import create_app as create_ingest_app
 from sessions.catalog import Catalog
 from sessions.store import CatalogStore
 
@@ -108,5 +108,5 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
 
 
 def _ingest_store(settings: DashboardSettings, catalog: Catalog) -> IngestStore:
-    """Remote stations' ingest store (recorder.ingest), authorised by the catalog's station tokens."""
+    """Remote stations' ingest store (recorder.remote.ingest), authorised by the catalog's station tokens."""
     return IngestStore(settings.ingest_root, CatalogStore(catalog).station_for_token)

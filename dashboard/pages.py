@@ -27,7 +27,7 @@ from dashboard.errors import DashboardError, said, status_of
 from dashboard.signals import replay_video
 from recorder.layout import SAMPLES_FILE
 from sessions.models import ROLES
-from sessions.ratings import session_ratings
+from sessions.scoring.ratings import session_ratings
 from sessions.store import STAFF
 from sim.errors import VascsimError
 
@@ -136,7 +136,7 @@ def set_study_standard(
 ) -> Response:
     """A supervisor sets a new version of the study's standard on ``task`` (as `vascsim standards
     set` does, signed with their name); refused, the study page again with why."""
-    from sessions.standards import set_standard
+    from sessions.scoring.standards import set_standard
 
     state = request.app.state
     study = state.store.study(study_id, viewer, whole=True)

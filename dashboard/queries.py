@@ -13,7 +13,6 @@ import pandas as pd
 
 from dashboard.analysis import AnalysisCache, benchmark_rows, records, roc_points
 from dashboard.auth import Viewer
-from metrics.proficiency import benchmarks_heading, drift_line
 from metrics.reading.feedback import metric_groups, participant_feedback, session_feedback
 from metrics.reading.tables import (
     composite_summary,
@@ -24,13 +23,14 @@ from metrics.reading.tables import (
     standards_tables,
     summary_in_display_units,
 )
-from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.study import practice_mask
+from metrics.session.registry import REGISTRY, REGISTRY_VERSION
+from metrics.study.analysis import practice_mask
+from metrics.study.proficiency import benchmarks_heading, drift_line
 from metrics.units import display_unit, in_display_units
 from recorder.layout import SAMPLES_JOURNAL
-from sessions.analysis import analysed_task
-from sessions.review import against_band, expert_band, session_stitches
-from sessions.standards import set_command
+from sessions.scoring.analysis import analysed_task
+from sessions.scoring.review import against_band, expert_band, session_stitches
+from sessions.scoring.standards import set_command
 from sessions.status import SCORABLE
 from sessions.store import CatalogStore, ParticipantRecord, SessionRecord
 from sim.errors import VascsimError

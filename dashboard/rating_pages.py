@@ -8,7 +8,7 @@ address, the video's address or the page. The video is the blind render
 (:mod:`metrics.replay.blind`: the session alone, without names, ghost, judging colours or readouts),
 never the replay a supervisor reviews; without one, the page offers to render it. Open rating
 (``/sessions/{uid}/rate``) shows who it is.
-Every rating goes through :func:`sessions.ratings.add_rating` with the signed-in user as the rater.
+Every rating goes through :func:`sessions.scoring.ratings.add_rating` with the signed-in user as the rater.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from dashboard.pages import render
 from dashboard.signals import inside, replay_video
 from metrics.errors import MetricsError
 from metrics.instruments import INSTRUMENTS, instrument
-from sessions.ratings import add_rating, session_ratings
 from sessions.replaying import blind_replay_path
+from sessions.scoring.ratings import add_rating, session_ratings
 from sessions.store import STAFF
 from sim.errors import VascsimError
 

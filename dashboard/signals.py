@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from dashboard.errors import DashboardError, not_found
-from metrics.events import readable_events
 from metrics.replay.reference import SIGNALS, signal_of
+from metrics.session.events import readable_events
+from metrics.signals.tissue import with_tissue_fields
 from metrics.streams import from_recorded
-from metrics.tissue import with_tissue_fields
 from recorder import open_session
 from recorder.writer import SAMPLES_FILE
 from sessions.config import cache_dir

@@ -7,10 +7,10 @@ The core imports without the web stack. Public API::
 """
 
 from metrics.errors import MetricsError
-from metrics.registry import REGISTRY, REGISTRY_VERSION, Metric
-from metrics.session import compute_session_metrics, metrics_of
+from metrics.session.compute import compute_session_metrics, metrics_of
+from metrics.session.registry import REGISTRY, REGISTRY_VERSION, Metric
 from metrics.streams import SessionStreams, from_frame, from_recorded
-from metrics.validity import ConstructValidityResult, construct_validity
+from metrics.study.validity import ConstructValidityResult, construct_validity
 
 __all__ = [
     "REGISTRY",

@@ -95,9 +95,9 @@ class SessionStreams:
     time and kind. stress_field: optional table of the tissue surface at the moment of insertion
     (columns x, y, z, area, von_mises; m, m², Pa). force_limit: the device's rated clamp (N), if known.
     stitches: optional table of each stitch's entry and exit points on the tissue surface
-    (:func:`metrics.placement.stitch_points`, derived with the tissue mesh), with how the needle went
-    through the wall where the scene was recorded (:mod:`metrics.passage`). needle_frames: the recorded
-    scene (:class:`NeedleFrames`), if any.
+    (:func:`metrics.signals.placement.stitch_points`, derived with the tissue mesh), with how the
+    needle went through the wall where the scene was recorded (:mod:`metrics.signals.passage`).
+    needle_frames: the recorded scene (:class:`NeedleFrames`), if any.
     """
 
     session_id: str

@@ -83,7 +83,7 @@ class SessionWriter:
     header: session metadata (participant, session ids, task, mesh hash,
         materials, model parameters, device, software version, clock mode, ...).
     mirror: called from the writer thread with ("samples" | "events", batch) for every batch
-        once it is durable here, e.g. ``recorder.station.StationUploader.submit`` to stream the
+        once it is durable here, e.g. ``recorder.remote.station.StationUploader.submit`` to stream the
         session to a central recorder as well.
     Single producer: call ``record`` from one thread (the haptic loop).
     """

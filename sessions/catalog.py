@@ -209,7 +209,7 @@ class Catalog:
         handedness: str = "right",
         synthetic: bool = False,
     ) -> Participant:
-        from sessions.groups import group_name
+        from sessions.scoring.groups import group_name
 
         if orm.scalar(select(Participant).where(Participant.study_id == study.id, Participant.code == code)):
             raise AlreadyExists(f"participant {code!r} already exists in study {study.name!r}")
@@ -317,7 +317,7 @@ def stream_file(session_id: int, path: Path) -> StreamFile:
 
 def metric_results(session_id: int, values: dict[str, float]) -> list[MetricResult]:
     """Metric rows of one session under the current registry version (NaN stored as NULL)."""
-    from metrics.registry import REGISTRY_VERSION
+    from metrics.session.registry import REGISTRY_VERSION
 
     return [
         MetricResult(

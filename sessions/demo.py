@@ -26,13 +26,13 @@ import numpy as np
 from sqlalchemy import select
 
 from metrics.reading.report import write_report
-from metrics.study import StudyAnalysis, StudySettings
-from sessions.analysis import analyse_catalog_study, declare_analysis
+from metrics.study.analysis import StudyAnalysis, StudySettings
 from sessions.catalog import Catalog, CatalogError, WrongState
 from sessions.config import cache_dir
 from sessions.models import Study
-from sessions.runner import SessionPlan, run_session
-from sessions.standards import set_standard
+from sessions.running.runner import SessionPlan, run_session
+from sessions.scoring.analysis import analyse_catalog_study, declare_analysis
+from sessions.scoring.standards import set_standard
 from sessions.synthetic import profile_for, scripted_hands
 from sessions.tasks import task_spec, tissue_for
 
@@ -125,7 +125,7 @@ def synthetic_ratings(catalog: Catalog, runs: list, seed: int) -> int:
     instrument); returns how many ratings."""
     from metrics.instruments import GRS
     from sessions.models import Participant, Session, Study, Task
-    from sessions.ratings import checked_rating, store_ratings
+    from sessions.scoring.ratings import checked_rating, store_ratings
 
     with catalog.session() as orm:
         rows = orm.execute(

@@ -32,7 +32,7 @@ class Study(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     description: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime)
-    # groups this study declared beyond the standard ones (sessions.groups), lower-case
+    # groups this study declared beyond the standard ones (sessions.scoring.groups), lower-case
     custom_groups: Mapped[list] = mapped_column(JSON, default=list, server_default="[]")
     participants: Mapped[list[Participant]] = relationship(
         back_populates="study", cascade="all, delete-orphan"
@@ -43,7 +43,7 @@ class Study(Base):
 
 
 class AnalysisDeclaration(Base):
-    """One version of a study's declared analysis (:class:`metrics.study.StudySettings` as JSON).
+    """One version of a study's declared analysis (:class:`metrics.study.analysis.StudySettings` as JSON).
 
     Versions are never edited: a change is a new row, so who changed what, and when, stays readable.
     """
@@ -61,7 +61,7 @@ class AnalysisDeclaration(Base):
 
 class Standard(Base):
     """One version of a study's standard on one task: the pass marks as they were set, from which
-    experts and sessions, by whom and when (sessions.standards). Never edited: a new version is a
+    experts and sessions, by whom and when (sessions.scoring.standards). Never edited: a new version is a
     new row, and analyses judge against the newest instead of recomputing marks from today's data."""
 
     __tablename__ = "standards"

@@ -116,7 +116,7 @@ def replay_against_experts(catalog: Catalog, home: Path, uid: str) -> Path:
     """Render session ``uid``'s replay against its study's experts on the same task (the most typical
     one ghosted in; the trainee alone when there is none) to ``home/replays/UID-vs.mp4``."""
     from metrics.replay.export import ReplaySettings, export_replay
-    from sessions.review import experts_on_task
+    from sessions.scoring.review import experts_on_task
 
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)

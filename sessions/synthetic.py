@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy import insert, select
 
-from metrics.registry import REGISTRY_VERSION
+from metrics.session.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog, now
 from sessions.models import MetricResult, Participant, Session
 from sessions.tasks import task_spec

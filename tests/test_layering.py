@@ -102,3 +102,47 @@ def test_each_front_end_says_a_remedy_in_its_own_words():
     unscored = WrongState("study 'course' has no scored sessions", remedy=("score", "course"))
     assert remedy_in_words(unscored) == "; run `vascsim score --study course` first"
     assert said(WrongState("plain")) == "plain" and remedy_in_words(WrongState("plain")) == ""
+
+
+# -- the size of things (issue 48): a file a newcomer can read, a folder they can scan ----------------
+MAX_FILE_LINES = 500
+MAX_FOLDER_MODULES = 15
+FOLDERS_OF_ONE_MODULE_PER_COMMAND = ("sessions/cli",)
+# Not yet split: each may shrink, none may grow, and a file or folder split under the limit leaves
+# this list (the test says so), so the list only ever gets shorter.
+FILES_TO_SPLIT = {
+    "sim/mesh/surfaces.py": 504,
+    "sim/runtime/realtime.py": 515,
+    "sim/fem/model.py": 556,
+    "sim/runtime/simulation.py": 635,
+    "sim/needle/interaction.py": 678,
+}
+FOLDERS_TO_SPLIT = {"sim/fem": 17, "dashboard": 16}
+
+
+def python_files():
+    for package in ORDER:
+        yield from sorted((ROOT / package).rglob("*.py"))
+
+
+def test_no_file_is_over_the_line_limit():
+    sizes = {path.relative_to(ROOT).as_posix(): len(path.read_text().splitlines()) for path in python_files()}
+    over = {name: lines for name, lines in sizes.items() if lines > MAX_FILE_LINES}
+    grown = {name: lines for name, lines in over.items() if lines > FILES_TO_SPLIT.get(name, MAX_FILE_LINES)}
+    assert not grown, f"over {MAX_FILE_LINES} lines (split them; see docs/architecture.md): {grown}"
+    split = sorted(set(FILES_TO_SPLIT) - set(over))
+    assert not split, f"now within {MAX_FILE_LINES} lines: take {split} off FILES_TO_SPLIT"
+
+
+def test_no_folder_holds_more_than_fifteen_modules():
+    folders = {path.parent for path in python_files()}
+    counts = {
+        folder.relative_to(ROOT).as_posix(): len(list(folder.glob("*.py")))
+        for folder in folders
+        if folder.relative_to(ROOT).as_posix() not in FOLDERS_OF_ONE_MODULE_PER_COMMAND
+    }
+    over = {name: n for name, n in counts.items() if n > MAX_FOLDER_MODULES}
+    grown = {name: n for name, n in over.items() if n > FOLDERS_TO_SPLIT.get(name, MAX_FOLDER_MODULES)}
+    assert not grown, f"over {MAX_FOLDER_MODULES} modules (make a sub-package for one idea): {grown}"
+    split = sorted(set(FOLDERS_TO_SPLIT) - set(over))
+    assert not split, f"now within {MAX_FOLDER_MODULES} modules: take {split} off FOLDERS_TO_SPLIT"

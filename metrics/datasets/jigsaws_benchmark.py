@@ -342,7 +342,7 @@ def _confusion(truth: np.ndarray, predicted: np.ndarray, classes: tuple[str, ...
 
 def benchmark_metrics(table: pd.DataFrame) -> list[str]:
     """The registry's metrics every trial has (JIGSAWS has no force, needle or tissue streams)."""
-    from metrics.registry import REGISTRY
+    from metrics.session.registry import REGISTRY
 
     names = [m.name for m in REGISTRY if m.name in table.columns]
     return [n for n in names if table[n].notna().all() and table[n].nunique() > 1]

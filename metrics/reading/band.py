@@ -12,8 +12,8 @@ import math
 
 import pandas as pd
 
-from metrics.proficiency import band_position
-from metrics.registry import REGISTRY
+from metrics.session.registry import REGISTRY
+from metrics.study.proficiency import band_position
 from metrics.units import display_unit, in_display_units
 
 QUARTILES = ("expert_q1", "expert_median", "expert_q3")

@@ -20,9 +20,9 @@ from collections.abc import Mapping, Sequence
 import pandas as pd
 
 from metrics.reading.band import against_band, expert_quartiles
-from metrics.registry import REGISTRY, display_name
-from metrics.standards import SAFETY_METRICS
-from metrics.study import StudyAnalysis, practice_mask
+from metrics.session.registry import REGISTRY, display_name
+from metrics.study.analysis import StudyAnalysis, practice_mask
+from metrics.study.standards import SAFETY_METRICS
 from metrics.units import shown, significant
 
 KINDS = ("safety", "quality", "efficiency")

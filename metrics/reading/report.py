@@ -13,7 +13,6 @@ import numpy as np
 import pandas as pd
 from jinja2 import Environment
 
-from metrics.proficiency import benchmarks_heading
 from metrics.reading.study_figures import box_plot_figure, learning_curve_figures, roc_figure
 from metrics.reading.tables import (
     FEEDBACK_BASIS,
@@ -30,8 +29,9 @@ from metrics.reading.tables import (
     trainee_summary,
     validity_for_reading,
 )
-from metrics.registry import REGISTRY, REGISTRY_VERSION
-from metrics.study import StudyAnalysis
+from metrics.session.registry import REGISTRY, REGISTRY_VERSION
+from metrics.study.analysis import StudyAnalysis
+from metrics.study.proficiency import benchmarks_heading
 
 TEMPLATE = Path(__file__).with_name("report.html")
 """The report page (Jinja, autoescaped): every value arrives as text or an already-escaped table."""

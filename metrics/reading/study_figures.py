@@ -10,10 +10,10 @@ import numpy as np
 from matplotlib.ticker import MaxNLocator
 from sklearn.metrics import roc_curve
 
-from metrics.learning import MODELS as LEARNING_MODELS
 from metrics.reading.figures import new_figure
 from metrics.reading.tables import display_scale, participant_medians
-from metrics.study import StudyAnalysis, oriented, practice_mask
+from metrics.study.analysis import StudyAnalysis, oriented, practice_mask
+from metrics.study.learning import MODELS as LEARNING_MODELS
 
 FIGURE_FORMATS = ("png", "svg")
 

@@ -12,11 +12,11 @@ import pandas as pd
 from markupsafe import Markup
 
 from metrics.reading.feedback import RECENT_SESSIONS, participant_feedback
-from metrics.registry import REGISTRY, display_name
-from metrics.reliability import agreement_shown
-from metrics.study import StudyAnalysis, metric_unit, practice_mask
+from metrics.session.registry import REGISTRY, display_name
+from metrics.study.analysis import StudyAnalysis, metric_unit, practice_mask
+from metrics.study.reliability import agreement_shown
+from metrics.study.validity import aggregate_by_participant
 from metrics.units import display_unit, in_display_units, interval_text, significant
-from metrics.validity import aggregate_by_participant
 
 
 def participant_medians(analysis: StudyAnalysis, metrics: list[str]) -> pd.DataFrame:

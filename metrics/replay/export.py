@@ -19,7 +19,6 @@ from typing import TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.alignment import PHASES, phase_starts
 from metrics.errors import MetricsError
 from metrics.replay import blind
 from metrics.replay.blind import blind_keys, forceps_keys
@@ -28,8 +27,9 @@ from metrics.replay.reference import expert_reference
 from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
 from metrics.replay.track import ReplayTrack, session_track
 from metrics.replay.wound import outline_edges, wound_nodes
+from metrics.signals.alignment import PHASES, phase_starts
+from metrics.signals.tissue import with_tissue_fields
 from metrics.streams import SessionStreams, from_recorded
-from metrics.tissue import with_tissue_fields
 from sim.fem.fields import TissueFieldReplay
 
 MODES = ("ghost", "side-by-side")
@@ -135,7 +135,7 @@ class BiteMarks:
 
     @classmethod
     def of(cls, streams, mesh) -> BiteMarks | None:
-        from metrics.placement import PlacementTargets, StitchPlacement, mark_colour, stitch_points
+        from metrics.signals.placement import PlacementTargets, StitchPlacement, mark_colour, stitch_points
 
         targets = PlacementTargets.from_attributes(dict(streams.attributes))
         stitches = stitch_points(streams.events, mesh)
@@ -390,7 +390,7 @@ class ReplayCanvas:
 def wound_outline(streams: SessionStreams, mesh) -> NDArray[np.int64]:
     """The rim of the wound's cut faces ((E, 2) node ids) for the session's task, empty when the task
     has no wound (:mod:`metrics.replay.wound`)."""
-    from metrics.placement import PlacementTargets
+    from metrics.signals.placement import PlacementTargets
 
     targets = PlacementTargets.from_attributes(dict(streams.attributes))
     point, normal = (None, None) if targets is None else (targets.wound_point, targets.wound_normal)
@@ -400,7 +400,7 @@ def wound_outline(streams: SessionStreams, mesh) -> NDArray[np.int64]:
 def replay_keys(ghost: bool, marks: bool, wound: bool, forceps: bool = False) -> list[Key]:
     """What the key says, for what the video shows (colours as :class:`sim.render.TissueRenderer`
     draws them); ``forceps``: a two-handed session's subordinate hand."""
-    from metrics.placement import MARK_COLOURS
+    from metrics.signals.placement import MARK_COLOURS
     from sim.render import FORCE_ARROW_M_PER_N
 
     (near, on_mark), (far, near_mark), (_, off_mark) = MARK_COLOURS

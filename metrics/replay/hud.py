@@ -50,7 +50,7 @@ def value_line(
 
 
 WIDEST_LINES = (
-    HudLine("phase", "approach"),  # the longest of metrics.alignment.PHASES
+    HudLine("phase", "approach"),  # the longest of metrics.signals.alignment.PHASES
     HudLine("force", "8888.8 mN", "experts 888.8-888.8", True),
     HudLine("tip speed", "888.8 mm/s", "experts 88.8-88.8", True),
     HudLine("entry angle", "88 deg"),

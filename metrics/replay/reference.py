@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.alignment import PHASES, Alignment, align_sessions, decimated, phase_starts
 from metrics.errors import MetricsError
+from metrics.signals.alignment import PHASES, Alignment, align_sessions, decimated, phase_starts
 from metrics.streams import SessionStreams
 
 SIGNALS = {

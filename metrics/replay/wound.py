@@ -2,7 +2,7 @@
 
 A mesh cut by the vessel generator names its two incision faces' nodes (``wound_a``, ``wound_b``);
 a block whose free edge is the wound (the wall-stitch task) has none, and its cut face is the
-surface lying in the task's wound plane (:class:`metrics.placement.PlacementTargets`). Either way the
+surface lying in the task's wound plane (:class:`metrics.signals.placement.PlacementTargets`). Either way the
 replay draws the outline of those surface triangles, so the edge a trainee bites from is visible.
 """
 

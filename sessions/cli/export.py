@@ -39,7 +39,7 @@ def export_bundle(study: str, out: str | None, sign_key: str | None, as_json: bo
     by accident; --sign adds an Ed25519 signature, so a site holding your public key
     can verify that the study comes from you unchanged (`import-bundle --trust`).
     """
-    from sessions.bundle import export_study
+    from sessions.exchange.bundle import export_study
 
     catalog, _ = open_catalog()
     target = out or f"{study}.vascsim.zip"

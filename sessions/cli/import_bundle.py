@@ -38,7 +38,7 @@ def import_bundle_command(bundle: str, trust: str | None, keep_imported_metrics:
     catalogued is refused and nothing is changed. Participants arrive without any
     account link: link trainee accounts here with `vascsim users`.
     """
-    from sessions.bundle import import_bundle
+    from sessions.exchange.bundle import import_bundle
 
     catalog, home = open_catalog()
     summary = per_file(

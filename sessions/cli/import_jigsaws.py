@@ -23,7 +23,7 @@ def import_jigsaws(kinematics_dir: str, meta_file: str, study: str) -> None:
     self-reported level; GRS totals stored as ratings); trials become sessions
     whose files are the kinematics files, with checksums.
     """
-    from sessions.importing import import_jigsaws as run_import
+    from sessions.exchange.importing import import_jigsaws as run_import
 
     existing_path(kinematics_dir, "kinematics folder", folder=True)
     existing_path(meta_file, "meta file")

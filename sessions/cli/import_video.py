@@ -40,7 +40,7 @@ def import_video(
     motion metrics as simulator sessions (no force or tissue metrics).
     """
     from metrics.bench.tracking import ToolMarker
-    from sessions.importing import import_bench_video
+    from sessions.exchange.importing import import_bench_video
 
     existing_path(video, "video")
     existing_path(camera_file, "camera calibration")

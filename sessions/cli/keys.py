@@ -23,7 +23,7 @@ def keys_new(path: str) -> None:
     Sign exports with `vascsim export --sign PATH`; a receiving site verifies them with
     `vascsim import-bundle --trust PATH.pub`.
     """
-    from sessions.signing import new_key_pair, trusted_fingerprint
+    from sessions.exchange.signing import new_key_pair, trusted_fingerprint
 
     private, public = new_key_pair(path)
     key = trusted_fingerprint(public)

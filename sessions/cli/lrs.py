@@ -24,7 +24,7 @@ def lrs() -> None:
 
 
 def _required(value: str | None, name: str, option: str) -> str:
-    from sessions.lrs import LrsError
+    from sessions.exchange.lrs import LrsError
 
     if value:
         return value
@@ -60,8 +60,8 @@ BASE = click.option(
 @user_errors
 def configure(study, endpoint, key, home_page, activity_base, auto) -> None:
     """Remember the study's LRS (the secret is not stored: VASCSIM_LRS_SECRET at push time)."""
-    from sessions.lrs import StudyLrs
-    from sessions.lrs import configure as remember
+    from sessions.exchange.lrs import StudyLrs
+    from sessions.exchange.lrs import configure as remember
 
     store, home = open_store()
     store.study_named(study)  # an unknown study is refused before anything is remembered
@@ -92,9 +92,9 @@ def configure(study, endpoint, key, home_page, activity_base, auto) -> None:
 @user_errors
 def push(study, endpoint, key, secret, home_page, activity_base, dry_run, as_json, resend) -> None:
     """Send the study's statements (to the options' LRS, else the study's configured one)."""
-    from sessions.lrs import LrsEndpoint, Outbox, configured, plan
-    from sessions.lrs import push as send
-    from sessions.xapi import XapiSettings, study_statements
+    from sessions.exchange.lrs import LrsEndpoint, Outbox, configured, plan
+    from sessions.exchange.lrs import push as send
+    from sessions.exchange.xapi import XapiSettings, study_statements
 
     catalog, home = open_catalog()
     stored = configured(home).get(study)
@@ -132,7 +132,7 @@ def push_after_scoring(catalog, home: Path, uids: Iterable[str]) -> None:
     """For each study of the sessions just scored that is set to push automatically: push, and say
     what happened in one line (an unreachable LRS is not an error of the scoring: its statements
     stay spooled for the next push)."""
-    from sessions.lrs import LrsError, configured, push_study
+    from sessions.exchange.lrs import LrsError, configured, push_study
     from sessions.store import CatalogStore
 
     settings = configured(home)

@@ -69,7 +69,7 @@ def participants_export(study: str, output: str) -> None:
     direction in the headers)."""
     from pathlib import Path
 
-    from sessions.progress import progress_table, write_progress
+    from sessions.exchange.progress import progress_table, write_progress
 
     catalog, _ = open_catalog()
     table = progress_table(catalog, study)

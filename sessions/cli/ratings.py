@@ -8,10 +8,10 @@ import click
 import pandas as pd
 
 from metrics.instruments import INSTRUMENTS, instrument
-from metrics.reliability import agreement_shown, rater_agreement
+from metrics.study.reliability import agreement_shown, rater_agreement
 from sessions.catalog import CatalogError
 from sessions.cli.base import open_catalog, print_frame, print_json, user_errors
-from sessions.ratings import add_rating, import_ratings, study_ratings
+from sessions.scoring.ratings import add_rating, import_ratings, study_ratings
 
 _ITEMS = "; ".join(f"{i.name}: {', '.join(i.item_names)}" for i in INSTRUMENTS.values())
 

@@ -29,7 +29,7 @@ def recover(session: str, score: bool, as_json: bool) -> None:
     `recovered`, with its files' checksums, and is scored. Find candidates with
     `vascsim sessions list --status running`.
     """
-    from sessions.runner import recover_session, score_session
+    from sessions.running.runner import recover_session, score_session
 
     catalog, home = open_catalog()
     uid, header = recover_session(catalog, session)

@@ -51,7 +51,7 @@ def report(
     """
 
     from metrics.reading.report import write_report
-    from sessions.analysis import analyse_catalog_study
+    from sessions.scoring.analysis import analyse_catalog_study
 
     catalog, home = open_catalog()
     if scheduler or workers or data_root:

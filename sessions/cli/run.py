@@ -67,8 +67,8 @@ def run(
     crash, `vascsim recover` restores it. Ends with the verdict against the study's standard and the
     three things to work on first (--json: everything).
     """
-    from sessions.review import experts_on_task, review_session
-    from sessions.runner import SessionPlan, run_session
+    from sessions.running.runner import SessionPlan, run_session
+    from sessions.scoring.review import experts_on_task, review_session
     from sessions.status import SCRIPTED_DEVICE
     from sessions.store import CatalogStore
     from sessions.synthetic import scripted_hands
@@ -110,7 +110,7 @@ DEFAULT_TASK = "interrupted-stitch"
 
 def default_task(catalog, study: str) -> str:
     """The task of the study's declared analysis, else :data:`DEFAULT_TASK`."""
-    from sessions.analysis import declared_settings
+    from sessions.scoring.analysis import declared_settings
 
     settings, _, _ = declared_settings(catalog, study)
     return settings.task or DEFAULT_TASK

@@ -39,7 +39,7 @@ def study_sessions(catalog, study: str, only_unscored: bool = False) -> list[str
 
 
 def score_with_progress(catalog, home, targets, scheduler, workers, data_root=None) -> dict:
-    from sessions.scoring import score_sessions
+    from sessions.scoring.workers import score_sessions
 
     where = f" on {scheduler}" if scheduler else (f" on {workers} local Dask workers" if workers else "")
     with progress_bar() as progress:

@@ -32,7 +32,7 @@ def sessions() -> None:
 @user_errors
 def sessions_list(study, task, status, as_json) -> None:
     """List sessions (newest last), with the task each ran (trials count per task)."""
-    from sessions.analysis import metric_versions
+    from sessions.scoring.analysis import metric_versions
 
     store, _ = open_store()
     catalog = store.catalog
@@ -107,7 +107,7 @@ def sessions_show(uid: str, as_json: bool) -> None:
         "files": [{"name": f.name, "sha256": f.sha256, "bytes": f.bytes} for f in facts.files],
     }
     from metrics.reading.feedback import metric_groups, session_feedback
-    from sessions.review import review_session, session_against_experts, session_stitches
+    from sessions.scoring.review import review_session, session_against_experts, session_stitches
 
     rows = session_against_experts(catalog, uid)
     data["metrics"] = {r["metric"]: r["value"] for r in rows}

@@ -31,7 +31,7 @@ def standards_set(study: str, task: str, author: str | None, note: str, as_json:
     """
     import getpass
 
-    from sessions.standards import set_standard
+    from sessions.scoring.standards import set_standard
 
     catalog, _ = open_catalog()
     record = set_standard(catalog, study, task, author or getpass.getuser(), note)
@@ -49,7 +49,7 @@ def standards_set(study: str, task: str, author: str | None, note: str, as_json:
 @user_errors
 def standards_show(study: str, task: str | None, as_json: bool) -> None:
     """Every version of STUDY's standards, oldest first, with their marks (the newest is in force)."""
-    from sessions.standards import standard_history
+    from sessions.scoring.standards import standard_history
 
     catalog, _ = open_catalog()
     history = standard_history(catalog, study, task)
@@ -59,7 +59,7 @@ def standards_show(study: str, task: str | None, as_json: bool) -> None:
     if not history:
         click.echo(f"study {study!r}: no standard set" + (f" for {task}" if task else ""))
         return
-    from sessions.verdicts import rejudgements
+    from sessions.scoring.verdicts import rejudgements
 
     for record in history:
         click.echo(
@@ -88,7 +88,7 @@ def standards_rejudge(study: str, task: str, reason: str, author: str | None, as
     they kept from earlier versions. Logged: who, when, why, and how many verdicts changed."""
     import getpass
 
-    from sessions.verdicts import rejudge
+    from sessions.scoring.verdicts import rejudge
 
     catalog, _ = open_catalog()
     result = rejudge(catalog, study, task, author or getpass.getuser(), reason)
@@ -102,7 +102,7 @@ def standards_rejudge(study: str, task: str, reason: str, author: str | None, as
 
 
 def _print_marks(record) -> None:
-    from metrics.registry import display_name
+    from metrics.session.registry import display_name
 
     for mark in record.marks:
         click.echo(

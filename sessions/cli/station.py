@@ -122,8 +122,8 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
     count on as `vascsim run` counts them.
     """
     from sessions.replaying import replay_against_experts
-    from sessions.runner import SessionPlan, run_session
     from sessions.running.hands import instruments
+    from sessions.running.runner import SessionPlan, run_session
     from sessions.running.station import StationPlan, run_station
     from sessions.synthetic import pass_parameters
     from sessions.tasks import task_spec

@@ -39,9 +39,9 @@ class LiveView:
         """The window for session ``uid`` of task ``spec`` with ``device``, in study and task ``ids``;
         it publishes its view for the dashboard (:func:`live_view_path`) when ``uid`` is given."""
         from sessions.config import cache_dir
-        from sessions.review import expert_band
         from sessions.running.hud import HudLimits
         from sessions.running.scene import scene_facts
+        from sessions.scoring.review import expert_band
         from sessions.tasks import task_preset, tissue_for
         from sim.devices.mouse import MouseDevice, MouseHand
 

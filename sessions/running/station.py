@@ -2,8 +2,8 @@
 
 ``vascsim station`` runs :func:`run_station`: the instruction screen (what the task asks, the marks,
 the time budget, the controls, how to start), the space bar and a short countdown, the trial (a
-real-time session with its window, :func:`sessions.runner.run_session`), then the feedback screen
-(:func:`sessions.review.review_session`: the verdict against the study's standard, each benchmark,
+real-time session with its window, :func:`sessions.running.runner.run_session`), then the feedback screen
+(:func:`sessions.scoring.review.review_session`: the verdict against the study's standard, each benchmark,
 what to work on, strengths) and the choice of the next trial, a replay of this one against the
 experts, or quitting. Trials count on as ``vascsim run`` counts them. The screens' words are built
 by pure functions (:func:`instruction_lines`, :func:`feedback_lines`), tested without a display.
@@ -17,9 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sessions.catalog import Catalog
-from sessions.review import SessionReview, review_session
 from sessions.running.live import LiveView
 from sessions.running.screens import Line, Screen, wrapped
+from sessions.scoring.review import SessionReview, review_session
 from sessions.tasks import TaskSpec, task_spec
 
 COUNTDOWN_S = 3
@@ -148,7 +148,7 @@ def run_station(
     """The station's loop (see the module docstring); ``run_trial()`` runs one session and returns its
     uid, ``replay(uid)`` renders it against the experts and returns where; ``trials`` bounds the loop.
     Returns the uids of the trials run."""
-    from sessions.review import experts_on_task
+    from sessions.scoring.review import experts_on_task
 
     spec = task_spec(plan.task)
     uids: list[str] = []

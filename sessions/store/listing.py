@@ -8,7 +8,7 @@ import pandas as pd
 from sqlalchemy import case, func, or_, select
 from sqlalchemy.orm import Session as OrmSession
 
-from metrics.registry import REGISTRY, REGISTRY_VERSION
+from metrics.session.registry import REGISTRY, REGISTRY_VERSION
 from sessions.catalog import Catalog, WrongState
 from sessions.models import MetricResult, Participant, Rating, Session, Study, Task, User
 from sessions.status import SCORABLE, SCRIPTED_DEVICE

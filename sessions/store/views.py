@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from sqlalchemy import func, select
 
-from metrics.registry import REGISTRY_VERSION
+from metrics.session.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog
 from sessions.models import (
     AnalysisDeclaration,

@@ -16,7 +16,7 @@ class TaskSpec:
     parameters: dict
     placement: dict | None = None
     """The wound edge and target marks placement metrics score against (SI units; see
-    :class:`metrics.placement.PlacementTargets`); recorded in each session's header."""
+    :class:`metrics.signals.placement.PlacementTargets`); recorded in each session's header."""
     more_bites: tuple = ()
     """Further bites after the first, in the order they are made: (entry, normal, bite_direction)."""
     access: dict | None = None

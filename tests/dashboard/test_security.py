@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import select, update
 
 from dashboard.auth import COOKIE, LoginRateLimiter
-from recorder.remote import encode_batch
+from recorder.remote.protocol import encode_batch
 from recorder.writer import samples_batch
 from sessions.models import Session, User
 from tests.dashboard.conftest import PASSWORD, seed_dashboard, sign_in

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrics import SessionStreams
-from metrics.alignment import PHASES, align_sessions, dtw_path, phase_starts
+from metrics.signals.alignment import PHASES, align_sessions, dtw_path, phase_starts
 
 
 def expert_path(t):

@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 
 from metrics.reading.report import write_report
-from metrics.study import StudySettings, analyse_study
-from sessions.analysis import settings_from_json
+from metrics.study.analysis import StudySettings, analyse_study
 from sessions.catalog import CatalogError
+from sessions.scoring.analysis import settings_from_json
 
 
 def learning_course(experts: int = 6, trainees: int = 6, trials: int = 10) -> pd.DataFrame:

@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 
 from metrics import compute_session_metrics
-from metrics.batch import compute_metrics_dask
+from metrics.session.batch import compute_metrics_dask
 from metrics.synthetic import synthetic_study
 from recorder import SessionWriter
 from recorder.schema import COLUMN, SAMPLE_COLUMNS

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from metrics.proficiency import benchmarks_heading
-from metrics.study import StudySettings, analyse_study
+from metrics.study.analysis import StudySettings, analyse_study
+from metrics.study.proficiency import benchmarks_heading
 
 
 def course(experts: int = 8, trainees: int = 8, sessions: int = 2) -> pd.DataFrame:

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from metrics.concurrent import concurrent_validity, permutation_spearman
+from metrics.study.concurrent import concurrent_validity, permutation_spearman
 
 
 def test_rho_and_exact_p_match_scipy():

@@ -3,7 +3,7 @@ checks collapse into one line with a count and an explanation."""
 
 import pandas as pd
 
-from metrics.events import COLLAPSED, EVENT_NAMES, SAFETY_EVENTS, readable_events
+from metrics.session.events import COLLAPSED, EVENT_NAMES, SAFETY_EVENTS, readable_events
 from recorder.schema import EVENT_KINDS
 
 

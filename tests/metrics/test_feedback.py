@@ -24,12 +24,12 @@ from metrics.reading.feedback import (
     strengths,
     what_to_work_on,
 )
-from metrics.registry import REGISTRY, metric
+from metrics.session.registry import REGISTRY, metric
 from sessions.accounts import create_user
 from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.models import Participant, Session
-from sessions.review import against_band
+from sessions.scoring.review import against_band
 from tests.dashboard.conftest import sign_in
 
 
@@ -81,7 +81,7 @@ def test_the_pass_marks_a_session_misses_lead_then_safety_then_the_rest():
     from its mark first), each with the gap in display units, then the never events, then the rest."""
     import pandas as pd
 
-    from metrics.proficiency import pass_condition
+    from metrics.study.proficiency import pass_condition
 
     band = {
         "back_wall_catches": {"expert_q1": 0.0, "expert_median": 0.0, "expert_q3": 0.0},

@@ -10,15 +10,15 @@ import pandas as pd
 import pytest
 from scipy import optimize, stats
 
-from metrics.composite import fit_composite, validate_composite
-from metrics.statistics import (
+from metrics.study.composite import fit_composite, validate_composite
+from metrics.study.statistics import (
     auc_interval,
     cluster_permutation_test,
     interval_is_informative,
     mann_whitney,
     oriented_auc,
 )
-from metrics.validity import construct_validity
+from metrics.study.validity import construct_validity
 
 
 def _newcombe_by_root_finding(theta_hat: float, m: int, n: int) -> tuple[float, float]:
@@ -172,7 +172,7 @@ def test_the_roc_curves_and_the_table_give_the_same_auc():
     """Seen: tables showed 0, 0.042, 0.167 for lower-is-better metrics beside ROC curves of 1.00, 0.96."""
     from sklearn.metrics import roc_auc_score
 
-    from metrics.study import oriented
+    from metrics.study.analysis import oriented
 
     table = _cohort(5, 6, trials=2, seed=9)
     result = construct_validity(table, "label", ("expert", "trainee"))

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy import integrate
 
 from metrics import SessionStreams, metrics_of
-from metrics.kinematics import (
+from metrics.signals.kinematics import (
     UniformMotion,
     find_movements,
     idle_time,

@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrics import compute_session_metrics
-from metrics.learning import MODELS, fit_learning_curve
-from metrics.registry import REGISTRY
-from metrics.study import StudySettings, analyse_study
+from metrics.session.registry import REGISTRY
+from metrics.study.analysis import StudySettings, analyse_study
+from metrics.study.learning import MODELS, fit_learning_curve
 from metrics.synthetic import synthetic_study
 
 PRIMARY = ("path_length", "spectral_arc_length", "entry_angle_error_deg", "task_time")

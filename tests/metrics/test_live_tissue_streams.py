@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from metrics.signals.tissue import session_forces, with_tissue_fields
 from metrics.streams import from_recorded
-from metrics.tissue import session_forces, with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from sessions.tasks import task_preset, task_spec, tissue_for
@@ -28,7 +28,7 @@ def record(folder, tissue, parameters, forces=FORCES):
         "label": "x",
         "task": "wall-stitch",
         "needle_forces": forces.as_dict(),
-        "placement": spec.placement,  # as sessions.runner records it
+        "placement": spec.placement,  # as sessions.running.runner records it
     }
     writer = SessionWriter(folder, header, flush_interval=0.1)
     simulation = Simulation(tissue, Needle.curved(), ScriptedDevice(suturing.pose_and_grip), forces=forces)
@@ -110,7 +110,7 @@ def test_the_wound_edge_stress_is_live_and_a_levered_bite_near_the_edge_raises_e
     the live value equals the edge-only replay of the step's drive (the metric's path) on the same
     elements; an expert bite 1.5 mm from the edge stays under the preset's threshold, a levered bite
     0.6 mm from it crosses it once (an ``edge_overstress`` event)."""
-    from metrics.passage import WoundEdgeStress
+    from metrics.signals.passage import WoundEdgeStress
     from sessions.tasks import task_simulation
 
     replay = WoundEdgeStress(tissue_for("interrupted-stitch", None))

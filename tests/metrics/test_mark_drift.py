@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from metrics.proficiency import drift_line, mark_drift, mark_intervals
+from metrics.study.proficiency import drift_line, mark_drift, mark_intervals
 
 
 def _table(expert_values: list[float], metric: str = "peak_force") -> pd.DataFrame:

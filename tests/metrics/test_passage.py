@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrics import metrics_of
-from metrics.passage import (
+from metrics.signals.passage import (
     WoundEdgeStress,
     nearest_on_curve,
     passage_columns,

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrics import MetricsError, SessionStreams, metrics_of
-from metrics.placement import PlacementTargets, stitch_points
+from metrics.signals.placement import PlacementTargets, stitch_points
 from sim.mesh import box_mesh
 
 PLACEMENT = ("bite_error_entry", "bite_error_exit", "entry_to_target", "exit_to_target", "bite_asymmetry")
@@ -155,7 +155,7 @@ def test_placement_is_unchanged_along_the_wound_and_in_the_mirror(shift_y, shift
 def test_recorded_stitches_expert_on_target_trainee_off(tmp_path):
     """Scripted wall-stitch passes through the simulator: the expert's bite lands within 0.4 mm of
     its marks and through the intima; a first-day trainee's levering pass lands further off."""
-    from metrics.tissue import with_tissue_fields
+    from metrics.signals.tissue import with_tissue_fields
     from sessions.synthetic import pass_parameters
     from sessions.tasks import tissue_for
     from tests.metrics.test_live_tissue_streams import record
@@ -177,10 +177,10 @@ def recorded_task(task: str, skill: float, seed: int, folder):
     """A scripted session of ``task`` through the runner's device (every bite), recorded as a session
     is and read back with its tissue streams and stitch points."""
     from metrics import from_recorded
-    from metrics.tissue import with_tissue_fields
+    from metrics.signals.tissue import with_tissue_fields
     from recorder import SessionWriter, open_session
     from recorder.runtime import RuntimeRecorder
-    from sessions.runner import SessionPlan, open_device
+    from sessions.running.runner import SessionPlan, open_device
     from sessions.synthetic import pass_parameters
     from sessions.tasks import task_preset, task_simulation, task_spec
 

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrics.errors import MetricsError
-from metrics.reliability import (
+from metrics.study.reliability import (
     complete_block,
     cronbach_alpha,
     intraclass_correlation,

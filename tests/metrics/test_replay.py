@@ -14,11 +14,11 @@ from metrics.replay.plots import figure_pixels, signal_figure
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import stress_map
 from metrics.replay.track import replay_track, scene_track
-from metrics.tissue import with_tissue_fields
+from metrics.signals.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from recorder.scene import read_scene
-from sessions.runner import SessionPlan, open_device
+from sessions.running.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
 from sessions.tasks import task_preset, tissue_for
 from sim.fem.fields import TissueFieldReplay

@@ -9,8 +9,8 @@ from markupsafe import escape
 
 from metrics import compute_session_metrics
 from metrics.reading.report import write_report
-from metrics.registry import REGISTRY_VERSION, display_name
-from metrics.study import StudySettings, analyse_study
+from metrics.session.registry import REGISTRY_VERSION, display_name
+from metrics.study.analysis import StudySettings, analyse_study
 from metrics.synthetic import synthetic_study
 
 PRIMARY = ("path_length", "spectral_arc_length", "entry_angle_error_deg", "force_at_insertion")

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from metrics import SessionStreams, metrics_of
-from metrics.kinematics import UniformMotion, economy_of_motion, find_movements, idle_time, resample_uniform
+from metrics.signals.kinematics import (
+    UniformMotion,
+    economy_of_motion,
+    find_movements,
+    idle_time,
+    resample_uniform,
+)
 
 RATES = (30.0, 100.0, 1000.0)
 MINIMUM_JERK_LDLJ = -math.log(720 / 1.875**2)  # -5.32

@@ -13,15 +13,15 @@ from scipy import stats
 from statsmodels.stats.proportion import proportion_confint
 
 from metrics.errors import MetricsError
-from metrics.proficiency import check_rule, proficiency_benchmarks, rule_value
-from metrics.standards import (
+from metrics.study.proficiency import check_rule, proficiency_benchmarks, rule_value
+from metrics.study.standards import (
     leave_one_expert_out,
     misclassification,
     non_compensatory_passes,
     progression_reached,
     rule_comparison,
 )
-from metrics.statistics import contrasting_groups_mark, wilson_interval
+from metrics.study.statistics import contrasting_groups_mark, wilson_interval
 
 
 def test_contrasting_groups_crosses_where_the_two_normal_fits_meet():
@@ -175,7 +175,7 @@ def test_a_declared_non_compensatory_study_fails_sessions_with_never_events_and_
     """analyse_study with non_compensatory: T1's third and fourth sessions beat the benchmark but the
     third caught the back wall, so T1 is not proficient by two in a row; with "2 of the last 3" T1
     is proficient at session 4 (sessions 2 and 4 pass)."""
-    from metrics.study import StudySettings, analyse_study
+    from metrics.study.analysis import StudySettings, analyse_study
 
     rows = []
     for name, times in (("E1", [10, 10]), ("E2", [11, 11]), ("E3", [12, 12])):

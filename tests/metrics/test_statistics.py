@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
-from metrics.statistics import (
+from metrics.study.statistics import (
     auc,
     bootstrap_auc,
     cliffs_delta,

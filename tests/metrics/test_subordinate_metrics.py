@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from metrics import SessionStreams, metrics_of
-from metrics.kinematics import UniformMotion
+from metrics.signals.kinematics import UniformMotion
 
 
 def streams(grasp_force=None, jaw=None, events=None, moved=None):

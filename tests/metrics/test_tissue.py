@@ -10,11 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrics import SessionStreams, from_recorded, metrics_of
-from metrics.definitions import HIGH_STRESS_PA, STRAIN_LIMIT_STRETCH, STRESS_RADIUS_M
-from metrics.tissue import NEAR_CONTACT_M, indentation_runs, with_tissue_fields
+from metrics.session.tissue import HIGH_STRESS_PA, STRAIN_LIMIT_STRETCH, STRESS_RADIUS_M
+from metrics.signals.tissue import NEAR_CONTACT_M, indentation_runs, with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
-from sessions.runner import SessionPlan, open_device
+from sessions.running.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
 from sessions.tasks import task_preset, tissue_for
 from sim.fem.fields import IndentationStress

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from metrics.registry import REGISTRY
+from metrics.session.registry import REGISTRY
 from metrics.units import DISPLAY_UNITS, display_unit, in_display_units, shown
 
 
@@ -28,8 +28,8 @@ def test_known_conversions_by_hand():
 
 
 def test_the_review_rows_carry_the_same_numbers_in_display_units():
-    """sessions.review.against_band: the row a page, the CLI and the API all show."""
-    from sessions.review import against_band
+    """sessions.scoring.review.against_band: the row a page, the CLI and the API all show."""
+    from sessions.scoring.review import against_band
 
     band = {"entry_to_target": {"expert_q1": 0.0001, "expert_median": 0.00015, "expert_q3": 0.0002}}
     (row,) = against_band({"entry_to_target": 0.0005}, band)

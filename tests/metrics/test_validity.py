@@ -8,9 +8,9 @@ import pytest
 from scipy import stats
 
 from metrics import MetricsError
-from metrics.learning import cusum, fit_learning_curve, retention
-from metrics.proficiency import assess_proficiency, proficiency_benchmarks, trials_to_proficiency
-from metrics.validity import construct_validity
+from metrics.study.learning import cusum, fit_learning_curve, retention
+from metrics.study.proficiency import assess_proficiency, proficiency_benchmarks, trials_to_proficiency
+from metrics.study.validity import construct_validity
 
 
 def cohort(n_experts=6, n_trainees=8, sessions=4, seed=0):

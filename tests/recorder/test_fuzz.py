@@ -22,8 +22,8 @@ from recorder import (
     open_session,
     recover,
 )
-from recorder.ingest import IngestStore, create_app
-from recorder.remote import encode_batch, pack_frame
+from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.protocol import encode_batch, pack_frame
 from recorder.schema import EVENT_SCHEMA, SAMPLE_SCHEMA
 from recorder.writer import read_journal, same_values, samples_batch
 

@@ -8,9 +8,9 @@ import json
 import pytest
 from starlette.testclient import TestClient
 
-from recorder.ingest import IngestStore, create_app
 from recorder.json_input import MAX_DEPTH, JSONInputError, parse_json
-from recorder.remote import encode_batch
+from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.protocol import encode_batch
 from tests.recorder.test_remote import AUTH, TOKENS, batch, post
 
 DEEP = "[" * 5000 + "]" * 5000
@@ -34,7 +34,7 @@ def test_deep_json_in_a_header_or_close_body_is_a_422_in_one_line(http):
 
 def test_deep_json_in_a_websocket_text_frame_is_answered_and_the_socket_stays_open(http):
     """Seen 2: the connection dropped without a close frame after one acknowledged batch."""
-    from recorder.remote import pack_frame
+    from recorder.remote.protocol import pack_frame
 
     with http.websocket_connect("/api/sessions/w1/ws", headers=AUTH) as socket_:
         socket_.send_bytes(pack_frame("samples", 0, encode_batch(batch(0), 0)))

@@ -15,10 +15,10 @@ import pytest
 from starlette.testclient import TestClient
 
 from recorder import COLUMN, SAMPLE_COLUMNS, RecorderError, SessionWriter, open_session, recover
-from recorder.ingest import IngestStore, create_app
-from recorder.remote import MAX_BATCH_BYTES, encode_batch, pack_frame
+from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.protocol import MAX_BATCH_BYTES, encode_batch, pack_frame
+from recorder.remote.station import StationUploader
 from recorder.schema import EVENT_SCHEMA, SAMPLE_SCHEMA
-from recorder.station import StationUploader
 from recorder.writer import read_journal, same_values, samples_batch
 
 TOKENS = {"secret-station-a": "station-a"}
@@ -193,7 +193,7 @@ def free_port():
 
 SERVER = """
 import sys, uvicorn
-from recorder.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore, create_app
 uvicorn.run(create_app(IngestStore(sys.argv[1], {"secret-station-a": "station-a"})),
             host="127.0.0.1", port=int(sys.argv[2]), log_level="warning")
 """

@@ -13,12 +13,12 @@ import pytest
 from click.testing import CliRunner
 
 from metrics import from_recorded, metrics_of
-from metrics.tissue import with_tissue_fields
+from metrics.signals.tissue import with_tissue_fields
 from recorder import open_session
-from sessions.bundle import export_study, import_bundle
 from sessions.catalog import CatalogError
 from sessions.cli import main
-from sessions.runner import study_table
+from sessions.exchange.bundle import export_study, import_bundle
+from sessions.running.runner import study_table
 from sessions.tasks import session_tissue
 from tests.conftest import repoint_session_folders
 
@@ -218,8 +218,8 @@ def _rehashed(bundle: Path, out: Path, edit) -> None:
 
 @pytest.mark.slow
 def test_the_declared_analysis_travels_with_the_bundle_and_is_checked(small_study, tmp_path, open_catalog):
-    from sessions.analysis import analysis_history, declared_settings
     from sessions.config import database_url
+    from sessions.scoring.analysis import analysis_history, declared_settings
 
     declared = invoke("studies", "analysis", "course", "--rule", "median", "--by", "alice", "--note", "v1")
     assert declared.exit_code == 0, declared.output
@@ -397,9 +397,9 @@ def test_sizes_are_checked_against_the_archive_before_extraction(small_study, tm
 def test_imported_metric_values_are_recomputed_or_marked_unverified(small_study, tmp_path, monkeypatch):
     from sqlalchemy import select
 
-    from sessions.analysis import analyse_catalog_study
     from sessions.catalog import Catalog
     from sessions.models import MetricResult
+    from sessions.scoring.analysis import analyse_catalog_study
 
     bundle = tmp_path / "course.zip"
     assert invoke("export", "--study", "course", "-o", str(bundle)).exit_code == 0

@@ -172,9 +172,9 @@ def test_the_demo_shows_a_course_that_works_and_says_how_to_go_on(tmp_path, monk
     does not and is flagged, the experts pass their own standard most of the time, and on each task
     every metric that discriminates does so the expected way (none shows the trainees better)."""
     from dashboard.queries import ATTENTION_AFTER_TRIALS
-    from sessions.analysis import analyse_catalog_study
     from sessions.catalog import Catalog
     from sessions.demo import DEMO_STUDY, FINAL_TASK, DemoSize
+    from sessions.scoring.analysis import analyse_catalog_study
 
     monkeypatch.setenv("VASCSIM_HOME", str(tmp_path / "home"))
     monkeypatch.delenv("VASCSIM_DATABASE_URL", raising=False)

@@ -15,17 +15,17 @@ from sqlalchemy import delete, func, select
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
 from sessions.accounts import create_user
-from sessions.analysis import (
+from sessions.catalog import Catalog, CatalogError
+from sessions.cli import main
+from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY
+from sessions.models import Participant, Session, Study
+from sessions.scoring.analysis import (
     analyse_catalog_study,
     analysis_history,
     declare_analysis,
     declared_settings,
     settings_from_json,
 )
-from sessions.catalog import Catalog, CatalogError
-from sessions.cli import main
-from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY
-from sessions.models import Participant, Session, Study
 from tests.conftest import REDUCED_DEMO_SIZE
 from tests.dashboard.conftest import sign_in
 
@@ -66,7 +66,7 @@ def test_the_demo_rates_every_session_with_two_synthetic_raters_and_reports_ever
     front-end uses then carries inter-rater agreement, concurrent validity against the GRS total,
     test-retest and standard setting."""
     from sessions.models import Rating
-    from sessions.ratings import study_ratings
+    from sessions.scoring.ratings import study_ratings
 
     catalog, _ = demo
     ratings = study_ratings(catalog, DEMO_STUDY)
@@ -230,7 +230,7 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path, copy_de
     """A registry version bump: old results are shown as stale, left out with a note, and rescored."""
     from sqlalchemy import update
 
-    from metrics.registry import REGISTRY_VERSION
+    from metrics.session.registry import REGISTRY_VERSION
     from sessions.models import MetricResult, Session
 
     home = tmp_path
@@ -260,7 +260,7 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
     from datetime import datetime
 
     from sessions.models import Rating, Session
-    from sessions.runner import study_table
+    from sessions.running.runner import study_table
 
     catalog, home = demo
     with catalog.session() as orm:

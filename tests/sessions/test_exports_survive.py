@@ -57,10 +57,10 @@ def change_sessions(catalog: Catalog, changes: list[str]) -> int:
 @given(changes=st.lists(CHANGES, min_size=4, max_size=16))
 def test_exports_of_a_study_with_missing_failed_and_unscored_sessions(copy_demo, changes):
     from metrics.reading.report import write_report
-    from sessions.analysis import analyse_catalog_study
-    from sessions.bundle_export import export_study
-    from sessions.progress import progress_table, write_progress
-    from sessions.xapi import XapiSettings, study_statements
+    from sessions.exchange.bundle_export import export_study
+    from sessions.exchange.progress import progress_table, write_progress
+    from sessions.exchange.xapi import XapiSettings, study_statements
+    from sessions.scoring.analysis import analyse_catalog_study
 
     with tempfile.TemporaryDirectory() as folder:
         home = Path(folder) / "home"

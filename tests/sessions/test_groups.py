@@ -74,8 +74,8 @@ def test_every_report_accounts_for_every_participant(tmp_path, copy_demo):
     """A participant with no session, one of a group the analysis does not compare: both are named in
     the report with the reason, not silently missing."""
     from metrics.reading.report import write_report
-    from sessions.analysis import analyse_catalog_study
     from sessions.demo import DEMO_STUDY
+    from sessions.scoring.analysis import analyse_catalog_study
 
     catalog = Catalog(copy_demo(tmp_path / "home"))
     store = CatalogStore(catalog)

@@ -16,13 +16,12 @@ import pytest
 from click.testing import CliRunner
 from sqlalchemy import func, select, update
 
-from metrics.registry import REGISTRY_VERSION
+from metrics.session.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY
-from sessions.lrs import LrsEndpoint, LrsRejected, LrsUnreachable, Outbox, push, read_statements
-from sessions.models import MetricResult, Session
-from sessions.xapi import (
+from sessions.exchange.lrs import LrsEndpoint, LrsRejected, LrsUnreachable, Outbox, push, read_statements
+from sessions.exchange.xapi import (
     CMI5_CATEGORY,
     CMI5_MASTERY,
     MOVEON_CATEGORY,
@@ -30,6 +29,7 @@ from sessions.xapi import (
     XapiSettings,
     study_statements,
 )
+from sessions.models import MetricResult, Session
 
 ROOT = Path(__file__).resolve().parents[2]
 RALPH = ROOT / ".venv-lrs" / "bin"

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from metrics.datasets.jigsaws import GRS_ITEMS
-from metrics.reliability import intraclass_correlation
+from metrics.study.reliability import intraclass_correlation
 from sessions.cli import main
 from tests.metrics.test_jigsaws import TRIALS, write_trial
 

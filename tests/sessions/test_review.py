@@ -7,8 +7,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from metrics.errors import MetricsError
-from metrics.proficiency import band_position
-from sessions.review import against_band
+from metrics.study.proficiency import band_position
+from sessions.scoring.review import against_band
 
 BAND = {"expert_q1": 10.0, "expert_median": 12.0, "expert_q3": 14.0}
 

@@ -10,12 +10,12 @@ from click.testing import CliRunner
 from sqlalchemy import select, update
 
 from metrics.reading.report import write_report
-from sessions.analysis import analyse_catalog_study
 from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY, TASK
 from sessions.models import MetricResult, Participant, Session
-from sessions.standards import current_standard
+from sessions.scoring.analysis import analyse_catalog_study
+from sessions.scoring.standards import current_standard
 
 
 def _cli(home, url, *args):

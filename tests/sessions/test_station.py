@@ -53,7 +53,7 @@ def course(tmp_path_factory):
     """A course with two experts and a trainee who each placed one scripted stitch (simulated time),
     so a trainee's trial at the station is judged against a standard; and P1, who has not started."""
     from sessions.config import database_url
-    from sessions.runner import SessionPlan, run_session
+    from sessions.running.runner import SessionPlan, run_session
     from sessions.synthetic import pass_parameters
 
     home = tmp_path_factory.mktemp("station-home")

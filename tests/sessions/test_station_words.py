@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from sessions.cli.run import review_lines
-from sessions.review import SessionReview
 from sessions.running.hud import HudLimits, HudTracker
 from sessions.running.scene import START_HEIGHT_M, access_direction, start_pose, task_camera
 from sessions.running.station import feedback_lines, instruction_lines
+from sessions.scoring.review import SessionReview
 from sessions.tasks import task_spec
 from sim.needle import Needle
 

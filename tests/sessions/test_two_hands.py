@@ -9,7 +9,7 @@ import pytest
 from metrics import from_recorded, metrics_of
 from recorder import open_session
 from sessions.catalog import Catalog
-from sessions.runner import SessionPlan, open_device, run_session
+from sessions.running.runner import SessionPlan, open_device, run_session
 from sessions.synthetic import assisting_parameters, scripted_hands
 from sim.devices.assisting import AssistingHandParameters
 from sim.devices.base import DeviceError

@@ -9,14 +9,14 @@ import json
 from click.testing import CliRunner
 from sqlalchemy import select, update
 
-from metrics.proficiency import assess_proficiency
-from sessions.analysis import analyse_catalog_study
+from metrics.study.proficiency import assess_proficiency
 from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY, TASK
 from sessions.models import MetricResult, Participant, Session, Verdict
-from sessions.review import review_session
-from sessions.standards import current_standard
+from sessions.scoring.analysis import analyse_catalog_study
+from sessions.scoring.review import review_session
+from sessions.scoring.standards import current_standard
 
 
 def _cli(home, url, *args):
@@ -190,8 +190,8 @@ def test_a_session_keeps_its_verdict_when_its_metrics_are_rescored(tmp_path, cop
 def test_the_version_in_force_is_the_newest_set_before_the_session():
     from datetime import datetime
 
-    from sessions.standards import StandardRecord
-    from sessions.verdicts import version_in_force
+    from sessions.scoring.standards import StandardRecord
+    from sessions.scoring.verdicts import version_in_force
 
     def version(n: int, day: int) -> StandardRecord:
         return StandardRecord("s", "t", n, "mean", [], [], [], 5, "1", None, "x", datetime(2026, 12, day), "")
@@ -209,7 +209,7 @@ def test_marks_set_before_intervals_were_kept_are_drift_checked_too(tmp_path, co
     interval is now rebuilt from the expert sessions the standard names: equal to the one the same
     bootstrap stored, and today's experts moving a mark beyond it are reported."""
     from sessions.models import Standard
-    from sessions.standards import set_time_intervals
+    from sessions.scoring.standards import set_time_intervals
 
     home = tmp_path / "home"
     catalog = Catalog(copy_demo(home))

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sessions.runner import SessionPlan, open_device
+from sessions.running.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
 from sessions.tasks import TASKS, task_simulation
 
