@@ -1,10 +1,11 @@
 """What a trainee should work on next, and what they already do well, against the experts' band.
 
 The never events first (back-wall catches, wound-edge tears, force beyond the device's rating: never
-cut from the list), then the rest of safety (:data:`SAFETY_GROUP`: partial-thickness bites, extra
-punctures, excessive force, the tissue's load), the quality of the stitch (placement), then
-efficiency (motion, insertion, the remaining forces, the assisting hand); within each, by how far
-outside the experts' interquartile band the value lies, in band widths. Each item carries a
+cut from the list), then the rest of safety (each metric registered with ``kind="safety"``:
+partial-thickness bites, extra punctures, excessive force, the tissue's load), the quality of the
+stitch (placement), then efficiency (motion, insertion, the remaining forces, the assisting
+hand); within each, by how far outside the experts' interquartile band the value lies, in band
+widths. Each item carries a
 sentence a supervisor would say (each metric's ``advice`` in the registry, required when it registers),
 so the CLI, the dashboard and the report say the same thing. Strengths are the metrics better
 than the experts' middle half (then the safety and quality metrics level with it), in the same
@@ -20,40 +21,16 @@ from collections.abc import Mapping, Sequence
 import pandas as pd
 
 from metrics.reading.band import against_band, expert_quartiles
-from metrics.session.registry import REGISTRY, display_name
+from metrics.session.registry import KINDS, REGISTRY, display_name
 from metrics.study.analysis import StudyAnalysis, practice_mask
 from metrics.study.standards import SAFETY_METRICS
 from metrics.units import shown, significant
 
-KINDS = ("safety", "quality", "efficiency")
-"""The order feedback is ranked in: what harms the patient, then what makes the anastomosis, then speed
-and economy."""
-
-SAFETY_GROUP = (
-    *SAFETY_METRICS,
-    "full_thickness_fraction",
-    "extra_punctures",
-    "peak_force",
-    "wound_edge_stress",
-    "high_stress_area",
-    "stress_concentration",
-    "peak_stretch",
-    "time_above_strain_limit",
-    "forceps_tears",
-    "peak_grasp_force",
-)
-"""What harms the patient: the never events, partial-thickness bites and extra punctures (leaks),
-excessive force, the load on the tissue (stress, stretch, the wound edge), and an edge the forceps
-tear or crush."""
-
-QUALITY_GROUPS = ("placement",)
-
 
 def kind_of(metric: str) -> str:
-    """safety (:data:`SAFETY_GROUP`), quality (where the stitch went) or efficiency."""
-    if metric in SAFETY_GROUP:
-        return "safety"
-    return "quality" if metric in REGISTRY and REGISTRY[metric].group in QUALITY_GROUPS else "efficiency"
+    """The metric's kind as registered (``@metric(kind=...)``: safety, quality or efficiency); a
+    metric outside the registry (an imported column) counts as efficiency."""
+    return REGISTRY[metric].kind if metric in REGISTRY else "efficiency"
 
 
 def band_widths_outside(value: float, q1: float, q3: float, better: str, side: str = "worse") -> float:

@@ -33,6 +33,7 @@ FORCE_RATE_WINDOW_S = 0.01
     better=LOWER,
     reference="O'Toole et al. 1999, J Am Coll Surg 189:114",
     group="force",
+    kind="safety",
 )
 def peak_force(context: SessionContext) -> float:
     magnitude = context.force_magnitude
@@ -56,6 +57,7 @@ def _contact_force(context: SessionContext):
     better=LOWER,
     reference="O'Toole et al. 1999, J Am Coll Surg 189:114",
     group="force",
+    kind="efficiency",
 )
 def mean_force(context: SessionContext) -> float:
     selected = _contact_force(context)
@@ -71,6 +73,7 @@ def mean_force(context: SessionContext) -> float:
     better=LOWER,
     reference="O'Toole et al. 1999, J Am Coll Surg 189:114",
     group="force",
+    kind="efficiency",
 )
 def rms_force(context: SessionContext) -> float:
     selected = _contact_force(context)
@@ -86,6 +89,7 @@ def rms_force(context: SessionContext) -> float:
     better=LOWER,
     reference="Moody et al. 2003 (grip forces at insertion); " + PAPER_REF,
     group="force",
+    kind="efficiency",
 )
 def force_at_insertion(context: SessionContext) -> float:
     magnitude = context.force_magnitude
@@ -104,6 +108,7 @@ def force_at_insertion(context: SessionContext) -> float:
     better=LOWER,
     reference="Trejos et al. 2014, Surg Endosc 28:2530 (force derivatives in skill assessment)",
     group="force",
+    kind="efficiency",
 )
 def peak_force_rate(context: SessionContext) -> float:
     force = context.streams.force
@@ -126,6 +131,7 @@ def peak_force_rate(context: SessionContext) -> float:
     better=LOWER,
     reference="vascsim runtime safety (docs/runtime.md)",
     group="force",
+    kind="safety",
 )
 def force_clamp_hits(context: SessionContext) -> float:
     return float(np.sum(context.streams.events["kind"].to_numpy() == "force_clamped"))

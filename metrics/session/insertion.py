@@ -51,6 +51,7 @@ def _tip_speed_near(context: SessionContext, after: bool) -> float:
     better=LOWER,
     reference=PAPER_REF,
     group="insertion",
+    kind="efficiency",
 )
 def tip_speed_before_pierce(context: SessionContext) -> float:
     return _tip_speed_near(context, after=False)
@@ -68,6 +69,7 @@ def tip_speed_before_pierce(context: SessionContext) -> float:
     better=LOWER,
     reference=PAPER_REF,
     group="insertion",
+    kind="efficiency",
 )
 def tip_speed_after_pierce(context: SessionContext) -> float:
     return _tip_speed_near(context, after=True)
@@ -85,6 +87,7 @@ def tip_speed_after_pierce(context: SessionContext) -> float:
     better=LOWER,
     reference="Moorthy et al. 2003, BMJ 327:1032 (needle entry perpendicular to tissue)",
     group="insertion",
+    kind="efficiency",
 )
 def entry_angle_error_deg(context: SessionContext) -> float:
     angles = [abs(i.entry_angle_deg) for i in context.insertions if not math.isnan(i.entry_angle_deg)]
@@ -100,6 +103,7 @@ def entry_angle_error_deg(context: SessionContext) -> float:
     better=LOWER,
     reference=PAPER_REF,
     group="insertion",
+    kind="efficiency",
 )
 def attempts(context: SessionContext) -> float:
     kinds = context.streams.events["kind"].to_numpy()
@@ -126,6 +130,7 @@ def attempts(context: SessionContext) -> float:
     better=LOWER,
     reference="Reznick et al. 1997, Am J Surg 173:226 (OSATS instrument handling)",
     group="insertion",
+    kind="efficiency",
 )
 def regrabs(context: SessionContext) -> float:
     return float(np.sum(context.streams.events["kind"].to_numpy() == "regrab"))
@@ -140,6 +145,7 @@ def regrabs(context: SessionContext) -> float:
     better=LOWER,
     reference=PAPER_REF,
     group="insertion",
+    kind="efficiency",
 )
 def contact_to_pierce_time(context: SessionContext) -> float:
     values = [i.pierce_time - i.contact_time for i in context.insertions]

@@ -23,6 +23,7 @@ from metrics.signals import kinematics
     better=LOWER,
     reference=MOTION_REF,
     group="motion",
+    kind="efficiency",
 )
 def task_time(context: SessionContext) -> float:
     return context.streams.duration
@@ -40,6 +41,7 @@ def task_time(context: SessionContext) -> float:
     better=LOWER,
     reference=MOTION_REF,
     group="motion",
+    kind="efficiency",
 )
 def path_length(context: SessionContext) -> float:
     return kinematics.moving_path_length(context.motion, context.movements)
@@ -57,6 +59,7 @@ def path_length(context: SessionContext) -> float:
     better=LOWER,
     reference=MOTION_REF,
     group="motion",
+    kind="efficiency",
 )
 def movement_count(context: SessionContext) -> float:
     return float(context.movements.count)
@@ -73,6 +76,7 @@ def movement_count(context: SessionContext) -> float:
     better=HIGHER,
     reference=MOTION_REF,
     group="motion",
+    kind="efficiency",
     bounds=(0.0, 1.0),
 )
 def economy_of_motion(context: SessionContext) -> float:
@@ -91,6 +95,7 @@ def economy_of_motion(context: SessionContext) -> float:
     better=HIGHER,
     reference=SMOOTH_REF,
     group="motion",
+    kind="efficiency",
     bounds=(-math.inf, 0.0),
 )
 def log_dimensionless_jerk(context: SessionContext) -> float:
@@ -111,6 +116,7 @@ def log_dimensionless_jerk(context: SessionContext) -> float:
     better=HIGHER,
     reference=SMOOTH_REF,
     group="motion",
+    kind="efficiency",
     bounds=(-math.inf, 0.0),
 )
 def spectral_arc_length(context: SessionContext) -> float:
@@ -125,6 +131,7 @@ def spectral_arc_length(context: SessionContext) -> float:
     better=LOWER,
     reference=MOTION_REF,
     group="motion",
+    kind="efficiency",
 )
 def idle_time(context: SessionContext) -> float:
     return kinematics.idle_time(context.motion)

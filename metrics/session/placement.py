@@ -38,6 +38,7 @@ def _over_stitches(context: SessionContext, per_stitch: Callable[[StitchPlacemen
     better=LOWER,
     reference=TARGETS_REF,
     group="placement",
+    kind="quality",
 )
 def bite_error_entry(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: np.abs(placed.entry_bite - placed.target_bite))
@@ -53,6 +54,7 @@ def bite_error_entry(context: SessionContext) -> float:
     better=LOWER,
     reference=TARGETS_REF,
     group="placement",
+    kind="quality",
 )
 def bite_error_exit(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: np.abs(placed.exit_bite - placed.target_exit_bite))
@@ -67,6 +69,7 @@ def bite_error_exit(context: SessionContext) -> float:
     better=LOWER,
     reference=TARGETS_REF,
     group="placement",
+    kind="quality",
 )
 def entry_to_target(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: placed.entry_to_target)
@@ -81,6 +84,7 @@ def entry_to_target(context: SessionContext) -> float:
     better=LOWER,
     reference=TARGETS_REF,
     group="placement",
+    kind="quality",
 )
 def exit_to_target(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: placed.exit_to_target)
@@ -97,6 +101,7 @@ def exit_to_target(context: SessionContext) -> float:
     better=LOWER,
     reference=OSATS_REF,
     group="placement",
+    kind="quality",
 )
 def bite_asymmetry(context: SessionContext) -> float:
     return _over_stitches(
@@ -116,6 +121,7 @@ def bite_asymmetry(context: SessionContext) -> float:
     better=HIGHER,
     reference=OSATS_REF,
     group="placement",
+    kind="safety",
     bounds=(0.0, 1.0),
 )
 def full_thickness_fraction(context: SessionContext) -> float:
@@ -136,6 +142,7 @@ def full_thickness_fraction(context: SessionContext) -> float:
     better=LOWER,
     reference=TARGETS_REF,
     group="placement",
+    kind="quality",
 )
 def spacing_error(context: SessionContext) -> float:
     placed = context.placement
@@ -154,6 +161,7 @@ def spacing_error(context: SessionContext) -> float:
     better=LOWER,
     reference=OSATS_REF,
     group="placement",
+    kind="quality",
 )
 def spacing_variation(context: SessionContext) -> float:
     placed = context.placement
@@ -179,6 +187,7 @@ PASSAGE_REF = (
     better=LOWER,
     reference=PASSAGE_REF,
     group="placement",
+    kind="quality",
 )
 def needle_track_offset(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: placed.track_offset)
@@ -195,6 +204,7 @@ def needle_track_offset(context: SessionContext) -> float:
     better=LOWER,
     reference=PASSAGE_REF,
     group="placement",
+    kind="quality",
 )
 def tissue_swept_area(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: placed.swept_area)
@@ -211,6 +221,7 @@ def tissue_swept_area(context: SessionContext) -> float:
     better=LOWER,
     reference=OSATS_REF,
     group="placement",
+    kind="safety",
 )
 def wound_edge_stress(context: SessionContext) -> float:
     return _over_stitches(context, lambda placed: placed.wound_edge_stress)
@@ -226,6 +237,7 @@ def wound_edge_stress(context: SessionContext) -> float:
     better=LOWER,
     reference=OSATS_REF,
     group="placement",
+    kind="safety",
 )
 def back_wall_catches(context: SessionContext) -> float:
     placed = context.placement
@@ -242,6 +254,7 @@ def back_wall_catches(context: SessionContext) -> float:
     better=LOWER,
     reference=OSATS_REF,
     group="placement",
+    kind="safety",
 )
 def extra_punctures(context: SessionContext) -> float:
     placed = context.placement

@@ -25,6 +25,10 @@ its recorded forceps (edge_held_at_insertion, peak_grasp_force, forceps_tears ad
 (NaN) for a session recorded one-handed, where they had read zeros (issue 46)."""
 
 LOWER, HIGHER = "lower", "higher"
+KINDS = ("safety", "quality", "efficiency")
+"""What a metric is about, in the order feedback ranks it: what harms the patient (never events,
+partial-thickness bites and extra punctures, excessive force, the load on the tissue, an edge the
+forceps tear or crush), what makes the anastomosis (where the stitch went), then speed and economy."""
 
 
 @dataclass(frozen=True)
@@ -37,6 +41,7 @@ class Metric:
     ``"events"``); without them the value is NaN.
     bounds: the values the metric can take (a time or an angle error is never negative,
     SPARC never positive); learning curves are fitted inside them.
+    kind: one of :data:`KINDS` (the feedback's ranking: :mod:`metrics.reading.feedback`).
     """
 
     name: str
@@ -46,6 +51,7 @@ class Metric:
     better: str
     reference: str
     group: str
+    kind: str
     compute: Callable[[SessionContext], float]
     bounds: tuple[float, float] = (-math.inf, math.inf)
     advice: str = ""
@@ -56,6 +62,10 @@ class Metric:
         if self.better not in (LOWER, HIGHER):
             raise MetricsError(
                 f"metric {self.name!r}: better must be 'lower' or 'higher'; got {self.better!r}"
+            )
+        if self.kind not in KINDS:
+            raise MetricsError(
+                f"metric {self.name!r}: kind must be one of {', '.join(KINDS)}; got {self.kind!r}"
             )
 
     @property
@@ -99,7 +109,8 @@ class Registry:
         return list(self) if names is None else [self[n] for n in names]
 
     def describe(self):
-        """The registry as a DataFrame (name, unit, better, streams, group, definition, advice, reference)."""
+        """The registry as a DataFrame (name, unit, better, range, group, kind, streams, definition,
+        advice, reference)."""
         import pandas as pd
 
         return pd.DataFrame(
@@ -110,6 +121,7 @@ class Registry:
                     "better": m.better,
                     "range": f"[{m.bounds[0]:g}, {m.bounds[1]:g}]",
                     "group": m.group,
+                    "kind": m.kind,
                     "streams": ", ".join(m.streams),
                     "definition": m.definition,
                     "advice": m.advice,
@@ -159,16 +171,18 @@ def metric(
     better: str,
     reference: str,
     group: str,
+    kind: str,
     bounds: tuple[float, float] = (0.0, math.inf),
 ) -> Callable[[Callable[[SessionContext], float]], Callable[[SessionContext], float]]:
     """Decorator registering a metric function in :data:`REGISTRY` (by default a non-negative quantity);
-    ``advice``: what a better attempt does, one sentence ending in a full stop."""
+    ``advice``: what a better attempt does, one sentence ending in a full stop; ``kind``: safety,
+    quality or efficiency (:data:`KINDS`)."""
     if not advice.endswith(".") or len(advice) >= 90:
         raise MetricsError(f"metric {name!r}: advice must be one sentence under 90 characters, ending in '.'")
 
     def register(function: Callable[[SessionContext], float]) -> Callable[[SessionContext], float]:
         REGISTRY.add(
-            Metric(name, unit, definition, streams, better, reference, group, function, bounds, advice)
+            Metric(name, unit, definition, streams, better, reference, group, kind, function, bounds, advice)
         )
         return function
 

@@ -39,6 +39,7 @@ def _insertion_mask(context: SessionContext):
     better=LOWER,
     reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
     group="subordinate",
+    kind="efficiency",
 )
 def subordinate_displacement(context: SessionContext) -> float:
     moved = context.streams.subordinate_displacement
@@ -61,6 +62,7 @@ def subordinate_displacement(context: SessionContext) -> float:
     better=LOWER,
     reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
     group="subordinate",
+    kind="efficiency",
 )
 def subordinate_activity(context: SessionContext) -> float:
     moved = context.streams.subordinate_displacement
@@ -80,6 +82,7 @@ def subordinate_activity(context: SessionContext) -> float:
     better=LOWER,
     reference="Datta et al. 2001, J Am Coll Surg 193:479 (ICSAD, both hands)",
     group="subordinate",
+    kind="efficiency",
 )
 def subordinate_path_length(context: SessionContext) -> float:
     moved = context.streams.subordinate_displacement
@@ -102,6 +105,7 @@ def subordinate_path_length(context: SessionContext) -> float:
     better=HIGHER,
     reference="PAPER.md: the subordinate hand gives access inside the wound's edge",
     group="subordinate",
+    kind="efficiency",
     bounds=(0.0, 1.0),
 )
 def edge_held_at_insertion(context: SessionContext) -> float:
@@ -125,6 +129,7 @@ def edge_held_at_insertion(context: SessionContext) -> float:
     better=LOWER,
     reference="Heijnsdijk et al. 2004, Surg Endosc 18:974 (grasper forces and tissue damage)",
     group="subordinate",
+    kind="safety",
 )
 def peak_grasp_force(context: SessionContext) -> float:
     force = context.streams.grasp_force
@@ -142,6 +147,7 @@ def peak_grasp_force(context: SessionContext) -> float:
     better=LOWER,
     reference="Konig et al. 2009, Biomaterials 30:1542 (suture retention strength of arteries)",
     group="subordinate",
+    kind="safety",
 )
 def forceps_tears(context: SessionContext) -> float:
     if context.streams.grasp_force is None:
@@ -163,6 +169,7 @@ def forceps_tears(context: SessionContext) -> float:
     reference="Hofstad et al. 2013, Surg Endosc 27:854 (bimanual dexterity: the instruments' velocity "
     "correlation)",
     group="subordinate",
+    kind="efficiency",
     bounds=(-1.0, 1.0),
 )
 def bimanual_dexterity(context: SessionContext) -> float:

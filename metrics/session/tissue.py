@@ -53,6 +53,7 @@ def _stress_near(context: SessionContext):
     better=LOWER,
     reference=PAPER_REF + " (stress localisation)",
     group="tissue",
+    kind="safety",
 )
 def high_stress_area(context: SessionContext) -> float:
     near = _stress_near(context)
@@ -74,6 +75,7 @@ def high_stress_area(context: SessionContext) -> float:
     better=LOWER,
     reference=PAPER_REF + " (stress localisation)",
     group="tissue",
+    kind="safety",
 )
 def stress_concentration(context: SessionContext) -> float:
     near = _stress_near(context)
@@ -98,6 +100,7 @@ def stress_concentration(context: SessionContext) -> float:
     better=LOWER,
     reference="Holzapfel et al. 2005, Am J Physiol Heart 289:H2048 (arterial failure stretch)",
     group="tissue",
+    kind="safety",
 )
 def peak_stretch(context: SessionContext) -> float:
     stretch = context.streams.stretch
@@ -115,6 +118,7 @@ def peak_stretch(context: SessionContext) -> float:
     better=LOWER,
     reference="Holzapfel et al. 2005, Am J Physiol Heart 289:H2048 (arterial failure stretch)",
     group="tissue",
+    kind="safety",
 )
 def time_above_strain_limit(context: SessionContext) -> float:
     stretch = context.streams.stretch
@@ -135,6 +139,7 @@ def time_above_strain_limit(context: SessionContext) -> float:
     better=LOWER,
     reference="vascsim tissue model, edge_damage_stress (docs/tissue-model.md)",
     group="tissue",
+    kind="safety",
 )
 def wound_edge_tears(context: SessionContext) -> float:
     return float(np.sum(context.streams.events["kind"].to_numpy() == "edge_overstress"))

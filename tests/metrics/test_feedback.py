@@ -36,7 +36,16 @@ from tests.dashboard.conftest import sign_in
 def test_every_registered_metric_has_advice_and_no_other():
     assert all(m.advice.endswith(".") and len(m.advice) < 90 for m in REGISTRY)
     with pytest.raises(MetricsError, match="advice must be one sentence"):
-        metric("new_metric", unit="s", definition="d", advice="", better="lower", reference="r", group="g")
+        metric(
+            "new_metric",
+            unit="s",
+            definition="d",
+            advice="",
+            better="lower",
+            reference="r",
+            group="g",
+            kind="efficiency",
+        )
 
 
 def test_band_widths_outside_hand_worked():
@@ -216,3 +225,41 @@ def test_never_events_outrank_the_rest_of_safety():
         "force_clamp_hits"
     ]  # the never event is kept, the limit is filled
     assert [i["kind"] for i in what_to_work_on(against_band(values, band), limit=5)] == ["safety", "safety"]
+
+
+def test_each_metric_says_its_kind_where_it_registers():
+    """Issue 48: what harms the patient is a property of the metric (``@metric(kind=...)``), not a
+    list of names kept in the feedback module: the safety kind is the never events, partial-thickness
+    bites and extra punctures, excessive force, the tissue's load and the forceps' harm; placement is
+    quality; the rest efficiency. A metric without a known kind is refused as it registers."""
+    from metrics.study.standards import SAFETY_METRICS
+
+    kinds = REGISTRY.describe().set_index("name")["kind"]
+    assert set(kinds) == {"safety", "quality", "efficiency"}
+    assert set(kinds[kinds == "safety"].index) == {
+        *SAFETY_METRICS,
+        "full_thickness_fraction",
+        "extra_punctures",
+        "peak_force",
+        "wound_edge_stress",
+        "high_stress_area",
+        "stress_concentration",
+        "peak_stretch",
+        "time_above_strain_limit",
+        "forceps_tears",
+        "peak_grasp_force",
+    }
+    quality = {m.name for m in REGISTRY if m.group == "placement"} - set(kinds[kinds == "safety"].index)
+    assert set(kinds[kinds == "quality"].index) == quality
+    assert kind_of("a_column_someone_imported") == "efficiency"
+    with pytest.raises(MetricsError, match="kind must be one of safety, quality, efficiency"):
+        metric(
+            "a_metric_of_no_known_kind",
+            unit="1",
+            definition="-",
+            advice="Do better.",
+            better="lower",
+            reference="-",
+            group="motion",
+            kind="speed",
+        )(lambda context: 0.0)
