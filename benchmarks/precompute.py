@@ -22,7 +22,7 @@ import numpy as np
 from sim.calibration.scenarios import SCENARIOS, scenario
 from sim.fem import BiphaseParameters, Material, TissueModel
 from sim.fem.biphase import BiphaseContact
-from sim.fem.condensation import condensed_inverse_multi_rhs, node_dofs
+from sim.fem.inverse.condensation import condensed_inverse_multi_rhs, node_dofs
 
 PRECOMPUTED = ("paper_table2_792", "paper_table2_1286", "paper_table2_2283", "vessel_10k")
 ON_DEMAND_ONLY = ("vessel_50k",)
@@ -88,7 +88,7 @@ def run_precomputed(name: str, repeats: int) -> dict[str, object]:
         fresh.penalised_stiffness()
 
     def factorise() -> None:
-        from sim.fem.condensation import sparse_cholesky
+        from sim.fem.inverse.condensation import sparse_cholesky
 
         sparse_cholesky(soft.penalised_stiffness())
 

@@ -16,8 +16,8 @@ from pydantic import BaseModel, Field
 from dashboard import queries
 from dashboard.auth import COOKIE, LoginRateLimiter, Viewer, current_viewer, require, sign_in_keys
 from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
-from dashboard.live import live_stream
-from dashboard.signals import inside, replay_video, session_file
+from dashboard.streams.live import live_stream
+from dashboard.streams.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
 from sessions import accounts
 from sessions.running.live import live_view_path

@@ -16,9 +16,9 @@ from dashboard.analysis import AnalysisCache
 from dashboard.auth import LoginRateLimiter
 from dashboard.errors import install_error_handlers
 from dashboard.limits import BodyLimit
-from dashboard.replay_jobs import ReplayJobs
 from dashboard.settings import DashboardSettings
-from dashboard.signals import SignalCache
+from dashboard.streams.replay_jobs import ReplayJobs
+from dashboard.streams.signals import SignalCache
 from metrics.session.registry import display_name
 from metrics.units import significant
 from recorder.remote.ingest import IngestStore

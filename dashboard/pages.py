@@ -24,7 +24,7 @@ from dashboard.auth import (
     require,
 )
 from dashboard.errors import DashboardError, said, status_of
-from dashboard.signals import replay_video
+from dashboard.streams.signals import replay_video
 from recorder.layout import SAMPLES_FILE
 from sessions.models import ROLES
 from sessions.scoring.ratings import session_ratings

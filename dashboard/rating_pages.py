@@ -25,7 +25,7 @@ from dashboard.api import Id
 from dashboard.auth import Viewer, require
 from dashboard.errors import DashboardError, not_found, said, status_of
 from dashboard.pages import render
-from dashboard.signals import inside, replay_video
+from dashboard.streams.signals import inside, replay_video
 from metrics.errors import MetricsError
 from metrics.instruments import INSTRUMENTS, instrument
 from sessions.replaying import blind_replay_path

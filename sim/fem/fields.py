@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import ModelError
 from sim.fem.assembly import displacement_gradients, small_strain, stress_tensor, von_mises_of_stress
-from sim.fem.condensation import node_dofs
+from sim.fem.inverse.condensation import node_dofs
 from sim.fem.model import TissueModel
 from sim.fem.stress import von_mises_rows
 from sim.fem.tissue import Tissue

@@ -26,17 +26,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import ModelError
 from sim.fem import _local_stress as compiled
-from sim.fem import cache, checks, stress
+from sim.fem import checks, stress
 from sim.fem.assembly import (
     SparsityPattern,
     element_stiffness,
     shape_gradients,
 )
 from sim.fem.checks import fixed_nodes_of
-from sim.fem.columns import ColumnCache, mixed_columns
-from sim.fem.condensation import node_dofs, sparse_cholesky, superposed_reactions
+from sim.fem.inverse import cache
+from sim.fem.inverse.columns import ColumnCache, mixed_columns
+from sim.fem.inverse.condensation import node_dofs, sparse_cholesky, superposed_reactions
+from sim.fem.inverse.precomputation import Precomputation, condensed, woodbury_composite
+from sim.fem.inverse.sharing import stiffness_scale
 from sim.fem.material import Material, MaterialSpec, describe_materials, element_lame
-from sim.fem.precomputation import Precomputation, condensed, woodbury_composite
 from sim.fem.solution import ContactHandle, ContactSolution, PrescribedHandle
 from sim.fem.surface import SurfaceGeometry
 from sim.mesh.tetmesh import TetMesh
@@ -167,7 +169,7 @@ class TissueModel:
         K0_base^-1 / s exactly, so this model neither factorises nor solves columns of its own:
         it divides base's. Returns s, or None (nothing shared) when the models are not so related.
         """
-        scale = self._stiffness_scale_of(base)
+        scale = stiffness_scale(self, base)
         if scale is None or "_factor" in self.__dict__ or "penalty" in self.__dict__:
             return None
         self._inverse_of = (base, scale)
@@ -186,32 +188,6 @@ class TissueModel:
             return self._inverse_of[0].needs_solve(node, full)
         precomputed = not full and self._precomputed is not None and self._candidate_row[node] >= 0
         return not precomputed and node not in self._column_cache
-
-    def _stiffness_scale_of(self, base: TissueModel) -> float | None:
-        """s with K0 = s K0_base, or None."""
-        if base is self or base._inverse_of is not None:
-            return None
-        same_structure = (
-            self.mesh is base.mesh
-            and np.array_equal(self.fixed_dofs, base.fixed_dofs)
-            and np.array_equal(self.contact_nodes, base.contact_nodes)
-        )
-        if not same_structure:
-            return None
-        (lam, mu), (base_lam, base_mu) = self._lame, base._lame
-        scale = float(mu[0] / base_mu[0])
-        if not (
-            scale > 0
-            and np.allclose(mu, scale * base_mu, rtol=1e-12, atol=0.0)
-            and np.allclose(lam, scale * base_lam, rtol=1e-12, atol=0.0)
-        ):
-            return None
-        if self._requested_penalty is None and base._requested_penalty is None:
-            return scale if self._penalty_factor == base._penalty_factor else None
-        if self._requested_penalty is not None and base._requested_penalty is not None:
-            ratio = self._requested_penalty / base._requested_penalty
-            return scale if abs(ratio - scale) <= 1e-12 * scale else None
-        return None
 
     def surface_von_mises(self, displacement: NDArray[np.float64]) -> NDArray[np.float64]:
         """See :func:`sim.fem.stress.surface_von_mises`."""
@@ -240,7 +216,7 @@ class TissueModel:
         """Condensed inverse over all contact candidates (the paper's composite matrix, exactly).
 
         With ``use_cache`` the result is read from / written to ``cache_dir``
-        (default :func:`sim.fem.cache.default_cache_dir`), verified by checksum.
+        (default :func:`sim.fem.inverse.cache.default_cache_dir`), verified by checksum.
         """
         if self._inverse_of is not None:
             base, scale = self._inverse_of
@@ -288,7 +264,7 @@ class TissueModel:
         ahead: bool = False,
     ) -> NDArray[np.float64]:
         """(3N, 3k) columns of K0^-1 at the nodes' dofs, only their ``rows`` (dof ids), or only the
-        candidates' dofs, from the column cache (:class:`sim.fem.columns.ColumnCache`; a model that
+        candidates' dofs, from the column cache (:class:`sim.fem.inverse.columns.ColumnCache`; a model that
         shares its inverse reads its base's, divided by the scale)."""
         if self._inverse_of is not None:
             base, scale = self._inverse_of

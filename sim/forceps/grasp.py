@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from sim.collision.mesh import CollisionMesh
 from sim.fem import Tissue
-from sim.fem.condensation import node_dofs
+from sim.fem.inverse.condensation import node_dofs
 from sim.forceps.jaws import Forceps, closest_surface_point, jaw_nodes
 
 FORCEPS_EVENT_KINDS = ("grasp", "release_grasp", "edge_torn")

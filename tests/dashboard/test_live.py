@@ -13,7 +13,7 @@ import pyarrow as pa
 import pyarrow.ipc as ipc
 from sqlalchemy import select, update
 
-from dashboard.live import JournalTail, sample_payload
+from dashboard.streams.live import JournalTail, sample_payload
 from recorder.schema import COLUMN, SAMPLE_COLUMNS
 from recorder.writer import SessionWriter, samples_batch
 from sessions.catalog import now

@@ -6,7 +6,7 @@ import scipy.sparse.linalg as spla
 
 from sim.errors import MaterialError, ModelError
 from sim.fem import Material, PoissonRatioWarning, TissueModel
-from sim.fem.condensation import node_dofs
+from sim.fem.inverse.condensation import node_dofs
 from sim.mesh import box_mesh, vessel_mesh
 from sim.mesh.tetmesh import TetMesh
 from tests.conftest import top_centre_triangle
@@ -293,7 +293,7 @@ def test_fast_composite_equals_papers_per_node_inversion(small_box):
 
 
 def test_trailing_factor_is_the_schur_complement(small_box):
-    from sim.fem.condensation import condensed_inverse, condensed_inverse_multi_rhs, trailing_cholesky
+    from sim.fem.inverse.condensation import condensed_inverse, condensed_inverse_multi_rhs, trailing_cholesky
 
     model = TissueModel(small_box, Material(20e3, 0.45), small_box.node_sets["z0"])
     k0 = model.penalised_stiffness()
@@ -426,7 +426,7 @@ def test_fixing_too_little_is_rejected(cube, fixed_nodes, fixed_dofs, free):
 
 def test_indefinite_matrix_reported_as_solver_error():
     from sim.errors import SolverError
-    from sim.fem.condensation import sparse_cholesky
+    from sim.fem.inverse.condensation import sparse_cholesky
 
     with pytest.raises(SolverError, match="not positive definite"):
         sparse_cholesky(sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]])))

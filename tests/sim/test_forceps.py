@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from sim.collision.mesh import CollisionMesh
 from sim.fem import Material, TissueModel
-from sim.fem.condensation import node_dofs
+from sim.fem.inverse.condensation import node_dofs
 from sim.forceps import Forceps, ForcepsError, ForcepsInteraction, closest_surface_point, jaw_nodes
 from sim.forceps.jaws import _closest_on_triangles
 from sim.mesh import box_mesh

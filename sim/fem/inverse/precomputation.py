@@ -2,7 +2,7 @@
 
 ``precompute`` (PAPER.md 4) inverts K0 over every contact-candidate dof at once; the result is keyed
 by everything it depends on (mesh, materials, fixed dofs, candidates, penalty) and stored with a
-checksum (:mod:`sim.fem.cache`), so a second run on the same tissue loads it in milliseconds. The
+checksum (:mod:`sim.fem.inverse.cache`), so a second run on the same tissue loads it in milliseconds. The
 paper's composite matrix follows from it by an exact 3 x 3 Woodbury update per node.
 """
 
@@ -17,8 +17,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from sim.fem import cache
-from sim.fem.condensation import condensed_inverse, node_dofs
+from sim.fem.inverse import cache
+from sim.fem.inverse.condensation import condensed_inverse, node_dofs
 
 
 @dataclass

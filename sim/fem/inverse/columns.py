@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.fem.condensation import node_dofs
+from sim.fem.inverse.condensation import node_dofs
 
 Solver = Callable[[NDArray[np.int64]], NDArray[np.float64]]
 

@@ -22,7 +22,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from sim.errors import SolverError
-from sim.fem.lapack import potri_lower
+from sim.fem.inverse.lapack import potri_lower
 
 # Columns per block in multi-right-hand-side solves: big enough for BLAS-3,
 # small enough to bound the dense workspace.
