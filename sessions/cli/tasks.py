@@ -184,7 +184,8 @@ def tasks_add(
 
     from sessions.tasks import add_mesh_task
     from sim.mesh import load_mesh
-    from sim.mesh.surfaces import CalcifiedSphere, mesh_quality, mesh_vessel_surface
+    from sim.mesh.quality import mesh_quality
+    from sim.mesh.surfaces import CalcifiedSphere, mesh_vessel_surface
 
     path = Path(mesh_path)
     sphere = None

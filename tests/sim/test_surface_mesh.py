@@ -16,9 +16,9 @@ from sim.calibration.presets import tissue_preset
 from sim.errors import MeshError
 from sim.fem import BiphaseTissue
 from sim.mesh import vessel_mesh
+from sim.mesh.quality import mesh_quality
 from sim.mesh.surfaces import (
     CalcifiedSphere,
-    mesh_quality,
     mesh_vessel_surface,
     mesh_wall,
     read_surface,
