@@ -12,8 +12,13 @@ import contextlib
 import functools
 import gc
 import os
+import signal
 import time as clock
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sim.runtime.shared import ControlBlock
 
 SPIN_MARGIN = 3e-4  # s before a deadline at which the haptic process stops sleeping and spins
 PR_SET_PDEATHSIG = 1  # prctl option: the signal this process gets when its parent dies
@@ -167,3 +172,31 @@ def read_all(fd: int, close: bool = True) -> str:
     if close:
         os.close(fd)
     return b"".join(chunks).decode(errors="replace")
+
+
+# -- what every forked layer process does ------------------------------------------------------
+def leave_interrupts_to_parent() -> None:
+    """In a forked child: Ctrl-C reaches the terminal's whole process group; the parent turns it into
+    a stop every layer sees, so the child ignores it rather than dying with a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def report_failure(fd: int, layer: str, error: BaseException) -> None:
+    """In a forked child: the failure, named with its layer, for the parent to read."""
+    try:
+        os.write(fd, f"{layer}: {type(error).__name__}: {error}".encode()[:4000])
+    except OSError:
+        pass
+
+
+def stop_with_parent(parent: int, control: ControlBlock) -> None:
+    """In a forked child: stop the run (the loop winds down, force to zero first) when the process
+    that forked it dies, killed included. An orphaned haptic loop would go on commanding the
+    device. Linux sends the child SIGTERM then (PR_SET_PDEATHSIG); elsewhere nothing changes."""
+    signal.signal(signal.SIGTERM, lambda signum, frame: control.request_stop())
+    libc = libc_functions()
+    if libc is None:
+        return
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != parent:  # it died before the request was in place
+        control.request_stop()

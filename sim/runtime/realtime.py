@@ -29,20 +29,21 @@ from collections.abc import Callable
 import numpy as np
 
 from sim.runtime.cpu import IdlePolling
+from sim.runtime.display_process import start_display_process, wait_for_display
 from sim.runtime.force_path import CompiledForcePath
 from sim.runtime.osrt import (
-    PR_SET_PDEATHSIG,
+    leave_interrupts_to_parent,
     leave_last_core_to_haptics,
-    libc_functions,
     lock_memory,
     process_prepared,
     read_all,
+    report_failure,
     set_all_threads,
     sleep_until,
+    stop_with_parent,
     try_realtime_priority,
     wait_for,
 )
-from sim.runtime.prefetch import WORKER_NICENESS
 from sim.runtime.shared import (
     Arena,
     ControlBlock,
@@ -66,9 +67,6 @@ FORCE_PATH = "haptic force path"
 """The telemetry of each haptic tick's force path (holder publish, force interpolation, safety filter,
 log: one compiled call, sim/runtime/force_path.py), within the whole haptic step's; the step also
 reads the device, writes its force and records the sample."""
-DISPLAY_PHASE = 0.004
-"""s after each graphics deadline at which a display that draws the newest graphics frame steps
-(the graphics step, global collision detection, takes 1-2 ms)."""
 LAYER_PRIORITIES = {"fem": 40, "graphics": 30}
 """SCHED_FIFO priorities of the FEM and graphics threads (the haptic process has 50). They sleep
 most of each period; in the normal class a woken FEM thread could wait a scheduler tick (4 ms) behind
@@ -109,7 +107,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     simulation.graphics = SharedGraphics(arena)
     simulation.fem = SharedFem(arena)
     display_telemetry = SharedTelemetry(arena, display_capacity)
-    display_pid, display_errors = _start_display_process(simulation, duration, control, display_telemetry)
+    display_pid, display_errors = start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()
     started = clock.perf_counter()
     parent = os.getpid()
@@ -118,13 +116,13 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
         os.close(errors_read)
         status = 0
         try:
-            _leave_interrupts_to_parent()
-            _stop_with_parent(parent, control)
+            leave_interrupts_to_parent()
+            stop_with_parent(parent, control)
             channels = (telemetry, force_path_telemetry)
             _haptic_process(simulation, duration, control, channels, events, errors_write, pin_cpus)
         except BaseException as error:  # outside the loop's own report (set-up): the parent reads it
             status = 1
-            _report(errors_write, "haptic", error)
+            report_failure(errors_write, "haptic", error)
         finally:
             os._exit(status)
     os.close(errors_write)
@@ -134,7 +132,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     try:
         with polling, _interrupts_stop(control):
             _wait_until_ready(pid, control, errors_read)
-            _wait_for_display(display_pid, control)
+            wait_for_display(display_pid, control)
             # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
             control.start = clock.perf_counter() + START_DELAY
             _run_other_layers(simulation, duration, control)
@@ -186,109 +184,6 @@ def _interrupts_stop(control: ControlBlock):
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-def _leave_interrupts_to_parent() -> None:
-    """In a forked child: Ctrl-C reaches the terminal's whole process group; the parent turns it into
-    a stop every layer sees, so the child ignores it rather than dying with a traceback."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _wait_for_display(pid: int | None, control: ControlBlock, timeout: float = 30.0) -> None:
-    """Block until the display process has opened its view (a window takes a second or so), so the
-    first frames are on time; a display that died setting up is left (its error is read after the
-    run, and the session goes on without a view)."""
-    if pid is None:
-        return
-    deadline = clock.monotonic() + timeout
-    while not control.display_ready and clock.monotonic() < deadline and not control.stop_requested:
-        finished, _ = os.waitpid(pid, os.WNOHANG)
-        if finished:
-            return
-        clock.sleep(0.005)
-
-
-def _report(fd: int, layer: str, error: BaseException) -> None:
-    """In a forked child: the failure, named with its layer, for the parent to read."""
-    try:
-        os.write(fd, f"{layer}: {type(error).__name__}: {error}".encode()[:4000])
-    except OSError:
-        pass
-
-
-def _start_display_process(
-    simulation: Simulation, duration: float, control: ControlBlock, telemetry: SharedTelemetry
-) -> tuple[int | None, int]:
-    """The display layer in its own process, so rendering never takes the FEM thread's GIL; at the
-    column worker's niceness (:data:`sim.runtime.prefetch.WORKER_NICENESS`), below the real-time
-    FEM and graphics threads."""
-    errors_read, errors_write = os.pipe()
-    if simulation.renderer is None:
-        os.close(errors_write)
-        return None, errors_read
-    parent = os.getpid()
-    pid = os.fork()
-    if pid != 0:
-        os.close(errors_write)
-        return pid, errors_read
-    os.close(errors_read)
-    status = 0
-    try:
-        _leave_interrupts_to_parent()
-        _stop_with_parent(parent, control)
-        from threadpoolctl import threadpool_limits
-
-        renderer = simulation.renderer
-        prepare = getattr(renderer, "prepare", None)
-        if prepare is not None:  # a window opens here, in the process that draws into it
-            prepare(
-                lambda reason="stopped_by_trainee": control.request_stop(reason),
-                lambda: clock.perf_counter() - control.start if control.start else 0.0,
-            )
-        control.mark_display_ready()
-        os.nice(WORKER_NICENESS)
-        threadpool_limits(1)
-        spare = not simulation.settings.display_on_haptic_core
-        if spare and hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
-            os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:-1]))  # off the haptic core
-        gc.freeze()
-        period = simulation.settings.period("display")
-        start, k = control.wait_for_start(), 0
-        # drawing the newest graphics frame: just after the graphics layer posts it
-        phase = DISPLAY_PHASE if simulation.settings.display_delay_frames == 0 else 0.0
-        while not control.stop_requested and control.haptic_state == ControlBlock.RUNNING:
-            deadline = start + k * period + phase
-            wait = deadline - clock.perf_counter()
-            if wait > 0:
-                clock.sleep(min(wait, period))
-            now = clock.perf_counter() - start
-            if now > duration:
-                break
-            began = clock.perf_counter()
-            simulation.display_step(now)
-            telemetry.record(now, clock.perf_counter() - began)
-            k = max(k + 1, int((clock.perf_counter() - start) / period))
-        finish = getattr(renderer, "finish", None)
-        if finish is not None:  # a window closes, and writes what it measured
-            finish()
-    except BaseException as error:
-        status = 1
-        _report(errors_write, "display", error)
-    finally:
-        os._exit(status)
-
-
-def _stop_with_parent(parent: int, control: ControlBlock) -> None:
-    """In a forked child: stop the run (the loop winds down, force to zero first) when the process
-    that forked it dies, killed included. An orphaned haptic loop would go on commanding the
-    device. Linux sends the child SIGTERM then (PR_SET_PDEATHSIG); elsewhere nothing changes."""
-    signal.signal(signal.SIGTERM, lambda signum, frame: control.request_stop())
-    libc = libc_functions()
-    if libc is None:
-        return
-    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    if os.getppid() != parent:  # it died before the request was in place
-        control.request_stop()
 
 
 def _as_layer_telemetry(layer: str, simulation: Simulation, shared: SharedTelemetry) -> LoopTelemetry:
