@@ -197,20 +197,13 @@ def files_reading_the_demo() -> set[str]:
     }
 
 
-LONGEST_FILES = ("tests/sessions/test_cli_flow.py",)
-"""Files handed out first, beside the shared demo's group: the full demo (the README's first command,
-about three minutes on a shared core) would otherwise start late and end the run alone."""
-
-
 def pytest_xdist_make_scheduler(config, log):
     """How scripts/test's two workers share the tests: a file's tests stay together (its module
     fixtures are built once), and the files that read the shared reduced demo all go to one worker,
-    so the demo runs once in the suite, not once per worker. Units go out in collection order, which
-    the workers put longest first (:func:`pytest_collection_modifyitems`)."""
+    so the demo runs once in the suite, not once per worker."""
     from xdist.scheduler import LoadScopeScheduling
 
     demo_files = files_reading_the_demo()
-    config.option.loadscopereorder = False  # the workers' order, not by number of tests
 
     class ByFileDemoTogether(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
@@ -222,9 +215,7 @@ def pytest_xdist_make_scheduler(config, log):
 
 def pytest_collection_modifyitems(config, items):
     """A test that reads the demo through a fixture its file does not name would build the demo
-    on a second worker: say so rather than silently paying for it. On a worker, the longest units
-    come first (the full demo's file, then the demo's group), so neither starts late and ends the
-    run alone."""
+    on a second worker: say so rather than silently paying for it."""
     demo_files = files_reading_the_demo()
     missed = {item.nodeid.split("::", 1)[0] for item in items if "demo_template" in item.fixturenames}
     missed -= demo_files
@@ -233,13 +224,6 @@ def pytest_collection_modifyitems(config, items):
             f"{', '.join(sorted(missed))} read(s) the shared reduced demo without naming one of "
             f"{', '.join(DEMO_FIXTURES)}: name it in the file so the demo's tests share one worker"
         )
-    if getattr(config, "workerinput", None) is not None:  # a worker of scripts/test: longest first
-
-        def rank(item) -> int:
-            file = item.nodeid.split("::", 1)[0]
-            return 0 if file in LONGEST_FILES else 1 if file in demo_files else 2
-
-        items.sort(key=rank)  # stable: each file's own order kept; every worker sorts alike
 
 
 RINGS = Path("/dev/shm")

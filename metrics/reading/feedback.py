@@ -5,12 +5,11 @@ cut from the list), then the rest of safety (each metric registered with ``kind=
 partial-thickness bites, extra punctures, excessive force, the tissue's load), the quality of the
 stitch (placement), then efficiency (motion, insertion, the remaining forces, the assisting
 hand); within each, by how far outside the experts' interquartile band the value lies, in band
-widths. Each item carries a
-sentence a supervisor would say (each metric's ``advice`` in the registry, required when it registers),
-so the CLI, the dashboard and the report say the same thing. Strengths are the metrics better
-than the experts' middle half (then the safety and quality metrics level with it), in the same
-order. :func:`session_feedback` gives both for one session, :func:`participant_feedback` for a
-trainee's recent practice.
+widths. Each item carries a sentence a supervisor would say (each metric's ``advice`` in the
+registry, required when it registers), so the CLI, the dashboard and the report say the same
+thing. Strengths are the metrics better than the experts' middle half (then the safety and quality
+metrics level with it), in the same order. :func:`session_feedback` gives both for one session,
+:func:`participant_feedback` for a trainee's recent practice.
 """
 
 from __future__ import annotations
