@@ -205,8 +205,9 @@ class _KernelIndentation:
             )
             point, indentation = point + step.shifts[0], step.indentation
             generalised = step.kernel_forces.reshape(-1)
-            stress[k] = self.operator.maximum(generalised)
-            stretch[k] = self.operator.stretch(generalised, 1.0 / self.load.drive_scale(step.share))
+            stress[k], _, stretch[k] = self.operator.measures(
+                generalised, 1.0 / self.load.drive_scale(step.share)
+            )
             self._last = (step.kernel_forces, step.share)
         return stretch, stress
 

@@ -12,12 +12,11 @@ costs six sparse solves plus array arithmetic, and gives exactly what
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import ModelError
+from sim.fem import _local_stress as compiled
 from sim.fem.assembly import displacement_gradients, small_strain, stress_tensor, von_mises_of_stress
 from sim.fem.inverse.condensation import node_dofs
 from sim.fem.model import TissueModel
@@ -352,14 +351,19 @@ class LocalStress:
             (per_node[edges[:, 1]] - per_node[edges[:, 0]]).reshape(3 * len(edges), -1)
         )
 
+    def measures(self, forces: NDArray[np.float64], scale: float = 1.0) -> tuple[float, float, float]:
+        """(local, watched, stretch) for the generalised forces (q,): :meth:`maxima` and
+        :meth:`stretch` in one compiled pass (what each FEM step reads)."""
+        forces = np.ascontiguousarray(forces, dtype=np.float64).reshape(-1)
+        return compiled.measures(
+            self._operator, self._split, self._response, self._rest, self._rest_length, forces, float(scale)
+        )
+
     def stretch(self, forces: NDArray[np.float64], scale: float = 1.0) -> float:
         """The largest stretch (deformed over rest length) of the local elements' edges in the
         displacement field ``scale`` x (the soft phase's response to the generalised forces (q,)):
         what the display draws around the contact (1.0 with no local elements)."""
-        if not len(self._edges):
-            return 1.0
-        deformed = self._rest + scale * self._response.dot(forces).reshape(-1, 3)
-        return math.sqrt(float((np.einsum("ij,ij->i", deformed, deformed) / self._rest_length).max()))
+        return self.measures(forces, scale)[2]
 
     def maximum(self, forces: NDArray[np.float64]) -> float:
         """The largest von Mises stress (Pa) of the local elements for the generalised forces (q,)."""
@@ -368,9 +372,4 @@ class LocalStress:
     def maxima(self, forces: NDArray[np.float64]) -> tuple[float, float]:
         """(local, watched): the largest von Mises stress (Pa) of the local elements and of the
         watched ones (nan without any) for the generalised forces (q,)."""
-        values = self._operator.dot(forces).reshape(-1, 6)
-        squares = np.einsum("ij,ij->i", values, values)
-        split = self._split
-        local = float(np.sqrt(squares[:split].max())) if split else 0.0
-        watched = float(np.sqrt(squares[split:].max())) if len(squares) > split else math.nan
-        return local, watched
+        return self.measures(forces)[:2]

@@ -159,6 +159,7 @@ class NeedleInteraction(GraphicsRateTracking):
         self._deepest = 0.0  # deepest tip depth reached into the wall since piercing (m)
         held, self._at_held_edge = _held_faces(tissue)
         self.collision = collision or CollisionMesh(tissue.mesh, ~held)
+        self._reaches: list[tuple[TriangleContact, NDArray, float]] = []  # the last few triangle reaches
         self.state = "free"
         self.grasped = True
         self.grasp = grasp or Pose.identity()  # needle frame in the holder frame
@@ -544,15 +545,16 @@ class NeedleInteraction(GraphicsRateTracking):
 
     def _nodal_stress(self, nodes: NDArray, reactions: NDArray, points: list, displacements: NDArray) -> None:
         """Local stress and stretch of the barycentric rule's nodal forces (operator per contact set)."""
-        if not self.live_stress:
-            self.local_stress = self.wound_edge_stress = math.nan
-        else:
+        forces = reactions.reshape(-1)
+        if self.live_stress:
             if self._stress is None or self._stress_key != tuple(nodes.tolist()):
                 edge = self.tissue.mesh.wound_edge_elements
                 self._stress = LocalStress(self.tissue, nodes, np.eye(3 * len(nodes)), points, watched=edge)
                 self._stress_key = tuple(nodes.tolist())
-            self.local_stress, self.wound_edge_stress = self._stress.maxima(reactions.reshape(-1))
-        self.stretch = math.nan if self._stress is None else self._stress.stretch(reactions.reshape(-1))
+            self.local_stress, self.wound_edge_stress, self.stretch = self._stress.measures(forces)
+            return
+        self.local_stress = self.wound_edge_stress = math.nan
+        self.stretch = math.nan if self._stress is None else self._stress.stretch(forces)
 
     def _axial_forces(self, vertices: NDArray, tangent: NDArray, kernels: int) -> NDArray:
         """(kernels, 3) the passage forces on the tissue along the needle (cutting, friction, the far
@@ -623,10 +625,11 @@ class NeedleInteraction(GraphicsRateTracking):
         if self._stress is None:
             self.local_stress = self.wound_edge_stress = self.stretch = math.nan
         else:
-            generalised = kernel_forces.reshape(-1)
-            self.local_stress, self.wound_edge_stress = self._stress.maxima(generalised)
-            # the field the display draws: the soft phase's answer to these loads over both phases'
-            self.stretch = self._stress.stretch(generalised, 1.0 / load.drive_scale(share))
+            # the stretch of the field the display draws: the soft phase's answer to these loads over
+            # both phases'
+            self.local_stress, self.wound_edge_stress, self.stretch = self._stress.measures(
+                kernel_forces.reshape(-1), 1.0 / load.drive_scale(share)
+            )
         return load.nodes, reactions, [ranks[m] for m in torn]
 
     def _move_contact(self, rank: int, shift: NDArray) -> None:

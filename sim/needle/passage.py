@@ -150,13 +150,26 @@ class GraphicsRateTracking:
         margin = 1e-3
         if self.contacts and contact is self.contacts[0] and 0 in self._torn:
             margin += TORN_HOLE  # a torn entry is a slit the needle was levered along
-        return bool(self._within_reach(contact, point, margin)[0])
+        reach = self._triangle_reach(contact) + margin
+        offset = point - contact.point
+        return float(offset.dot(offset)) <= reach * reach
+
+    def _triangle_reach(self, contact: TriangleContact) -> float:
+        """The contact triangle's size seen from the contact point (m): its farthest corner's distance,
+        remembered while the contact and the collision mesh's corners stay the same objects (each
+        FEM step asks it of every crossing)."""
+        corners = self.collision.corners
+        for known, known_corners, reach in self._reaches:
+            if known is contact and known_corners is corners:
+                return reach
+        reach = float(np.linalg.norm(corners[contact.triangle] - contact.point, axis=1).max())
+        self._reaches = [*self._reaches[-3:], (contact, corners, reach)]
+        return reach
 
     def _within_reach(self, contact: TriangleContact, points: NDArray, margin: float) -> NDArray[np.bool_]:
         """Whether each of ``points`` ((N, 3) or one) lies within the contact triangle's size plus
         ``margin`` (m) of the contact point."""
-        corners = self.collision.corners[contact.triangle]
-        reach = float(np.linalg.norm(corners - contact.point, axis=1).max()) + margin
+        reach = self._triangle_reach(contact) + margin
         offsets = np.atleast_2d(points) - contact.point
         return np.einsum("ij,ij->i", offsets, offsets) <= reach * reach
 

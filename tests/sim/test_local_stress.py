@@ -67,6 +67,57 @@ def test_the_compiled_steps_equal_the_numpy_reference(k, n, q, local, elements, 
     np.testing.assert_allclose(rows, reference, rtol=0, atol=1e-9 * max(1.0, abs(reference).max()))
 
 
+def reference_measures(operator, split, deformation, rest, rest_length, forces, scale):
+    """NumPy, as LocalStress read its field before the compiled pass: two products and maxima."""
+    squares = ((operator @ forces).reshape(-1, 6) ** 2).sum(axis=1)
+    local = float(np.sqrt(squares[:split].max())) if split else 0.0
+    watched = float(np.sqrt(squares[split:].max())) if len(squares) > split else np.nan
+    if not len(rest_length):
+        return local, watched, 1.0
+    deformed = rest + scale * (deformation @ forces).reshape(-1, 3)
+    return local, watched, float(np.sqrt(((deformed**2).sum(axis=1) / rest_length).max()))
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    q=st.integers(1, 9),
+    elements=st.integers(0, 12),
+    edges=st.integers(0, 10),
+    seed=st.integers(0, 2**32 - 1),
+    scale=st.floats(0.01, 10.0),
+    poison=st.sampled_from(["none", "operator", "deformation"]),
+)
+def test_the_compiled_field_measures_equal_the_numpy_reference(q, elements, edges, seed, scale, poison):
+    rng = np.random.default_rng(seed)
+    split = int(rng.integers(0, elements + 1))
+    operator = rng.normal(size=(6 * elements, q)) * 1e4
+    deformation = rng.normal(size=(3 * edges, q)) * 1e-4
+    rest = rng.normal(size=(edges, 3)) * 1e-3
+    rest_length = (rest**2).sum(axis=1)
+    forces = rng.normal(size=q)
+    if poison == "operator" and elements:  # a nan is the answer of its group, as NumPy's max says
+        operator[int(rng.integers(0, 6 * elements)), 0] = np.nan
+    if poison == "deformation" and edges:
+        deformation[int(rng.integers(0, 3 * edges)), 0] = np.nan
+    got = compiled.measures(operator, split, deformation, rest, rest_length, forces, scale)
+    expected = reference_measures(operator, split, deformation, rest, rest_length, forces, scale)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0)
+
+
+def test_compiled_field_measures_refuse_what_does_not_fit():
+    rest = np.eye(3)[:2].copy()  # two unit edges, unloaded: stretch 1
+    args = (np.zeros((12, 3)), 1, np.zeros((6, 3)), rest, np.ones(2), np.zeros(3), 1.0)
+    assert compiled.measures(*args) == (0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match=r"operator must be \(6E, 5\)"):
+        compiled.measures(args[0], 1, args[2], args[3], args[4], np.zeros(5), 1.0)
+    with pytest.raises(ValueError, match="split must be within the operator's 2 elements"):
+        compiled.measures(args[0], 3, *args[2:])
+    with pytest.raises(ValueError, match="must match rest_length's 3 edges"):
+        compiled.measures(args[0], 1, args[2], args[3], np.ones(3), *args[5:])
+    with pytest.raises(TypeError, match="forces must be float64"):
+        compiled.measures(*args[:5], np.zeros(3, dtype=np.float32), 1.0)
+
+
 def test_compiled_steps_refuse_what_does_not_fit():
     columns = [np.zeros((30, 3)), np.zeros((30, 3))]
     out = np.empty((6, 2))
