@@ -26,8 +26,8 @@ import numpy as np  # noqa: E402
 from sqlalchemy import select  # noqa: E402
 
 from sessions.catalog import Catalog, new_uid  # noqa: E402
+from sessions.catalog.models import Participant, Session  # noqa: E402
 from sessions.demo import DEMO_STUDY, DemoSize, run_demo  # noqa: E402
-from sessions.models import Participant, Session  # noqa: E402
 from sessions.scoring.workers import score_sessions  # noqa: E402
 
 

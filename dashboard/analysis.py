@@ -20,8 +20,8 @@ import numpy as np
 import pandas as pd
 
 from metrics.study.analysis import StudyAnalysis, oriented
+from sessions.catalog.store import CatalogStore
 from sessions.scoring.analysis import analyse_catalog_study
-from sessions.store import CatalogStore
 
 CACHED_STUDIES = 16
 

@@ -19,11 +19,11 @@ from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_foun
 from dashboard.streams.live import live_stream
 from dashboard.streams.signals import inside, replay_video, session_file
 from recorder.layout import SAMPLES_JOURNAL
-from sessions import accounts
+from sessions.catalog import accounts
+from sessions.catalog.store import STAFF, UserRecord
 from sessions.running.live import live_view_path
 from sessions.scoring import ratings
 from sessions.status import SessionStatus
-from sessions.store import STAFF, UserRecord
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 Staff = Annotated[Viewer, Depends(require(*STAFF))]
@@ -40,7 +40,7 @@ class Credentials(BaseModel):
     password: str = Field(min_length=1, max_length=1024)
 
 
-# the rules sessions.accounts enforces, declared here so the OpenAPI document states them
+# the rules sessions.catalog.accounts enforces, declared here so the OpenAPI document states them
 Password = Annotated[str, Field(min_length=accounts.MIN_PASSWORD_LENGTH, max_length=1024)]
 
 

@@ -24,7 +24,7 @@ from metrics.units import significant
 from recorder.remote.ingest import IngestStore
 from recorder.remote.ingest import create_app as create_ingest_app
 from sessions.catalog import Catalog
-from sessions.store import CatalogStore
+from sessions.catalog.store import CatalogStore
 
 HERE = Path(__file__).parent
 SECURITY_HEADERS = {
@@ -71,7 +71,7 @@ def create_app(settings: DashboardSettings, catalog: Catalog | None = None) -> F
     )
     app.state.settings = settings
     app.state.catalog = catalog
-    app.state.store = CatalogStore(catalog)  # administration through the domain store (sessions.store)
+    app.state.store = CatalogStore(catalog)  # administration through the domain store
     app.state.ingest = ingest_store
     app.state.analyses = AnalysisCache(app.state.store)
     app.state.signals = SignalCache(settings.home)

@@ -13,7 +13,7 @@ from fastapi import Depends, Request
 from starlette.concurrency import run_in_threadpool
 
 from dashboard.errors import DashboardError, forbidden
-from sessions.store import Scope
+from sessions.catalog.store import Scope
 
 COOKIE = "vascsim_login"
 PRE_LOGIN_COOKIE = "vascsim_prelogin"  # double-submit CSRF token of the sign-in form
@@ -24,7 +24,7 @@ FORM_TYPES = ("application/x-www-form-urlencoded", "multipart/form-data")
 
 @dataclass(frozen=True, kw_only=True)
 class Viewer(Scope):
-    """The signed-in user as every query sees them: their :class:`sessions.store.Scope` (role, a
+    """The signed-in user as every query sees them: their :class:`sessions.catalog.store.Scope` (role, a
     trainee's own participants) with who they are and their sign-in's CSRF token."""
 
     user_id: int

@@ -26,9 +26,9 @@ from dashboard.auth import (
 from dashboard.errors import DashboardError, said, status_of
 from dashboard.streams.signals import replay_video
 from recorder.layout import SAMPLES_FILE
-from sessions.models import ROLES
+from sessions.catalog.models import ROLES
+from sessions.catalog.store import STAFF
 from sessions.scoring.ratings import session_ratings
-from sessions.store import STAFF
 from sim.errors import VascsimError
 
 router = APIRouter(include_in_schema=False)

@@ -1,6 +1,6 @@
 """What each page shows, as plain dictionaries, always filtered by who is asking.
 
-The catalog store's scoped reads (:mod:`sessions.store.views`) answer every lookup, so an id that
+The catalog store's scoped reads (:mod:`sessions.catalog.views`) answer every lookup, so an id that
 exists but belongs to somebody else answers exactly like an id that does not exist; this module only
 composes them with the study's analysis. It holds no query of its own.
 """
@@ -28,11 +28,11 @@ from metrics.study.analysis import practice_mask
 from metrics.study.proficiency import benchmarks_heading, drift_line
 from metrics.units import display_unit, in_display_units
 from recorder.layout import SAMPLES_JOURNAL
+from sessions.catalog.store import CatalogStore, ParticipantRecord, SessionRecord
 from sessions.scoring.analysis import analysed_task
 from sessions.scoring.review import against_band, expert_band, session_stitches
 from sessions.scoring.standards import set_command
 from sessions.status import SCORABLE
-from sessions.store import CatalogStore, ParticipantRecord, SessionRecord
 from sim.errors import VascsimError
 
 ATTENTION_AFTER_TRIALS = 5

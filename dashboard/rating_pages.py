@@ -28,9 +28,9 @@ from dashboard.pages import render
 from dashboard.streams.signals import inside, replay_video
 from metrics.errors import MetricsError
 from metrics.instruments import INSTRUMENTS, instrument
+from sessions.catalog.store import STAFF
 from sessions.replaying import blind_replay_path
 from sessions.scoring.ratings import add_rating, session_ratings
-from sessions.store import STAFF
 from sim.errors import VascsimError
 
 router = APIRouter(include_in_schema=False)

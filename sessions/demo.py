@@ -23,13 +23,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from sqlalchemy import select
 
 from metrics.reading.report import write_report
 from metrics.study.analysis import StudyAnalysis, StudySettings
 from sessions.catalog import Catalog, CatalogError, WrongState
+from sessions.catalog.lookups import study_named, study_session_keys
 from sessions.config import cache_dir
-from sessions.models import Study
 from sessions.running.runner import SessionPlan, run_session
 from sessions.scoring.analysis import analyse_catalog_study, declare_analysis
 from sessions.scoring.standards import set_standard
@@ -124,17 +123,10 @@ def synthetic_ratings(catalog: Catalog, runs: list, seed: int) -> int:
     (SD 0.6 per item), rounded and kept within 1-5. Stored as any rating is (checked against the
     instrument); returns how many ratings."""
     from metrics.instruments import GRS
-    from sessions.models import Participant, Session, Study, Task
     from sessions.scoring.ratings import checked_rating, store_ratings
 
     with catalog.session() as orm:
-        rows = orm.execute(
-            select(Session.uid, Participant.code, Task.name, Session.trial, Session.phase)
-            .join(Participant, Session.participant_id == Participant.id)
-            .join(Study, Participant.study_id == Study.id)
-            .join(Task, Session.task_id == Task.id)
-            .where(Study.name == DEMO_STUDY)
-        ).all()
+        rows = study_session_keys(orm, DEMO_STUDY)
     uids = {(code, task, trial, phase): uid for uid, code, task, trial, phase in rows}
     rng = np.random.default_rng(seed)
     ratings = []
@@ -156,7 +148,7 @@ def _reset_study(catalog: Catalog, name: str, home: Path) -> PreviousDemo:
     """Delete the previous demo study, its recordings and its replay videos (which would otherwise
     outlive their sessions); return the trainee accounts linked to its participants, by code."""
     with catalog.session() as orm:
-        study = orm.scalar(select(Study).where(Study.name == name))
+        study = study_named(orm, name)
         if study is None:
             return PreviousDemo({}, 0)
         if not all(p.synthetic for p in study.participants):

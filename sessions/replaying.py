@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sqlalchemy import select
-
 from recorder import open_session
 from sessions.catalog import Catalog, CatalogError, NotFound
+from sessions.catalog.lookups import group_sessions, latest_session_of, session_with_uid
+from sessions.catalog.models import Session
 from sessions.config import cache_dir
-from sessions.models import Participant, Session
 from sessions.status import SCORABLE
 from sessions.tasks import known_task, tissue_for
 
@@ -30,21 +29,10 @@ def _replayable(row: Session) -> None:
 def _versus_session(catalog: Catalog, orm, versus: str, study_id: int, task_id: int) -> Session:
     """``--vs``: a session id, or a participant code of the session's study meaning that
     participant's latest replayable session on the same task."""
-    found = orm.scalar(select(Session).where(Session.uid == versus))
+    found = session_with_uid(orm, versus)
     if found is not None:
         return found
-    latest = orm.scalar(
-        select(Session)
-        .join(Participant, Session.participant_id == Participant.id)
-        .where(
-            Participant.study_id == study_id,
-            Participant.code == versus,
-            Session.task_id == task_id,
-            Session.status.in_(REPLAYABLE),
-        )
-        .order_by(Session.started_at.desc(), Session.id.desc())
-        .limit(1)
-    )
+    latest = latest_session_of(orm, study_id, versus, task_id, REPLAYABLE)
     if latest is None:
         raise NotFound("session or participant with a session on this task", versus)
     return latest
@@ -71,18 +59,7 @@ def replay_inputs(
             expert_dirs.append(other.directory)
         if versus_group:
             labels = {versus_group, versus_group.rstrip("s")}  # "experts" finds group "expert"
-            rows = orm.scalars(
-                select(Session)
-                .join(Participant, Session.participant_id == Participant.id)
-                .where(
-                    Participant.study_id == study_id,
-                    Participant.group_label.in_(labels),
-                    Session.status.in_(REPLAYABLE),
-                    Session.uid != uid,
-                    Session.task_id == row.task_id,
-                )
-                .order_by(Session.id)
-            ).all()
+            rows = group_sessions(orm, study_id, labels, row.task_id, REPLAYABLE, uid)
             if not rows:
                 raise CatalogError(
                     f"no complete sessions of group {versus_group!r} on task {task!r} in this session's study"

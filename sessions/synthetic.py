@@ -20,7 +20,7 @@ from sqlalchemy import insert, select
 
 from metrics.session.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog, now
-from sessions.models import MetricResult, Participant, Session
+from sessions.catalog.models import MetricResult, Participant, Session
 from sessions.tasks import task_spec
 from sim.devices.assisting import AssistingHandParameters, ScriptedHands
 from sim.devices.scripted import SuturingPassParameters

@@ -113,7 +113,6 @@ FOLDERS_OF_ONE_MODULE_PER_COMMAND = ("sessions/cli",)
 FILES_TO_SPLIT = {
     "sim/fem/model.py": 532,
     "sim/runtime/simulation.py": 635,
-    "sim/needle/interaction.py": 678,
 }
 FOLDERS_TO_SPLIT: dict[str, int] = {}
 
@@ -144,3 +143,46 @@ def test_no_folder_holds_more_than_fifteen_modules():
     assert not grown, f"over {MAX_FOLDER_MODULES} modules (make a sub-package for one idea): {grown}"
     split = sorted(set(FOLDERS_TO_SPLIT) - set(over))
     assert not split, f"now within {MAX_FOLDER_MODULES} modules: take {split} off FOLDERS_TO_SPLIT"
+
+
+CATALOG = "sessions/catalog/"
+SQL_BUILDERS = {"select", "insert", "update", "delete", "func", "text"}
+"""SQLAlchemy's statement builders: whoever imports one writes a query."""
+QUERIES_TO_MOVE = {
+    "sessions/exchange/bundle.py",
+    "sessions/exchange/bundle_export.py",
+    "sessions/exchange/importing.py",
+    "sessions/exchange/progress.py",
+    "sessions/scoring/analysis.py",
+    "sessions/scoring/ratings.py",
+    "sessions/scoring/review.py",
+    "sessions/scoring/standards.py",
+    "sessions/scoring/verdicts.py",
+    "sessions/synthetic.py",
+}
+"""Modules that still write their own queries (issue 48): the list may shrink, never grow."""
+
+
+def sql_writers() -> set[str]:
+    """Modules outside the catalog's folder that import a statement builder from SQLAlchemy."""
+    found = set()
+    for path in python_files():
+        name = path.relative_to(ROOT).as_posix()
+        if name.startswith(CATALOG):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sqlalchemy"):
+                if SQL_BUILDERS & {alias.name for alias in node.names}:
+                    found.add(name)
+            elif isinstance(node, ast.Attribute) and node.attr in SQL_BUILDERS:
+                if isinstance(node.value, ast.Name) and node.value.id in ("sqlalchemy", "sa"):
+                    found.add(name)
+    return found
+
+
+def test_queries_are_written_only_in_the_catalog():
+    writers = sql_writers()
+    grown = sorted(writers - QUERIES_TO_MOVE)
+    assert not grown, f"queries belong in {CATALOG} (the store or the engine), not in {grown}"
+    moved = sorted(QUERIES_TO_MOVE - writers)
+    assert not moved, f"these write no query any more: take {moved} off QUERIES_TO_MOVE"

@@ -100,7 +100,7 @@ def open_catalog():
 
 def open_store():
     """(the catalog's store, the data home): what a command reads and changes goes through the store."""
-    from sessions.store import CatalogStore
+    from sessions.catalog.store import CatalogStore
 
     catalog, home = open_catalog()
     return CatalogStore(catalog), home

@@ -53,8 +53,8 @@ def demo(small: bool, as_json: bool) -> None:
     synthetic everywhere.
     """
     from metrics.reading.tables import compact_caption, compact_summary, composite_summary, summary_table
+    from sessions.catalog.store import CatalogStore
     from sessions.demo import DEMO_STUDY, DemoSize, run_demo
-    from sessions.store import CatalogStore
 
     catalog, home = open_catalog()
     size = DemoSize(2, 2, 3, 3, True) if small else DemoSize()

@@ -132,8 +132,8 @@ def push_after_scoring(catalog, home: Path, uids: Iterable[str]) -> None:
     """For each study of the sessions just scored that is set to push automatically: push, and say
     what happened in one line (an unreachable LRS is not an error of the scoring: its statements
     stay spooled for the next push)."""
+    from sessions.catalog.store import CatalogStore
     from sessions.exchange.lrs import LrsError, configured, push_study
-    from sessions.store import CatalogStore
 
     settings = configured(home)
     if not any(s.auto for s in settings.values()):

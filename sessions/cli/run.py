@@ -67,10 +67,10 @@ def run(
     crash, `vascsim recover` restores it. Ends with the verdict against the study's standard and the
     three things to work on first (--json: everything).
     """
+    from sessions.catalog.store import CatalogStore
     from sessions.running.runner import SessionPlan, run_session
     from sessions.scoring.review import experts_on_task, review_session
     from sessions.status import SCRIPTED_DEVICE
-    from sessions.store import CatalogStore
     from sessions.synthetic import scripted_hands
 
     catalog, home = open_catalog()

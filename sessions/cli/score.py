@@ -32,8 +32,8 @@ WORKERS = click.option(
 
 
 def study_sessions(catalog, study: str, only_unscored: bool = False) -> list[str]:
-    """See :meth:`sessions.store.CatalogStore.scorable_sessions`."""
-    from sessions.store import CatalogStore
+    """See :meth:`sessions.catalog.store.CatalogStore.scorable_sessions`."""
+    from sessions.catalog.store import CatalogStore
 
     return CatalogStore(catalog).scorable_sessions(study, only_unscored)
 

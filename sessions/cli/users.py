@@ -6,9 +6,9 @@ import sys
 
 import click
 
+from sessions.catalog.models import ROLES
+from sessions.catalog.store import CatalogStore
 from sessions.cli.base import open_catalog, print_json, user_errors
-from sessions.models import ROLES
-from sessions.store import CatalogStore
 
 
 def _password(value: str | None) -> str:

@@ -34,6 +34,20 @@ from sqlalchemy import select
 
 from recorder.json_input import JSONInputError, JSONTooDeep, parse_json
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
+from sessions.catalog.models import (
+    AnalysisDeclaration,
+    Annotation,
+    MetricResult,
+    Participant,
+    Rating,
+    Rejudgement,
+    Session,
+    Standard,
+    StreamFile,
+    Study,
+    Task,
+    Verdict,
+)
 from sessions.exchange.bundle_export import export_study
 from sessions.exchange.manifest import (
     BUNDLE_FORMAT,
@@ -48,20 +62,6 @@ from sessions.exchange.manifest import (
 )
 from sessions.exchange.signing import SIGNATURE, trusted_fingerprint
 from sessions.exchange.signing import verify as verify_signature
-from sessions.models import (
-    AnalysisDeclaration,
-    Annotation,
-    MetricResult,
-    Participant,
-    Rating,
-    Rejudgement,
-    Session,
-    Standard,
-    StreamFile,
-    Study,
-    Task,
-    Verdict,
-)
 from sessions.status import SCORABLE
 
 

@@ -20,6 +20,14 @@ from typing import Any
 from sqlalchemy import select
 
 from sessions.catalog import Catalog, CatalogError
+from sessions.catalog.models import (
+    Participant,
+    Rejudgement,
+    Session,
+    Standard,
+    StreamFile,
+    Verdict,
+)
 from sessions.exchange.manifest import (
     BUNDLE_FORMAT,
     BUNDLE_VERSION,
@@ -30,14 +38,6 @@ from sessions.exchange.manifest import (
     SESSION_FIELDS,
 )
 from sessions.exchange.signing import SIGNATURE, sign
-from sessions.models import (
-    Participant,
-    Rejudgement,
-    Session,
-    Standard,
-    StreamFile,
-    Verdict,
-)
 from sessions.status import SessionStatus
 
 

@@ -9,7 +9,7 @@ from sqlalchemy import select
 from metrics import metrics_of
 from metrics.datasets import jigsaws
 from sessions.catalog import Catalog, CatalogError, metric_results, now, stream_file
-from sessions.models import Participant, Rating, Session
+from sessions.catalog.models import Participant, Rating, Session
 
 
 def import_jigsaws(

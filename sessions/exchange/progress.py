@@ -16,7 +16,7 @@ from metrics.session.registry import REGISTRY
 from metrics.study.analysis import StudyAnalysis
 from metrics.units import display_unit, in_display_units
 from sessions.catalog import Catalog, CatalogError
-from sessions.models import Participant, Session
+from sessions.catalog.models import Participant, Session
 from sessions.scoring.analysis import analyse_catalog_study
 
 

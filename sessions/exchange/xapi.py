@@ -38,9 +38,9 @@ from metrics.errors import MetricsError
 from metrics.session.registry import REGISTRY, REGISTRY_VERSION
 from metrics.units import display_unit, in_display_units
 from sessions.catalog import Catalog, CatalogError
+from sessions.catalog.store import CatalogStore, SessionRecord
 from sessions.scoring.analysis import analyse_catalog_study
 from sessions.status import SCORABLE
-from sessions.store import CatalogStore, SessionRecord
 
 NAMESPACE = uuid.UUID("6f1d2c1e-5b0a-5d7e-9a43-7c9b2f0e8a11")  # vascsim's statements (uuid5 seeds)
 
@@ -182,7 +182,7 @@ class _Builder:
 
 
 def _session_rows(catalog: Catalog, study_name: str) -> list[SessionRecord]:
-    """The study's sessions by participant, task and trial (:meth:`sessions.store.CatalogStore.sessions`)."""
+    """The study's sessions by participant, task and trial (:meth:`CatalogStore.sessions`)."""
     rows = CatalogStore(catalog).sessions(study_name)
     return sorted(rows, key=lambda r: (r.participant, r.task, r.trial))
 

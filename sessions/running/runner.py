@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import NamedTuple
 
 import pandas as pd
-from sqlalchemy import delete, select
 
 from metrics import REGISTRY_VERSION, SessionStreams, from_recorded, metrics_of
 from metrics.signals.placement import STITCH_QUANTITIES, stitch_table
@@ -24,17 +23,16 @@ from metrics.signals.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
-from sessions.config import cache_dir
-from sessions.models import (
+from sessions.catalog.lookups import forget_results, forget_stream_files, session_in_directory
+from sessions.catalog.models import (
     MetricResult,
-    Session,
     StitchResult,
-    StreamFile,
 )
+from sessions.catalog.store import CatalogStore
+from sessions.config import cache_dir
 from sessions.running.hands import instruments, open_forceps_device
 from sessions.running.live import LiveView
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
-from sessions.store import CatalogStore
 from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import (
     edge_grasps,
@@ -277,7 +275,7 @@ def study_and_task_ids(catalog: Catalog, uid: str) -> tuple[int, int]:
 def _finish(catalog: Catalog, uid: str, directory: Path, status: str, error: str = "") -> None:
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
-        orm.execute(delete(StreamFile).where(StreamFile.session_id == row.id))
+        forget_stream_files(orm, row.id)
         orm.add_all(stream_file(row.id, path) for path in sorted(directory.iterdir()) if path.is_file())
         row.status = status
         row.error = error
@@ -297,7 +295,7 @@ def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
         row = None
         if folder.is_dir():
             resolved = str(folder.resolve())
-            row = orm.scalar(select(Session).where(Session.directory.in_((target, resolved))))
+            row = session_in_directory(orm, (target, resolved))
         else:
             row = catalog.recorded_session(orm, target)
             folder = Path(row.directory)
@@ -375,10 +373,7 @@ def store_scores(catalog: Catalog, uid: str, values: dict[str, float], stitches:
     """Store a session's scores with the registry version, replacing what that version had."""
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
-        for table in (MetricResult, StitchResult):
-            orm.execute(
-                delete(table).where(table.session_id == row.id, table.registry_version == REGISTRY_VERSION)
-            )
+        forget_results(orm, (MetricResult, StitchResult), row.id, REGISTRY_VERSION)
         orm.add_all(metric_results(row.id, values))
         orm.add_all(stitch_results(row.id, stitches))
 
@@ -409,5 +404,5 @@ def stitch_results(session_id: int, stitches: pd.DataFrame | None) -> list[Stitc
 
 
 def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
-    """See :meth:`sessions.store.CatalogStore.study_table` (the store owns it)."""
+    """See :meth:`sessions.catalog.store.CatalogStore.study_table` (the store owns it)."""
     return CatalogStore(catalog).study_table(study_name)

@@ -21,7 +21,7 @@ from sqlalchemy.orm import Session as OrmSession
 from metrics.errors import MetricsError
 from metrics.study.analysis import StudyAnalysis, StudySettings, analyse_study
 from sessions.catalog import Catalog, CatalogError, WrongState, now
-from sessions.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
+from sessions.catalog.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
 from sessions.running.runner import study_table
 from sessions.status import SCORABLE
 from sim.errors import VascsimError
@@ -376,7 +376,7 @@ def with_primary_metrics(settings: StudySettings, table: pd.DataFrame) -> tuple[
 
 def participants_left_out(catalog: Catalog, study_name: str, analysis: StudyAnalysis) -> list[dict]:
     """Every participant of the study absent from ``analysis``, with the reason in words."""
-    from sessions.store import CatalogStore
+    from sessions.catalog.store import CatalogStore
 
     settings = analysis.settings
     analysed = set(map(str, analysis.sessions[settings.cluster_col]))

@@ -23,7 +23,7 @@ from sqlalchemy import delete, func, select
 from metrics.errors import MetricsError
 from metrics.instruments import TOTAL, Instrument, instrument
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, now
-from sessions.models import Participant, Rating, Session
+from sessions.catalog.models import Participant, Rating, Session
 
 RATER_NAME = re.compile(r"^[^\x00-\x1f\x7f]{1,100}$")
 MAX_IMPORT_BYTES = 16 * 1024 * 1024

@@ -16,7 +16,7 @@ from sqlalchemy import select
 from metrics.reading.band import against_band, expert_quartiles
 from metrics.session.registry import REGISTRY_VERSION, display_name
 from sessions.catalog import Catalog
-from sessions.models import MetricResult, Participant, Session, StitchResult
+from sessions.catalog.models import MetricResult, Participant, Session, StitchResult
 from sessions.status import SCORABLE
 
 EXPERT_GROUP = "expert"
@@ -196,7 +196,7 @@ def _against_standard(
 
 def experts_on_task(catalog: Catalog, study: str, task: str) -> bool:
     """Whether any expert of ``study`` has a scored session of ``task`` (a standard needs them)."""
-    from sessions.models import Task
+    from sessions.catalog.models import Task
 
     with catalog.session() as orm:
         study_id = catalog.study(orm, study).id

@@ -26,7 +26,7 @@ from metrics.session.registry import REGISTRY_VERSION
 from metrics.study.analysis import StudyAnalysis, practice_mask
 from metrics.study.proficiency import BENCHMARK_COLUMNS, mark_drift, mark_intervals, proficiency_benchmarks
 from sessions.catalog import Catalog, WrongState, now
-from sessions.models import Standard, Study
+from sessions.catalog.models import Standard, Study
 
 
 @dataclass(frozen=True)

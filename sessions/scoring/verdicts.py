@@ -20,7 +20,7 @@ from sqlalchemy.exc import IntegrityError
 
 from metrics.study.analysis import StudyAnalysis, session_judge, with_verdicts
 from sessions.catalog import Catalog, CatalogError, WrongState, now
-from sessions.models import Rejudgement, Session, Standard, Verdict
+from sessions.catalog.models import Rejudgement, Session, Standard, Verdict
 from sessions.scoring.standards import StandardRecord, set_command, standard_history, standards_command
 
 

@@ -15,8 +15,8 @@ from sqlalchemy import select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
-from sessions.accounts import create_user, link_participant
-from sessions.models import Participant, Session
+from sessions.catalog.accounts import create_user, link_participant
+from sessions.catalog.models import Participant, Session
 from sessions.synthetic import seed_metrics_study
 
 PASSWORD = "correct horse battery"

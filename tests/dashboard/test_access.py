@@ -69,7 +69,7 @@ def test_guessing_ids_finds_nothing_of_anyone_else(seeded, client_for):
     with seeded.catalog.session() as orm:
         from sqlalchemy import select
 
-        from sessions.models import Participant, Session
+        from sessions.catalog.models import Participant, Session
 
         every_participant = list(orm.scalars(select(Participant.id)))
         every_session = list(orm.scalars(select(Session.uid)))
@@ -103,7 +103,7 @@ def test_supervisor_sees_accounts_and_live_view_but_cannot_administer(seeded, cl
     # issue 44, seen 10: the live page's times carry their zone
     from sqlalchemy import select, update
 
-    from sessions.models import Session
+    from sessions.catalog.models import Session
 
     uid = seeded.other_sessions[0]
     with seeded.catalog.session() as orm:
@@ -192,8 +192,8 @@ def test_domain_errors_map_to_http_statuses_by_type_never_by_wording():
     """Issue 24: NotFound 404, Forbidden 403, AlreadyExists / WrongState 409, the rest 400; a message
     that happens to start with "no " is not a 404 (it was: "no free trial number" answered 404)."""
     from dashboard.errors import status_of
-    from sessions.accounts import AccountConflict, AccountNotFound
     from sessions.catalog import AlreadyExists, CatalogError, Forbidden, NotFound, WrongState
+    from sessions.catalog.accounts import AccountConflict, AccountNotFound
 
     assert status_of(NotFound("study", "x")) == 404
     assert status_of(AccountNotFound("user", "nobody")) == 404

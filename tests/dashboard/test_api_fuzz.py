@@ -85,7 +85,7 @@ def test_documented_constraints_are_the_enforced_ones(site):
     with no scored sessions is a documented 409, not an undocumented 400."""
     from fastapi.testclient import TestClient
 
-    from sessions.accounts import MIN_PASSWORD_LENGTH, STATION_PATTERN, USERNAME_PATTERN
+    from sessions.catalog.accounts import MIN_PASSWORD_LENGTH, STATION_PATTERN, USERNAME_PATTERN
 
     with TestClient(site.app) as client:
         schemas = client.get("/api/openapi.json").json()["components"]["schemas"]

@@ -17,7 +17,7 @@ from dashboard.streams.live import JournalTail, sample_payload
 from recorder.schema import COLUMN, SAMPLE_COLUMNS
 from recorder.writer import SessionWriter, samples_batch
 from sessions.catalog import now
-from sessions.models import Participant, Session, Task
+from sessions.catalog.models import Participant, Session, Task
 from tests.dashboard.conftest import PASSWORD, running_server
 
 

@@ -12,9 +12,9 @@ from sqlalchemy import select
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
 from metrics.reading.feedback import participant_feedback
-from sessions.accounts import create_user
+from sessions.catalog.accounts import create_user
+from sessions.catalog.models import Participant
 from sessions.demo import DEMO_STUDY
-from sessions.models import Participant
 from sessions.scoring.analysis import analyse_catalog_study
 from tests.dashboard.conftest import sign_in
 

@@ -12,7 +12,7 @@ from sqlalchemy import select, update
 from dashboard.auth import COOKIE, LoginRateLimiter
 from recorder.remote.protocol import encode_batch
 from recorder.writer import samples_batch
-from sessions.models import Session, User
+from sessions.catalog.models import Session, User
 from tests.dashboard.conftest import PASSWORD, seed_dashboard, sign_in
 
 HTTPS = "https://testserver"  # the site sets Secure cookies
@@ -112,7 +112,7 @@ def test_downloads_cannot_leave_the_data_directory(site, tmp_path):
     with site.catalog.session() as orm:
         orm.execute(update(Session).where(Session.uid == uid).values(directory="/etc"))
         row = orm.scalar(select(Session).where(Session.uid == uid))
-        from sessions.models import StreamFile
+        from sessions.catalog.models import StreamFile
 
         orm.add(StreamFile(session_id=row.id, name="passwd", sha256="0" * 64, bytes=1))
     with TestClient(site.app, base_url=HTTPS) as client:

@@ -25,8 +25,8 @@ LIMITS = {"header_timeout_s": "1", "body_timeout_s": "1", "body_min_rate": "10",
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
     """(port, a station's ingest token) of `vascsim serve` with the short LIMITS."""
-    from sessions.accounts import create_station_token
     from sessions.catalog import Catalog
+    from sessions.catalog.accounts import create_station_token
     from sessions.config import database_url
 
     home = tmp_path_factory.mktemp("slow") / "home"

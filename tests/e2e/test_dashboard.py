@@ -11,10 +11,10 @@ from sqlalchemy import select
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
 from metrics.replay.export import ReplaySettings, export_replay
-from sessions.accounts import create_user, link_participant
 from sessions.catalog import Catalog
+from sessions.catalog.accounts import create_user, link_participant
+from sessions.catalog.models import MetricResult, Participant, Session, Study
 from sessions.demo import DEMO_STUDY
-from sessions.models import MetricResult, Participant, Session, Study
 from sessions.replaying import replay_inputs
 from tests.blind_video import blind_problems, decoded_frames
 from tests.dashboard.conftest import running_server
@@ -240,7 +240,7 @@ def test_a_blinded_rater_rates_a_session_without_learning_whose_it_is(demo_site)
         assert trainee.goto(blinded_address).status == 403
     # the first session of the queue may be any of the study's; a rating of it was stored by the rater
     from sessions.catalog import Catalog
-    from sessions.models import Rating
+    from sessions.catalog.models import Rating
 
     catalog = Catalog(ids["url"])
     with catalog.session() as orm:

@@ -18,10 +18,10 @@ import pytest
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
-from sessions.accounts import create_user
 from sessions.catalog import Catalog
+from sessions.catalog.accounts import create_user
+from sessions.catalog.store import CatalogStore
 from sessions.config import database_url
-from sessions.store import CatalogStore
 from tests.dashboard.conftest import PASSWORD, running_server
 from tests.e2e.browser import chromium
 

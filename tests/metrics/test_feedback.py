@@ -25,10 +25,10 @@ from metrics.reading.feedback import (
     what_to_work_on,
 )
 from metrics.session.registry import REGISTRY, metric
-from sessions.accounts import create_user
 from sessions.catalog import Catalog
+from sessions.catalog.accounts import create_user
+from sessions.catalog.models import Participant, Session
 from sessions.cli import main
-from sessions.models import Participant, Session
 from sessions.scoring.review import against_band
 from tests.dashboard.conftest import sign_in
 

@@ -246,7 +246,7 @@ def test_the_declared_analysis_travels_with_the_bundle_and_is_checked(small_stud
         with pytest.raises(CatalogError, match=message):
             import_bundle(target, tmp_path / "other", hostile)
         with target.session() as orm:
-            from sessions.models import Study
+            from sessions.catalog.models import Study
 
             assert orm.query(Study).count() == 0  # refused before anything was stored
     import_bundle(target, tmp_path / "other", bundle)
@@ -398,7 +398,7 @@ def test_imported_metric_values_are_recomputed_or_marked_unverified(small_study,
     from sqlalchemy import select
 
     from sessions.catalog import Catalog
-    from sessions.models import MetricResult
+    from sessions.catalog.models import MetricResult
     from sessions.scoring.analysis import analyse_catalog_study
 
     bundle = tmp_path / "course.zip"
@@ -467,8 +467,8 @@ def test_signed_bundles_verify_against_the_trusted_key_only(small_study, tmp_pat
     for listed in json.loads(invoke("sessions", "list", "--json").stdout):  # make room for the study
         assert invoke("sessions", "delete", "--yes", listed["session"]).exit_code == 0
     from sessions.catalog import Catalog
+    from sessions.catalog.models import Study
     from sessions.config import database_url
-    from sessions.models import Study
 
     catalog = Catalog(database_url(small_study))
     with catalog.session() as orm:

@@ -11,8 +11,8 @@ from sqlalchemy import func, select
 
 from metrics import compute_session_metrics
 from sessions.catalog import Catalog, CatalogError
+from sessions.catalog.models import Base, Participant, Session
 from sessions.demo import PRIMARY_METRICS, DemoSize, run_demo
-from sessions.models import Base, Participant, Session
 from sessions.tasks import session_tissue
 from tests.conftest import REDUCED_DEMO_SIZE
 

@@ -7,7 +7,7 @@ from alembic import command
 from sqlalchemy import select, text
 
 from sessions.catalog import Catalog, CatalogError, alembic_config, make_engine, now
-from sessions.models import Participant, Session, Study, Task
+from sessions.catalog.models import Participant, Session, Study, Task
 
 
 def _first_use(url, start, index, results):

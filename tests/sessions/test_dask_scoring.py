@@ -11,9 +11,9 @@ from click.testing import CliRunner
 from sqlalchemy import select, update
 
 from sessions.catalog import Catalog
+from sessions.catalog.models import MetricResult, Session, StitchResult
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY
-from sessions.models import MetricResult, Session, StitchResult
 
 
 @pytest.fixture

@@ -14,11 +14,11 @@ from sqlalchemy import delete, func, select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
-from sessions.accounts import create_user
 from sessions.catalog import Catalog, CatalogError
+from sessions.catalog.accounts import create_user
+from sessions.catalog.models import Participant, Session, Study
 from sessions.cli import main
 from sessions.demo import DEMO_ANALYSIS, DEMO_STUDY
-from sessions.models import Participant, Session, Study
 from sessions.scoring.analysis import (
     analyse_catalog_study,
     analysis_history,
@@ -65,7 +65,7 @@ def test_the_demo_rates_every_session_with_two_synthetic_raters_and_reports_ever
     """Two synthetic raters (named so) score every demo session with the GRS; the analysis every
     front-end uses then carries inter-rater agreement, concurrent validity against the GRS total,
     test-retest and standard setting."""
-    from sessions.models import Rating
+    from sessions.catalog.models import Rating
     from sessions.scoring.ratings import study_ratings
 
     catalog, _ = demo
@@ -231,7 +231,7 @@ def test_results_of_an_older_registry_are_stale_until_rescored(tmp_path, copy_de
     from sqlalchemy import update
 
     from metrics.session.registry import REGISTRY_VERSION
-    from sessions.models import MetricResult, Session
+    from sessions.catalog.models import MetricResult, Session
 
     home = tmp_path
     catalog = Catalog(copy_demo(home))
@@ -259,7 +259,7 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
     """GRS totals stored as ratings become a column of the study table, and a report against them."""
     from datetime import datetime
 
-    from sessions.models import Rating, Session
+    from sessions.catalog.models import Rating, Session
     from sessions.running.runner import study_table
 
     catalog, home = demo

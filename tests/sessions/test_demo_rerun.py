@@ -7,11 +7,11 @@ from __future__ import annotations
 import pytest
 from sqlalchemy import select
 
-from sessions.accounts import create_user, link_participant
 from sessions.catalog import Catalog
+from sessions.catalog.accounts import create_user, link_participant
+from sessions.catalog.models import Participant, Session, User
 from sessions.cli.demo import rerun_lines
 from sessions.demo import DemoSize, run_demo
-from sessions.models import Participant, Session, User
 
 
 @pytest.mark.slow

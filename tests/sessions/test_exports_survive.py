@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from sqlalchemy import delete, select, update
 
 from sessions.catalog import Catalog
+from sessions.catalog.models import MetricResult, Session
 from sessions.demo import DEMO_STUDY
-from sessions.models import MetricResult, Session
 from sessions.status import SessionStatus
 
 PLACEMENT = ("entry_angle_deg", "entry_to_target", "bite_depth", "peak_force", "tip_speed_after_pierce")

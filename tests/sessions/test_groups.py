@@ -10,8 +10,8 @@ from click.testing import CliRunner
 from sqlalchemy import text
 
 from sessions.catalog import Catalog, alembic_config, make_engine
+from sessions.catalog.store import CatalogStore
 from sessions.cli import main
-from sessions.store import CatalogStore
 
 
 def _cli(*args):
@@ -92,7 +92,7 @@ def test_every_report_accounts_for_every_participant(tmp_path, copy_demo):
 
     from dashboard.app import create_app
     from dashboard.settings import DashboardSettings
-    from sessions.accounts import create_user
+    from sessions.catalog.accounts import create_user
     from tests.dashboard.conftest import sign_in
 
     with catalog.session() as orm:

@@ -18,6 +18,7 @@ from sqlalchemy import func, select, update
 
 from metrics.session.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog
+from sessions.catalog.models import MetricResult, Session
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY
 from sessions.exchange.lrs import LrsEndpoint, LrsRejected, LrsUnreachable, Outbox, push, read_statements
@@ -29,7 +30,6 @@ from sessions.exchange.xapi import (
     XapiSettings,
     study_statements,
 )
-from sessions.models import MetricResult, Session
 
 ROOT = Path(__file__).resolve().parents[2]
 RALPH = ROOT / ".venv-lrs" / "bin"

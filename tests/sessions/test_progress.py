@@ -13,11 +13,11 @@ from sqlalchemy import select
 
 from dashboard.app import create_app
 from dashboard.settings import DashboardSettings
-from sessions.accounts import create_user, link_participant
+from sessions.catalog.accounts import create_user, link_participant
+from sessions.catalog.models import Participant, Study
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY
 from sessions.exchange.progress import progress_table
-from sessions.models import Participant, Study
 from sessions.scoring.analysis import analyse_catalog_study
 from tests.dashboard.conftest import sign_in
 

@@ -11,9 +11,9 @@ from sqlalchemy import select, update
 
 from metrics.reading.report import write_report
 from sessions.catalog import Catalog
+from sessions.catalog.models import MetricResult, Participant, Session
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY, TASK
-from sessions.models import MetricResult, Participant, Session
 from sessions.scoring.analysis import analyse_catalog_study
 from sessions.scoring.standards import current_standard
 
@@ -69,7 +69,7 @@ def test_the_study_page_names_the_standard_in_force_and_follows_a_new_version(tm
 
     from dashboard.app import create_app
     from dashboard.settings import DashboardSettings
-    from sessions.accounts import create_user
+    from sessions.catalog.accounts import create_user
     from tests.dashboard.conftest import sign_in
 
     home = tmp_path / "home"

@@ -22,8 +22,8 @@ import pytest
 
 from recorder import open_session
 from sessions.catalog import Catalog
+from sessions.catalog.store import CatalogStore
 from sessions.running.scene import START_HEIGHT_M, access_direction, start_pose, task_camera
-from sessions.store import CatalogStore
 from sessions.tasks import task_spec
 from sim.devices.mouse import MouseMapping, needle_circle
 from sim.needle import Needle, rotation_about

@@ -9,7 +9,7 @@ import pytest
 from sqlalchemy import select
 
 from sessions.catalog import AlreadyExists, Catalog, NotFound, WrongState
-from sessions.store import CatalogStore, UserRecord
+from sessions.catalog.store import CatalogStore, UserRecord
 
 PASSWORD = "correct horse battery"
 
@@ -78,7 +78,7 @@ def test_sessions_are_listed_by_study_task_and_status(demo_catalog):
 def _session(catalog, code: str, status: str = "complete", note: str | None = None) -> str:
     """A catalogued session of participant ``code`` of the fixture's study (no streams)."""
     from sessions.catalog import new_uid, now
-    from sessions.models import Annotation, Participant
+    from sessions.catalog.models import Annotation, Participant
 
     with catalog.session() as orm:
         participant_id = orm.scalar(select(Participant.id).where(Participant.code == code))
@@ -142,7 +142,7 @@ def test_deleting_a_session_removes_its_rows_and_names_its_folder(store):
 
 def test_a_reader_sees_only_what_their_role_allows(store):
     from sessions.catalog import Forbidden
-    from sessions.store import Scope
+    from sessions.catalog.store import Scope
 
     mine, theirs = _session(store.catalog, "T01", note="watch the angle"), _session(store.catalog, "T02")
     t01 = next(p for p in store.participants("course") if p.code == "T01")

@@ -11,9 +11,9 @@ from sqlalchemy import select, update
 
 from metrics.study.proficiency import assess_proficiency
 from sessions.catalog import Catalog
+from sessions.catalog.models import MetricResult, Participant, Session, Verdict
 from sessions.cli import main
 from sessions.demo import DEMO_STUDY, TASK
-from sessions.models import MetricResult, Participant, Session, Verdict
 from sessions.scoring.analysis import analyse_catalog_study
 from sessions.scoring.review import review_session
 from sessions.scoring.standards import current_standard
@@ -80,7 +80,7 @@ def _study_page(home, url, catalog: Catalog) -> str:
 
     from dashboard.app import create_app
     from dashboard.settings import DashboardSettings
-    from sessions.accounts import create_user
+    from sessions.catalog.accounts import create_user
     from tests.dashboard.conftest import sign_in
 
     with catalog.session() as orm:
@@ -208,7 +208,7 @@ def test_marks_set_before_intervals_were_kept_are_drift_checked_too(tmp_path, co
     """Issue 44: marks stored before each kept its interval were never checked for drift. Their
     interval is now rebuilt from the expert sessions the standard names: equal to the one the same
     bootstrap stored, and today's experts moving a mark beyond it are reported."""
-    from sessions.models import Standard
+    from sessions.catalog.models import Standard
     from sessions.scoring.standards import set_time_intervals
 
     home = tmp_path / "home"
@@ -234,7 +234,7 @@ def test_marks_set_before_intervals_were_kept_are_drift_checked_too(tmp_path, co
 def _standing(catalog: Catalog) -> tuple[list, dict, list]:
     """(every standard version as set, session uid -> its kept verdict, the re-judging log) without
     the catalog's own ids."""
-    from sessions.models import Rejudgement, Standard
+    from sessions.catalog.models import Rejudgement, Standard
 
     with catalog.session() as orm:
         standards = [

@@ -1,11 +1,11 @@
 """The catalog as a store with a domain API: each method runs its own transaction and returns plain
-frozen values (:mod:`sessions.store.records`), never ORM rows, so a front-end (the CLI, the
+frozen values (:mod:`sessions.catalog.records`), never ORM rows, so a front-end (the CLI, the
 dashboard's API and pages) states no rule of its own and two front-ends cannot disagree.
 
-- :mod:`~sessions.store.admin`: accounts, sign-ins, station tokens, studies;
-- :mod:`~sessions.store.listing`: studies, participants and sessions listed, what is scorable, the
+- :mod:`~sessions.catalog.admin`: accounts, sign-ins, station tokens, studies;
+- :mod:`~sessions.catalog.listing`: studies, participants and sessions listed, what is scorable, the
   study table an analysis reads, deleting a session;
-- :mod:`~sessions.store.views`: what one reader may see (:mod:`~sessions.store.scope`, the row-level
+- :mod:`~sessions.catalog.views`: what one reader may see (:mod:`~sessions.catalog.scope`, the row-level
   rule), for the dashboard.
 
 Errors are the catalog's, by type (:class:`sessions.catalog.NotFound`, ``AlreadyExists``,
@@ -14,10 +14,10 @@ Errors are the catalog's, by type (:class:`sessions.catalog.NotFound`, ``Already
 
 from __future__ import annotations
 
-from sessions.catalog import Catalog
-from sessions.store.admin import Administration
-from sessions.store.listing import Listings
-from sessions.store.records import (
+from sessions.catalog.admin import Administration
+from sessions.catalog.engine import Catalog
+from sessions.catalog.listing import Listings
+from sessions.catalog.records import (
     AnnotationRecord,
     FileRecord,
     ParticipantRecord,
@@ -28,8 +28,8 @@ from sessions.store.records import (
     StudySummary,
     UserRecord,
 )
-from sessions.store.scope import EVERYTHING, STAFF, Scope
-from sessions.store.views import ScopedReads
+from sessions.catalog.scope import EVERYTHING, STAFF, Scope
+from sessions.catalog.views import ScopedReads
 
 __all__ = [
     "EVERYTHING",

@@ -1,6 +1,6 @@
 """The catalog store's listings: studies, participants and sessions as every front-end lists them,
 which sessions are scorable, the study table an analysis reads, and deleting a session's rows.
-Scoped lookups take the reader's :class:`sessions.store.scope.Scope` (the CLI reads everything)."""
+Scoped lookups take the reader's :class:`sessions.catalog.scope.Scope` (the CLI reads everything)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from sqlalchemy import case, func, or_, select
 from sqlalchemy.orm import Session as OrmSession
 
 from metrics.session.registry import REGISTRY, REGISTRY_VERSION
-from sessions.catalog import Catalog, WrongState
-from sessions.models import MetricResult, Participant, Rating, Session, Study, Task, User
+from sessions.catalog.engine import Catalog, WrongState
+from sessions.catalog.models import MetricResult, Participant, Rating, Session, Study, Task, User
+from sessions.catalog.records import ParticipantRecord, SessionRecord, StudyRecord, StudySummary
+from sessions.catalog.scope import EVERYTHING, Scope, visible
 from sessions.status import SCORABLE, SCRIPTED_DEVICE
-from sessions.store.records import ParticipantRecord, SessionRecord, StudyRecord, StudySummary
-from sessions.store.scope import EVERYTHING, Scope, visible
 
 
 def sessions_with(*columns):

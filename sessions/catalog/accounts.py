@@ -17,8 +17,8 @@ from argon2.exceptions import InvalidHashError, VerificationError
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session as OrmSession
 
-from sessions.catalog import AlreadyExists, CatalogError, NotFound, now
-from sessions.models import ROLES, LoginSession, Participant, StationToken, User
+from sessions.catalog.engine import AlreadyExists, CatalogError, NotFound, now
+from sessions.catalog.models import ROLES, LoginSession, Participant, StationToken, User
 
 MIN_PASSWORD_LENGTH = 10
 USERNAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{1,63}$")

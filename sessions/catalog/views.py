@@ -1,5 +1,5 @@
 """The catalog store's scoped reads: what one reader may see of a study, a participant or a session,
-each lookup through :mod:`sessions.store.scope` so an id outside the reader's reach answers exactly as
+each lookup through :mod:`sessions.catalog.scope` so an id outside the reader's reach answers exactly as
 one that does not exist. The dashboard's pages and API compose these with the analysis; they hold no
 query of their own."""
 
@@ -8,8 +8,9 @@ from __future__ import annotations
 from sqlalchemy import func, select
 
 from metrics.session.registry import REGISTRY_VERSION
-from sessions.catalog import Catalog
-from sessions.models import (
+from sessions.catalog.engine import Catalog
+from sessions.catalog.listing import listed_sessions, participant_records, sessions_with
+from sessions.catalog.models import (
     AnalysisDeclaration,
     Annotation,
     MetricResult,
@@ -20,9 +21,7 @@ from sessions.models import (
     Standard,
     Task,
 )
-from sessions.status import SCRIPTED_DEVICE, SessionStatus
-from sessions.store.listing import listed_sessions, participant_records, sessions_with
-from sessions.store.records import (
+from sessions.catalog.records import (
     AnnotationRecord,
     FileRecord,
     ParticipantRecord,
@@ -30,7 +29,8 @@ from sessions.store.records import (
     SessionRecord,
     StudyRecord,
 )
-from sessions.store.scope import EVERYTHING, Scope, owned_participant, owned_session, owned_study, visible
+from sessions.catalog.scope import EVERYTHING, Scope, owned_participant, owned_session, owned_study, visible
+from sessions.status import SCRIPTED_DEVICE, SessionStatus
 
 
 class ScopedReads:

@@ -1,4 +1,4 @@
-"""The catalog's tables (SQLAlchemy 2). Migrations in ``sessions/migrations`` must match these exactly."""
+"""The catalog's tables (SQLAlchemy 2). Migrations in ``sessions/catalog/migrations`` must match them."""
 
 from __future__ import annotations
 

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from sqlalchemy import select, true
 from sqlalchemy.orm import Session as OrmSession
 
-from sessions.catalog import Forbidden, NotFound
-from sessions.models import Participant, Session, Study
+from sessions.catalog.engine import Forbidden, NotFound
+from sessions.catalog.models import Participant, Session, Study
 
 STAFF = ("admin", "supervisor", "researcher")
 """Roles that see whole studies (researchers pseudonymously)."""

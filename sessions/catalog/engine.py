@@ -2,7 +2,7 @@
 
 SQLite runs in WAL mode with a busy timeout and foreign keys on, so several
 processes (a station recording, a supervisor scoring) can write at once. The
-schema is created and upgraded by the Alembic migrations in ``sessions/migrations``.
+schema is created and upgraded by the Alembic migrations in ``sessions/catalog/migrations``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
 from recorder.layout import sha256_of
-from sessions.models import MetricResult, Participant, Session, StreamFile, Study, Task
+from sessions.catalog.models import MetricResult, Participant, Session, StreamFile, Study, Task
 from sim.errors import VascsimError
 
 MIGRATIONS = Path(__file__).with_name("migrations")

@@ -12,10 +12,10 @@ from typing import Any
 
 from sqlalchemy import select
 
-from sessions import accounts
-from sessions.catalog import AlreadyExists, Catalog, NotFound, WrongState
-from sessions.models import Participant, StationToken, Study, User
-from sessions.store.records import StationRecord, StudyRecord, UserRecord
+from sessions.catalog import accounts
+from sessions.catalog.engine import AlreadyExists, Catalog, NotFound, WrongState
+from sessions.catalog.models import Participant, StationToken, Study, User
+from sessions.catalog.records import StationRecord, StudyRecord, UserRecord
 
 
 class Administration:
