@@ -16,11 +16,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from sqlalchemy import insert, select
 
 from metrics.session.registry import REGISTRY_VERSION
 from sessions.catalog import Catalog, now
-from sessions.catalog.models import MetricResult, Participant, Session
+from sessions.catalog.lookups import insert_rows
+from sessions.catalog.models import MetricResult, Session
+from sessions.catalog.results import study_sessions_with
 from sessions.tasks import task_spec
 from sim.devices.assisting import AssistingHandParameters, ScriptedHands
 from sim.devices.scripted import SuturingPassParameters
@@ -256,14 +257,8 @@ def seed_metrics_study(
                     }
                 )
                 progress.append(1.0 if kind == "expert" else 1.0 - math.exp(-rate * (trial - 1)))
-        orm.execute(insert(Session), session_rows)
-        ids = dict(
-            orm.execute(
-                select(Session.uid, Session.id)
-                .join(Participant, Session.participant_id == Participant.id)
-                .where(Participant.study_id == study.id)
-            ).all()
-        )
+        insert_rows(orm, Session, session_rows)
+        ids = {uid: sid for sid, uid in study_sessions_with(orm, study.id, ("complete",))}
         metric_rows = [
             {
                 "session_id": ids[row["uid"]],
@@ -274,5 +269,5 @@ def seed_metrics_study(
             for row, share in zip(session_rows, progress, strict=True)
             for name, expert, novice, spread in SYNTHETIC_METRICS
         ]
-        orm.execute(insert(MetricResult), metric_rows)
+        insert_rows(orm, MetricResult, metric_rows)
         return study.id

@@ -148,19 +148,6 @@ def test_no_folder_holds_more_than_fifteen_modules():
 CATALOG = "sessions/catalog/"
 SQL_BUILDERS = {"select", "insert", "update", "delete", "func", "text"}
 """SQLAlchemy's statement builders: whoever imports one writes a query."""
-QUERIES_TO_MOVE = {
-    "sessions/exchange/bundle.py",
-    "sessions/exchange/bundle_export.py",
-    "sessions/exchange/importing.py",
-    "sessions/exchange/progress.py",
-    "sessions/scoring/analysis.py",
-    "sessions/scoring/ratings.py",
-    "sessions/scoring/review.py",
-    "sessions/scoring/standards.py",
-    "sessions/scoring/verdicts.py",
-    "sessions/synthetic.py",
-}
-"""Modules that still write their own queries (issue 48): the list may shrink, never grow."""
 
 
 def sql_writers() -> set[str]:
@@ -181,8 +168,7 @@ def sql_writers() -> set[str]:
 
 
 def test_queries_are_written_only_in_the_catalog():
-    writers = sql_writers()
-    grown = sorted(writers - QUERIES_TO_MOVE)
-    assert not grown, f"queries belong in {CATALOG} (the store or the engine), not in {grown}"
-    moved = sorted(QUERIES_TO_MOVE - writers)
-    assert not moved, f"these write no query any more: take {moved} off QUERIES_TO_MOVE"
+    writers = sorted(sql_writers())
+    assert not writers, (
+        f"queries belong in {CATALOG} (the store, the engine or a query module), not in {writers}"
+    )

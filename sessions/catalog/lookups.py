@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from sqlalchemy import delete, select
+from sqlalchemy import delete, func, insert, select
 from sqlalchemy.orm import Session as OrmSession
 
 from sessions.catalog.models import Participant, Session, StreamFile, Study, Task
@@ -95,3 +95,44 @@ def study_session_keys(orm: OrmSession, study_name: str) -> list[tuple[str, str,
         .where(Study.name == study_name)
     ).all()
     return [tuple(row) for row in rows]
+
+
+def participants_of(orm: OrmSession, study_id: int) -> list[Participant]:
+    """The study's participants by code."""
+    return list(
+        orm.scalars(select(Participant).where(Participant.study_id == study_id).order_by(Participant.code))
+    )
+
+
+def participant_coded(orm: OrmSession, study_id: int, code: str) -> Participant | None:
+    """The study's participant with this code, or None."""
+    return orm.scalar(select(Participant).where(Participant.study_id == study_id, Participant.code == code))
+
+
+def first_catalogued(orm: OrmSession, uids: Iterable[str]) -> str | None:
+    """One of the session ids ``uids`` the catalog already holds, or None."""
+    return orm.scalar(select(Session.uid).where(Session.uid.in_(list(uids))).limit(1))
+
+
+def participant_activity(orm: OrmSession, study_id: int) -> list[tuple[str, str, int, object, object]]:
+    """(code, group, sessions, first and latest session start (None without any)) of each of the
+    study's participants, by code."""
+    rows = orm.execute(
+        select(
+            Participant.code,
+            Participant.group_label,
+            func.count(Session.id),
+            func.min(Session.started_at),
+            func.max(Session.started_at),
+        )
+        .outerjoin(Session, Session.participant_id == Participant.id)
+        .where(Participant.study_id == study_id)
+        .group_by(Participant.id)
+        .order_by(Participant.code)
+    ).all()
+    return [tuple(row) for row in rows]
+
+
+def insert_rows(orm: OrmSession, table: type, rows: list[dict]) -> None:
+    """Bulk insert plain rows into ``table`` (one statement; a synthetic study's thousands of sessions)."""
+    orm.execute(insert(table), rows)

@@ -30,10 +30,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import select
-
 from recorder.json_input import JSONInputError, JSONTooDeep, parse_json
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
+from sessions.catalog.lookups import first_catalogued, study_named
 from sessions.catalog.models import (
     AnalysisDeclaration,
     Annotation,
@@ -193,9 +192,9 @@ def import_bundle(
     name = manifest.study.name
     uids = [entry.uid for entry in manifest.sessions]
     with catalog.session() as orm:
-        if orm.scalar(select(Study).where(Study.name == name)) is not None:
+        if study_named(orm, name) is not None:
             raise AlreadyExists(f"a study named {name!r} already exists; this bundle was already imported")
-        clash = orm.scalar(select(Session.uid).where(Session.uid.in_(uids)))
+        clash = first_catalogued(orm, uids)
         if clash is not None:
             raise AlreadyExists(f"session {clash} from the bundle is already in the catalog")
     staging = home / "sessions" / f".import-{uuid.uuid4().hex[:8]}"

@@ -17,17 +17,13 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import select
-
 from sessions.catalog import Catalog, CatalogError
+from sessions.catalog.lookups import participants_of
 from sessions.catalog.models import (
-    Participant,
-    Rejudgement,
     Session,
-    Standard,
     StreamFile,
-    Verdict,
 )
+from sessions.catalog.standards import rejudgements_of, standards_of, study_verdicts
 from sessions.exchange.manifest import (
     BUNDLE_FORMAT,
     BUNDLE_VERSION,
@@ -56,13 +52,9 @@ def _row(obj: Any, fields: tuple[str, ...]) -> dict[str, Any]:
 def _standards(orm, study_id: int) -> list[dict[str, Any]]:
     """Every version of the study's standards as it was set, each with the log of re-judgings under
     it; intervals a bootstrap could not give (NaN) travel as null (JSON has no NaN)."""
-    rows = orm.scalars(
-        select(Standard).where(Standard.study_id == study_id).order_by(Standard.task, Standard.version)
-    ).all()
+    rows = standards_of(orm, study_id)
     logs: dict[int, list[dict[str, Any]]] = {}
-    for log in orm.scalars(
-        select(Rejudgement).where(Rejudgement.standard_id.in_([r.id for r in rows])).order_by(Rejudgement.id)
-    ):
+    for log in rejudgements_of(orm, [r.id for r in rows]):
         logs.setdefault(log.standard_id, []).append(
             {
                 "judged_by": log.judged_by,
@@ -100,11 +92,7 @@ def _mark(mark: dict[str, Any]) -> dict[str, Any]:
 
 def _verdicts(orm, study_id: int) -> dict[int, dict[str, Any]]:
     """Session id -> its kept verdict, naming the standard version that gave it."""
-    found = orm.execute(
-        select(Verdict, Standard.version)
-        .join(Standard, Verdict.standard_id == Standard.id)
-        .where(Standard.study_id == study_id)
-    ).all()
+    found = study_verdicts(orm, study_id)
     return {
         verdict.session_id: {
             "standard_version": version,
@@ -137,11 +125,7 @@ def export_study(
     out = Path(out)
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        participants = list(
-            orm.scalars(
-                select(Participant).where(Participant.study_id == study.id).order_by(Participant.code)
-            )
-        )
+        participants = participants_of(orm, study.id)
         manifest: dict[str, Any] = {
             "format": BUNDLE_FORMAT,
             "version": BUNDLE_VERSION,

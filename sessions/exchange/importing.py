@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sqlalchemy import select
-
 from metrics import metrics_of
 from metrics.datasets import jigsaws
 from sessions.catalog import Catalog, CatalogError, metric_results, now, stream_file
+from sessions.catalog.lookups import participant_coded, session_with_uid
 from sessions.catalog.models import Participant, Rating, Session
 
 
@@ -28,15 +27,11 @@ def import_jigsaws(
         people: dict[str, Participant] = {}
         for trial, values in scored:
             uid = f"J-{study.id}-{trial.trial_id}"
-            if orm.scalar(select(Session).where(Session.uid == uid)) is not None:
+            if session_with_uid(orm, uid) is not None:
                 raise CatalogError(f"trial {trial.trial_id} is already in study {study_name!r}")
             person = people.get(trial.participant_id)
             if person is None:
-                person = orm.scalar(
-                    select(Participant).where(
-                        Participant.study_id == study.id, Participant.code == trial.participant_id
-                    )
-                )
+                person = participant_coded(orm, study.id, trial.participant_id)
                 if person is None:
                     person = catalog.add_participant(
                         orm,

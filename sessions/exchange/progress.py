@@ -10,13 +10,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
-from sqlalchemy import func, select
 
 from metrics.session.registry import REGISTRY
 from metrics.study.analysis import StudyAnalysis
 from metrics.units import display_unit, in_display_units
 from sessions.catalog import Catalog, CatalogError
-from sessions.catalog.models import Participant, Session
+from sessions.catalog.lookups import participant_activity
 from sessions.scoring.analysis import analyse_catalog_study
 
 
@@ -49,19 +48,7 @@ def progress_table(catalog: Catalog, study: str, analysis: StudyAnalysis | None 
         analysis, _ = analyse_catalog_study(catalog, study)
     with catalog.session() as orm:
         found = catalog.study(orm, study)
-        rows = orm.execute(
-            select(
-                Participant.code,
-                Participant.group_label,
-                func.count(Session.id),
-                func.min(Session.started_at),
-                func.max(Session.started_at),
-            )
-            .outerjoin(Session, Session.participant_id == Participant.id)
-            .where(Participant.study_id == found.id)
-            .group_by(Participant.id)
-            .order_by(Participant.code)
-        ).all()
+        rows = participant_activity(orm, found.id)
     if not rows:
         raise CatalogError(f"study {study!r} has no participants")
     table, passed = analysis.sessions, analysis.proficiency["passed"]

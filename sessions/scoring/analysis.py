@@ -15,13 +15,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import pandas as pd
-from sqlalchemy import select
-from sqlalchemy.orm import Session as OrmSession
 
 from metrics.errors import MetricsError
 from metrics.study.analysis import StudyAnalysis, StudySettings, analyse_study
 from sessions.catalog import Catalog, CatalogError, WrongState, now
-from sessions.catalog.models import AnalysisDeclaration, MetricResult, Participant, Session, Study
+from sessions.catalog.models import AnalysisDeclaration
+from sessions.catalog.results import (
+    imported_result_sessions,
+    latest_declaration,
+    registry_versions,
+    study_sessions_with,
+)
 from sessions.running.runner import study_table
 from sessions.status import SCORABLE
 from sim.errors import VascsimError
@@ -163,15 +167,6 @@ def default_settings(table: pd.DataFrame | None) -> StudySettings:
     labels = [label for label in pd.unique(table["label"]) if label != "expert"] if "label" in table else []
     other = "trainee" if "trainee" in labels or not labels else sorted(map(str, labels))[0]
     return StudySettings(groups=("expert", other), skilled_group="expert")
-
-
-def latest_declaration(orm: OrmSession, study: Study) -> AnalysisDeclaration | None:
-    return orm.scalar(
-        select(AnalysisDeclaration)
-        .where(AnalysisDeclaration.study_id == study.id)
-        .order_by(AnalysisDeclaration.version.desc())
-        .limit(1)
-    )
 
 
 def declare_analysis(
@@ -401,17 +396,8 @@ def metric_versions(catalog: Catalog, session_ids: list[int]) -> dict[int, str]:
     """Per session id: "current", "stale (vN)" (scored only by an older metric registry) or "none"."""
     from metrics.session.registry import REGISTRY_VERSION
 
-    found: dict[int, set[str]] = {}
     with catalog.session() as orm:
-        for start in range(0, len(session_ids), 500):
-            chunk = session_ids[start : start + 500]
-            query = (
-                select(MetricResult.session_id, MetricResult.registry_version)
-                .where(MetricResult.session_id.in_(chunk))
-                .distinct()
-            )
-            for session_id, version in orm.execute(query):
-                found.setdefault(session_id, set()).add(version)
+        found = registry_versions(orm, session_ids)
     result = {}
     for session_id in session_ids:
         versions = found.get(session_id, set())
@@ -432,11 +418,7 @@ def stale_sessions(catalog: Catalog, study_name: str) -> list[str]:
     """Finished sessions of the study whose metrics come only from an older registry version."""
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        rows = orm.execute(
-            select(Session.id, Session.uid)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(Participant.study_id == study.id, Session.status.in_(SCORABLE))
-        ).all()
+        rows = study_sessions_with(orm, study.id, SCORABLE)
     versions = metric_versions(catalog, [r[0] for r in rows])
     return [uid for session_id, uid in rows if versions[session_id].startswith("stale")]
 
@@ -447,20 +429,7 @@ def imported_unverified_sessions(catalog: Catalog, study_name: str) -> list[str]
 
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        return list(
-            orm.scalars(
-                select(Session.uid)
-                .join(Participant, Session.participant_id == Participant.id)
-                .join(MetricResult, MetricResult.session_id == Session.id)
-                .where(
-                    Participant.study_id == study.id,
-                    MetricResult.source == "imported",
-                    MetricResult.registry_version == REGISTRY_VERSION,
-                )
-                .distinct()
-                .order_by(Session.uid)
-            )
-        )
+        return imported_result_sessions(orm, study.id, REGISTRY_VERSION)
 
 
 def _show(value: Any) -> str:

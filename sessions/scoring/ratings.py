@@ -18,12 +18,18 @@ from datetime import datetime
 from pathlib import Path
 
 import pandas as pd
-from sqlalchemy import delete, func, select
 
 from metrics.errors import MetricsError
 from metrics.instruments import TOTAL, Instrument, instrument
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, now
-from sessions.catalog.models import Participant, Rating, Session
+from sessions.catalog.models import Rating
+from sessions.catalog.ratings import (
+    forget_rating,
+    has_rated,
+    raters_in_order,
+    session_rating_rows,
+    study_rating_rows,
+)
 
 RATER_NAME = re.compile(r"^[^\x00-\x1f\x7f]{1,100}$")
 MAX_IMPORT_BYTES = 16 * 1024 * 1024
@@ -68,19 +74,14 @@ def store_ratings(catalog: Catalog, ratings: list[SessionRating], replace: bool 
     with catalog.session() as orm:
         for rating in ratings:
             session = catalog.recorded_session(orm, rating.session_uid)
-            mine = (
-                (Rating.session_id == session.id)
-                & (Rating.rater == rating.rater)
-                & (Rating.instrument == rating.instrument.name)
-            )
-            if orm.scalar(select(Rating.id).where(mine).limit(1)) is not None:
+            if has_rated(orm, session.id, rating.rater, rating.instrument.name):
                 if not replace:
                     raise AlreadyExists(
                         f"{rating.rater!r} already rated session {rating.session_uid} with "
                         f"{rating.instrument.name}",
                         remedy=("replace-rating", rating.session_uid),
                     )
-                orm.execute(delete(Rating).where(mine))
+                forget_rating(orm, session.id, rating.rater, rating.instrument.name)
             rows = {**rating.scores, TOTAL: rating.total}
             orm.add_all(
                 Rating(
@@ -179,25 +180,8 @@ def study_ratings(catalog: Catalog, study_name: str, instrument_name: str | None
     score, created_at; in time order (a rater's latest rating last)."""
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        query = (
-            select(
-                Session.uid,
-                Participant.code,
-                Participant.group_label,
-                Rating.rater,
-                Rating.instrument,
-                Rating.item,
-                Rating.score,
-                Rating.created_at,
-            )
-            .join(Session, Rating.session_id == Session.id)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(Participant.study_id == study.id)
-            .order_by(Rating.created_at, Rating.id)
-        )
-        if instrument_name is not None:
-            query = query.where(Rating.instrument == instrument(instrument_name).name)
-        rows = orm.execute(query).all()
+        named = None if instrument_name is None else instrument(instrument_name).name
+        rows = study_rating_rows(orm, study.id, named)
     columns = ["session_id", "participant_id", "label", "rater", "instrument", "item", "score", "created_at"]
     return pd.DataFrame(rows, columns=columns)
 
@@ -206,10 +190,8 @@ def rater_pseudonyms(catalog: Catalog) -> dict[str, str]:
     """Each rater's stable pseudonym ("rater 1", "rater 2", ...), numbered by their first rating in the
     catalog: what a reader who must not see account names (a researcher) sees instead."""
     with catalog.session() as orm:
-        rows = orm.execute(
-            select(Rating.rater, func.min(Rating.id)).group_by(Rating.rater).order_by(func.min(Rating.id))
-        ).all()
-    return {rater: f"rater {k}" for k, (rater, _) in enumerate(rows, start=1)}
+        raters = raters_in_order(orm)
+    return {rater: f"rater {k}" for k, rater in enumerate(raters, start=1)}
 
 
 def session_ratings(catalog: Catalog, session_uid: str, pseudonymous: bool = False) -> list[dict]:
@@ -217,11 +199,7 @@ def session_ratings(catalog: Catalog, session_uid: str, pseudonymous: bool = Fal
     as their stable pseudonym (:func:`rater_pseudonyms`) when ``pseudonymous``."""
     with catalog.session() as orm:
         session = catalog.recorded_session(orm, session_uid)
-        rows = orm.execute(
-            select(Rating.rater, Rating.instrument, Rating.item, Rating.score, Rating.created_at)
-            .where(Rating.session_id == session.id)
-            .order_by(Rating.created_at, Rating.id)
-        ).all()
+        rows = session_rating_rows(orm, session.id)
     grouped: dict[tuple[str, str], dict] = {}
     for rater, name, item, score, created in rows:
         entry = grouped.setdefault(

@@ -11,12 +11,11 @@ import dataclasses
 from dataclasses import dataclass
 
 import pandas as pd
-from sqlalchemy import select
 
 from metrics.reading.band import against_band, expert_quartiles
 from metrics.session.registry import REGISTRY_VERSION, display_name
 from sessions.catalog import Catalog
-from sessions.catalog.models import MetricResult, Participant, Session, StitchResult
+from sessions.catalog.results import group_metric_values, stitch_values, task_id_named
 from sessions.status import SCORABLE
 
 EXPERT_GROUP = "expert"
@@ -35,19 +34,7 @@ __all__ = [
 def expert_band(catalog: Catalog, study_id: int, task_id: int) -> dict[str, dict]:
     """Per metric, the quartiles of the study's expert sessions on the same task (current registry)."""
     with catalog.session() as orm:
-        rows = orm.execute(
-            select(MetricResult.metric, MetricResult.value)
-            .join(Session, MetricResult.session_id == Session.id)
-            .join(Participant, Session.participant_id == Participant.id)
-            .where(
-                Participant.study_id == study_id,
-                Participant.group_label == EXPERT_GROUP,
-                Session.task_id == task_id,
-                Session.status.in_(SCORABLE),
-                MetricResult.registry_version == REGISTRY_VERSION,
-                MetricResult.value.is_not(None),
-            )
-        ).all()
+        rows = group_metric_values(orm, study_id, EXPERT_GROUP, task_id, SCORABLE, REGISTRY_VERSION)
     return expert_quartiles(pd.DataFrame(rows, columns=["metric", "value"]))
 
 
@@ -69,11 +56,7 @@ def session_stitches(catalog: Catalog, uid: str) -> list[dict]:
     (:data:`metrics.signals.placement.STITCH_QUANTITIES`, SI units; None where it does not apply)."""
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
-        results = orm.execute(
-            select(StitchResult.stitch, StitchResult.quantity, StitchResult.value)
-            .where(StitchResult.session_id == row.id, StitchResult.registry_version == REGISTRY_VERSION)
-            .order_by(StitchResult.stitch)
-        ).all()
+        results = stitch_values(orm, row.id, REGISTRY_VERSION)
     stitches: dict[int, dict] = {}
     for stitch, quantity, value in results:
         stitches.setdefault(stitch, {"stitch": stitch})[quantity] = value
@@ -196,9 +179,7 @@ def _against_standard(
 
 def experts_on_task(catalog: Catalog, study: str, task: str) -> bool:
     """Whether any expert of ``study`` has a scored session of ``task`` (a standard needs them)."""
-    from sessions.catalog.models import Task
-
     with catalog.session() as orm:
         study_id = catalog.study(orm, study).id
-        task_id = orm.scalar(select(Task.id).where(Task.name == task))
+        task_id = task_id_named(orm, task)
     return task_id is not None and bool(expert_band(catalog, study_id, task_id))

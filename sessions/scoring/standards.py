@@ -20,13 +20,13 @@ from dataclasses import dataclass
 from datetime import datetime
 
 import pandas as pd
-from sqlalchemy import select
 
 from metrics.session.registry import REGISTRY_VERSION
 from metrics.study.analysis import StudyAnalysis, practice_mask
 from metrics.study.proficiency import BENCHMARK_COLUMNS, mark_drift, mark_intervals, proficiency_benchmarks
 from sessions.catalog import Catalog, WrongState, now
 from sessions.catalog.models import Standard, Study
+from sessions.catalog.standards import latest_version, standards_of
 
 
 @dataclass(frozen=True)
@@ -114,11 +114,7 @@ def standard_history(catalog: Catalog, study_name: str, task: str | None = None)
     """Every version set for the study (of ``task`` when given), oldest first."""
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        query = select(Standard).where(Standard.study_id == study.id)
-        if task is not None:
-            query = query.where(Standard.task == task)
-        rows = orm.scalars(query.order_by(Standard.task, Standard.version)).all()
-        return [_record(study, row) for row in rows]
+        return [_record(study, row) for row in standards_of(orm, study.id, task)]
 
 
 def current_standard(catalog: Catalog, study_name: str, task: str) -> StandardRecord | None:
@@ -164,16 +160,10 @@ def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note
     ]
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        latest = orm.scalar(
-            select(Standard.version)
-            .where(Standard.study_id == study.id, Standard.task == task)
-            .order_by(Standard.version.desc())
-            .limit(1)
-        )
         row = Standard(
             study_id=study.id,
             task=task,
-            version=(latest or 0) + 1,
+            version=latest_version(orm, study.id, task) + 1,
             rule=settings.benchmark_rule,
             marks=marks,
             experts=sorted(map(str, pd.unique(skilled[settings.cluster_col]))),

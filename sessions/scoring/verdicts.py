@@ -15,12 +15,18 @@ from dataclasses import dataclass
 from datetime import datetime
 
 import pandas as pd
-from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from metrics.study.analysis import StudyAnalysis, session_judge, with_verdicts
 from sessions.catalog import Catalog, CatalogError, WrongState, now
-from sessions.catalog.models import Rejudgement, Session, Standard, Verdict
+from sessions.catalog.models import Rejudgement, Verdict
+from sessions.catalog.standards import (
+    kept_verdict_rows,
+    rejudgement_log,
+    session_ids,
+    standard_ids,
+    verdicts_of,
+)
 from sessions.scoring.standards import StandardRecord, set_command, standard_history, standards_command
 
 
@@ -40,11 +46,7 @@ def _judged(analysis: StudyAnalysis, version: StandardRecord) -> pd.DataFrame:
 
 def _standard_ids(catalog: Catalog, study_name: str, task: str) -> dict[int, int]:
     with catalog.session() as orm:
-        study_id = catalog.study(orm, study_name).id
-        rows = orm.execute(
-            select(Standard.version, Standard.id).where(Standard.study_id == study_id, Standard.task == task)
-        ).all()
-    return dict(rows)
+        return standard_ids(orm, catalog.study(orm, study_name).id, task)
 
 
 def kept_verdicts(catalog: Catalog, study_name: str, task: str, analysis: StudyAnalysis) -> StudyAnalysis:
@@ -58,12 +60,7 @@ def kept_verdicts(catalog: Catalog, study_name: str, task: str, analysis: StudyA
     by_version = {v.version: v for v in versions}
     uids = [str(u) for u in analysis.proficiency["session_id"]]
     with catalog.session() as orm:
-        rows = orm.execute(
-            select(Session.uid, Session.id, Session.started_at, Verdict.passed, Standard.version)
-            .outerjoin(Verdict, Verdict.session_id == Session.id)
-            .outerjoin(Standard, Standard.id == Verdict.standard_id)
-            .where(Session.uid.in_(uids))
-        ).all()
+        rows = kept_verdict_rows(orm, uids)
     known = {uid: (sid, started, passed, version) for uid, sid, started, passed, version in rows}
     chosen = []
     for uid in uids:
@@ -159,11 +156,8 @@ def rejudge(catalog: Catalog, study_name: str, task: str, author: str, reason: s
     stamp = now()
     changed = 0
     with catalog.session() as orm:
-        found = dict(orm.execute(select(Session.uid, Session.id).where(Session.uid.in_(uids))).all())
-        verdicts = {
-            v.session_id: v
-            for v in orm.scalars(select(Verdict).where(Verdict.session_id.in_(found.values())))
-        }
+        found = session_ids(orm, uids)
+        verdicts = verdicts_of(orm, found.values())
         for i, uid in enumerate(uids):
             passed = bool(judged.at[i, "passed"])
             changed += passed != bool(kept.at[i, "passed"])
@@ -191,13 +185,7 @@ def rejudge(catalog: Catalog, study_name: str, task: str, author: str, reason: s
 def rejudgements(catalog: Catalog, study_name: str, task: str) -> list[dict]:
     """The standard's re-judging log on ``task``, oldest first."""
     with catalog.session() as orm:
-        study_id = catalog.study(orm, study_name).id
-        rows = orm.execute(
-            select(Standard.version, Rejudgement)
-            .join(Standard, Standard.id == Rejudgement.standard_id)
-            .where(Standard.study_id == study_id, Standard.task == task)
-            .order_by(Rejudgement.id)
-        ).all()
+        rows = rejudgement_log(orm, catalog.study(orm, study_name).id, task)
         return [
             {
                 "version": version,
