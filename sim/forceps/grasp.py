@@ -20,6 +20,7 @@ biphase split is the needle's law, driven by the needle's own indentation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -259,3 +260,18 @@ class ForcepsInteraction:
         elif self._shown:
             self.collision.update(self.collision.mesh.points)
             self._shown, self._shown_for = False, None
+
+
+def with_grasp(
+    loads: tuple[NDArray[np.int64], NDArray[np.float64], float] | None,
+    nodes: NDArray[np.int64],
+    forces: NDArray[np.float64],
+) -> tuple[NDArray[np.int64], NDArray[np.float64], float]:
+    """The needle's nodal ``loads`` (or none) and the grasp's (``nodes``, ``forces`` (k, 3) N) as one
+    set of loads on distinct nodes (a node both hold carries the sum)."""
+    if loads is None:
+        return nodes, forces, math.nan
+    every, at = np.unique(np.concatenate([loads[0], nodes]), return_inverse=True)
+    total = np.zeros((every.size, 3))
+    np.add.at(total, at, np.concatenate([loads[1], forces]))
+    return every, total, loads[2]

@@ -1,14 +1,9 @@
 """The layered multi-rate loop: haptics, FEM, graphics and display, with haptic safety."""
 
 from sim.runtime.safety import ForceSafety, SafetySettings
-from sim.runtime.simulation import (
-    LayerProcessError,
-    RunResult,
-    RuntimeEvent,
-    RuntimeSettings,
-    RuntimeSettingsError,
-    Simulation,
-)
+from sim.runtime.settings import LayerProcessError, RuntimeSettings, RuntimeSettingsError
+from sim.runtime.simulation import RunResult, Simulation
+from sim.runtime.snapshots import RuntimeEvent
 
 __all__ = [
     "ForceSafety",

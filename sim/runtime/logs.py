@@ -45,3 +45,49 @@ def interpolate_force(
     w = (time - times[k - 1]) / (times[k] - times[k - 1])
     a, b = forces[k - 1], forces[k]
     return np.array([a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])])
+
+
+class ForceHistory:
+    """The FEM layer's recent (time, force) outputs, interpolated by the haptic layer.
+
+    Plain lists with bisection: pushes arrive in time order, the oldest are
+    dropped beyond ``capacity``; both sides touch it in microseconds.
+    """
+
+    def __init__(self, capacity: int = 256) -> None:
+        self._times: list[float] = []
+        self._forces: list[tuple[float, float, float]] = []
+        self._capacity = capacity
+
+    def push(self, time: float, force: NDArray[np.float64]) -> None:
+        times, forces = self._times, self._forces
+        fx, fy, fz = force.tolist()
+        times.append(time)
+        forces.append((fx, fy, fz))
+        if len(times) > 2 * self._capacity:
+            del times[: self._capacity], forces[: self._capacity]
+
+    @property
+    def latest_time(self) -> float | None:
+        return self._times[-1] if self._times else None
+
+    def at(self, time: float) -> NDArray[np.float64]:
+        """Force at ``time``: linear between the two outputs around it, held at the ends."""
+        times, forces = self._times, self._forces
+        return interpolate_force(times, forces, time)
+
+
+class HapticLog(HapticColumns):
+    """Every haptic tick: time, holder position, grip, force sent, in growing preallocated arrays."""
+
+    def __init__(self, capacity: int = 1 << 16) -> None:
+        self._data = np.empty((capacity, 8))
+        self.count = 0
+
+    def append(self, time: float, position: NDArray, grip: bool, force: NDArray) -> None:
+        if self.count == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        x, y, z = position.tolist()
+        fx, fy, fz = force.tolist()
+        self._data[self.count] = (time, x, y, z, float(grip), fx, fy, fz)  # one assignment a tick
+        self.count += 1

@@ -312,3 +312,17 @@ class Prefetcher:
         for model, worker in zip(self.models, self.workers, strict=True):
             model.column_solver = None
             worker.close()
+
+
+def needs_column_worker(tissue: Tissue) -> bool:
+    """Whether some contact could need columns solved on demand (no precomputation, or free
+    surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through;
+    nodes held fixed on all three axes are not worth a worker: the tissue is clamped there)."""
+    models = tissue.models
+    for model in models:
+        if model.precomputation is None:
+            return True
+        free_surface = np.setdiff1d(tissue.mesh.surface_nodes, model.clamped_nodes)
+        if len(np.setdiff1d(free_surface, model.contact_nodes)):
+            return True
+    return False

@@ -31,6 +31,7 @@ import numpy as np
 from sim.runtime.cpu import IdlePolling
 from sim.runtime.display_process import start_display_process, wait_for_display
 from sim.runtime.force_path import CompiledForcePath
+from sim.runtime.logs import HapticLog
 from sim.runtime.osrt import (
     leave_interrupts_to_parent,
     leave_last_core_to_haptics,
@@ -44,6 +45,7 @@ from sim.runtime.osrt import (
     try_realtime_priority,
     wait_for,
 )
+from sim.runtime.settings import LayerProcessError
 from sim.runtime.shared import (
     Arena,
     ControlBlock,
@@ -55,7 +57,8 @@ from sim.runtime.shared import (
     SharedHolder,
     SharedTelemetry,
 )
-from sim.runtime.simulation import LAYERS, HapticLog, LayerProcessError, RunResult, RuntimeEvent, Simulation
+from sim.runtime.simulation import LAYERS, RunResult, Simulation
+from sim.runtime.snapshots import RuntimeEvent
 from sim.runtime.telemetry import LoopTelemetry
 
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time

@@ -5,7 +5,7 @@ FEM 500 Hz (200-1000; needle follows the holder, local CD, contact forces,
 piercing), graphics 30 Hz (global CD of the whole needle), display 30 Hz (renders
 the previous graphics frame: one video frame of delay, as in the paper).
 
-State crosses layers only as immutable snapshots in :class:`Mailbox` slots; the
+State crosses layers only as immutable snapshots in :class:`~sim.runtime.snapshots.Mailbox` slots; the
 graphics layer's global-CD results are queued and applied by the FEM layer at
 the start of its next step, so each mutable object has exactly one owner. The
 haptic layer interpolates the FEM layer's force history at ``now - force_delay``
@@ -24,162 +24,27 @@ import threading
 import time as wallclock
 import traceback
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.devices.base import GRIP_BUTTON, STOP_BUTTON, Device, DeviceLostError
-from sim.errors import VascsimError
 from sim.fem import Tissue
 from sim.fem.kernel import warm_kernel_geometry
 from sim.forceps import Forceps, ForcepsEvent, ForcepsInteraction
+from sim.forceps.grasp import with_grasp
 from sim.needle import Needle, Pose
 from sim.needle.forces import NeedleForces
 from sim.needle.interaction import NeedleEvent, NeedleInteraction, PiercingRules
-from sim.runtime.logs import HapticColumns, interpolate_force
-from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead
-from sim.runtime.safety import ForceSafety, SafetySettings
-from sim.runtime.snapshots import FemSnapshot, GraphicsSnapshot, HolderSnapshot, RuntimeEvent
+from sim.runtime.logs import ForceHistory, HapticLog
+from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead, needs_column_worker
+from sim.runtime.safety import ForceSafety
+from sim.runtime.settings import RuntimeSettings
+from sim.runtime.snapshots import FemSnapshot, GraphicsSnapshot, HolderSnapshot, Mailbox, RuntimeEvent
 from sim.runtime.telemetry import LayerSummary, LoopTelemetry
 
 LAYERS = ("haptic", "fem", "graphics", "display")
-
-
-class RuntimeSettingsError(VascsimError, ValueError):
-    """A runtime setting is out of range; the message names it and its range."""
-
-
-class LayerProcessError(VascsimError, RuntimeError):
-    """A layer's own process (haptic, display) failed; the message is the child's, with its layer."""
-
-
-@dataclass(frozen=True)
-class RuntimeSettings:
-    """Layer rates (Hz), the force display delay (s), safety, and the on-demand prefetch radius (m).
-
-    prefetch_radius: in on-demand mode the graphics layer asks a background worker to
-    solve the contact columns of surface nodes within this distance of the needle tip,
-    so a contact change rarely waits for a solve.
-    prefetch_reach: before those, the nodes of the surface triangle a ray along the tip's
-    tangent meets within this distance (m): the next contact, or the exit face.
-    """
-
-    haptic_rate: float = 1000.0
-    fem_rate: float = 500.0
-    graphics_rate: float = 30.0
-    display_rate: float = 30.0
-    force_delay: float = 1.0 / 30.0
-    safety: SafetySettings = field(default_factory=SafetySettings)
-    prefetch_radius: float = 0.002
-    prefetch_reach: float = 0.01
-    live_stress_in_real_time: bool = True
-    """Stream the local stress in real-time runs too (simulated runs always do). Its operator reads
-    whole K0^-1 columns of the contact's load nodes, which a background worker then solves ahead
-    of the needle for precomputed models too; off, contact changes skip the operator (about 1 ms
-    less) and scoring derives the indentation's stress afterwards."""
-    haptic_scale: float = 1.0
-    """Factor on the tissue's force before the device's clamp and rate limit, for a device that cannot
-    render the tissue's force (a session header records it); the recorded reaction force is unscaled."""
-    display_on_haptic_core: bool = False
-    """Let the display process (and a software renderer's raster threads) also use the haptic core's idle
-    time; the haptic process, real-time scheduled, preempts them. An on-screen window under Mesa's
-    llvmpipe needs it: confined to the one spare core, which the FEM and graphics threads and the
-    column worker share, a 960x540 frame took 27 ms to draw (18 ms with that core to itself, 10 ms
-    with both) and the window ran at 25 frames/s; with it, 29-30 frames/s and the haptic loop's p99
-    period unchanged (1.00 ms; docs/benchmarks.md, session 19)."""
-    display_delay_frames: int = 1
-    """1: the display renders the previous graphics frame (one video frame of delay, the paper's
-    design); 0: the newest one, drawn a few ms after the graphics layer posts it (a person's live view:
-    the FEM state it shows is still at most one frame old, and motion reaches the screen 33 ms sooner)."""
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.haptic_scale <= 1.0:
-            raise RuntimeSettingsError(f"haptic_scale must be in (0, 1]; got {self.haptic_scale}")
-        if not 200.0 <= self.fem_rate <= 1000.0:
-            raise RuntimeSettingsError(
-                f"fem_rate must be 200-1000 Hz (PAPER.md section 7); got {self.fem_rate}"
-            )
-        if self.haptic_rate < self.fem_rate:
-            raise RuntimeSettingsError(
-                f"haptic_rate ({self.haptic_rate} Hz) must be at least fem_rate ({self.fem_rate} Hz)"
-            )
-        for name in ("graphics_rate", "display_rate"):
-            if not 1.0 <= getattr(self, name) <= 240.0:
-                raise RuntimeSettingsError(f"{name} must be 1-240 Hz; got {getattr(self, name)}")
-        for name in ("prefetch_radius", "prefetch_reach"):
-            if not 0.0 <= getattr(self, name) <= 0.1:
-                raise RuntimeSettingsError(f"{name} must be 0-0.1 m; got {getattr(self, name)}")
-        if not 0.0 <= self.force_delay <= 0.2:
-            raise RuntimeSettingsError(f"force_delay must be 0-0.2 s; got {self.force_delay}")
-        if self.display_delay_frames not in (0, 1):
-            raise RuntimeSettingsError(
-                f"display_delay_frames must be 0 or 1; got {self.display_delay_frames}"
-            )
-
-    def period(self, layer: str) -> float:
-        return 1.0 / getattr(self, f"{layer}_rate")
-
-
-class Mailbox:
-    """A slot holding the latest immutable snapshot; replacing the reference is atomic."""
-
-    __slots__ = ("_value",)
-
-    def __init__(self, value: object = None) -> None:
-        self._value = value
-
-    def put(self, value: object) -> None:
-        self._value = value
-
-    def get(self) -> object:
-        return self._value
-
-
-class ForceHistory:
-    """The FEM layer's recent (time, force) outputs, interpolated by the haptic layer.
-
-    Plain lists with bisection: pushes arrive in time order, the oldest are
-    dropped beyond ``capacity``; both sides touch it in microseconds.
-    """
-
-    def __init__(self, capacity: int = 256) -> None:
-        self._times: list[float] = []
-        self._forces: list[tuple[float, float, float]] = []
-        self._capacity = capacity
-
-    def push(self, time: float, force: NDArray[np.float64]) -> None:
-        times, forces = self._times, self._forces
-        fx, fy, fz = force.tolist()
-        times.append(time)
-        forces.append((fx, fy, fz))
-        if len(times) > 2 * self._capacity:
-            del times[: self._capacity], forces[: self._capacity]
-
-    @property
-    def latest_time(self) -> float | None:
-        return self._times[-1] if self._times else None
-
-    def at(self, time: float) -> NDArray[np.float64]:
-        """Force at ``time``: linear between the two outputs around it, held at the ends."""
-        times, forces = self._times, self._forces
-        return interpolate_force(times, forces, time)
-
-
-class HapticLog(HapticColumns):
-    """Every haptic tick: time, holder position, grip, force sent, in growing preallocated arrays."""
-
-    def __init__(self, capacity: int = 1 << 16) -> None:
-        self._data = np.empty((capacity, 8))
-        self.count = 0
-
-    def append(self, time: float, position: NDArray, grip: bool, force: NDArray) -> None:
-        if self.count == len(self._data):
-            self._data = np.concatenate([self._data, np.empty_like(self._data)])
-        x, y, z = position.tolist()
-        fx, fy, fz = force.tolist()
-        self._data[self.count] = (time, x, y, z, float(grip), fx, fy, fz)  # one assignment a tick
-        self.count += 1
 
 
 @dataclass
@@ -198,35 +63,6 @@ class RunResult:
     @property
     def completed(self) -> bool:
         return self.stop_reason == "completed"
-
-
-def with_grasp(
-    loads: tuple[NDArray[np.int64], NDArray[np.float64], float] | None,
-    nodes: NDArray[np.int64],
-    forces: NDArray[np.float64],
-) -> tuple[NDArray[np.int64], NDArray[np.float64], float]:
-    """The needle's nodal ``loads`` (or none) and the grasp's (``nodes``, ``forces`` (k, 3) N) as one
-    set of loads on distinct nodes (a node both hold carries the sum)."""
-    if loads is None:
-        return nodes, forces, math.nan
-    every, at = np.unique(np.concatenate([loads[0], nodes]), return_inverse=True)
-    total = np.zeros((every.size, 3))
-    np.add.at(total, at, np.concatenate([loads[1], forces]))
-    return every, total, loads[2]
-
-
-def _on_demand(tissue: Tissue) -> bool:
-    """Whether some contact could need columns solved on demand (no precomputation, or free
-    surface nodes outside the precomputed candidates, e.g. the lumen an exit goes through;
-    nodes held fixed on all three axes are not worth a worker: the tissue is clamped there)."""
-    models = tissue.models
-    for model in models:
-        if model.precomputation is None:
-            return True
-        free_surface = np.setdiff1d(tissue.mesh.surface_nodes, model.clamped_nodes)
-        if len(np.setdiff1d(free_surface, model.contact_nodes)):
-            return True
-    return False
 
 
 class Simulation:
@@ -553,7 +389,7 @@ class Simulation:
         candidates too); before any of the run's threads start (the worker is forked). Real time
         only: simulated runs wait for a solve without falling behind a clock, so they solve what
         they lack when they need it."""
-        if self._prefetcher is None and (_on_demand(self._tissue) or whole_columns):
+        if self._prefetcher is None and (needs_column_worker(self._tissue) or whole_columns):
             self._prefetcher = Prefetcher(
                 self._tissue,
                 self.interaction.collision,

@@ -71,3 +71,18 @@ class RuntimeEvent:
     time: float
     layer: str
     detail: str = ""
+
+
+class Mailbox:
+    """A slot holding the latest immutable snapshot; replacing the reference is atomic."""
+
+    __slots__ = ("_value",)
+
+    def __init__(self, value: object = None) -> None:
+        self._value = value
+
+    def put(self, value: object) -> None:
+        self._value = value
+
+    def get(self) -> object:
+        return self._value

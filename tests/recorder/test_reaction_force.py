@@ -18,7 +18,7 @@ from sim.devices.base import TOUCH_LIMITS
 from sim.devices.scripted import SuturingPassParameters
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings, Simulation
-from sim.runtime.simulation import RuntimeSettingsError
+from sim.runtime.settings import RuntimeSettingsError
 
 
 def record(folder, settings=None, wrist_rotation=0.3):

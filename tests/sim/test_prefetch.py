@@ -172,7 +172,7 @@ def test_a_straight_needle_looks_ahead_along_its_axis():
 
 
 def test_a_worker_is_started_only_where_a_contact_could_need_columns(small_box, tmp_path):
-    from sim.runtime.simulation import _on_demand
+    from sim.runtime.prefetch import needs_column_worker as _on_demand
 
     fixed = small_box.node_sets["z0"]
     on_demand = TissueModel(small_box, Material(20e3, 0.45), fixed)

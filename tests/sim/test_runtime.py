@@ -216,7 +216,7 @@ def test_clamp_and_stop_sequence():
 
 
 def test_settings_validation():
-    from sim.runtime.simulation import RuntimeSettingsError
+    from sim.runtime.settings import RuntimeSettingsError
 
     with pytest.raises(RuntimeSettingsError, match="fem_rate must be 200-1000 Hz"):
         RuntimeSettings(fem_rate=100)

@@ -6,8 +6,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sim.runtime.logs import ForceHistory
 from sim.runtime.shared import Arena, SharedForceHistory
-from sim.runtime.simulation import ForceHistory
 
 CAPACITY = 16
 
@@ -134,8 +134,8 @@ def test_a_one_handed_snapshot_reads_back_with_no_grasp():
 def test_the_display_gets_both_hands_loads_and_the_jaws():
     """The graphics slot carries the forceps' jaws and the needle's and the grasp's loads as one set
     (a node both load carries the sum), which the display process solves for the wall it draws."""
+    from sim.forceps.grasp import with_grasp
     from sim.runtime.shared import SharedGraphics
-    from sim.runtime.simulation import with_grasp
     from sim.runtime.snapshots import GraphicsSnapshot
 
     graphics = SharedGraphics(Arena(SharedGraphics.doubles()))
