@@ -49,6 +49,7 @@ def tasks_show(name: str, as_json: bool) -> None:
     from dataclasses import asdict
 
     from sessions.tasks import task_spec
+    from sessions.tasks.kinds import kind_of
 
     spec = task_spec(name)
     if as_json:
@@ -57,17 +58,7 @@ def tasks_show(name: str, as_json: bool) -> None:
     text = f"{spec.name}: {spec.description}"
     click.echo(click.wrap_text(text, 78, initial_indent="task         ", subsequent_indent=" " * 13))
     click.echo(f"tissue       {spec.parameters.get('tissue', '')} ({spec.parameters.get('model', '')} model)")
-    p, held = spec.parameters, ", ".join(spec.parameters.get("fixed", []))
-    geometry = ""
-    if "size_m" in p:
-        geometry = f"{' x '.join(f'{1e3 * v:g}' for v in p['size_m'])} mm patch, held on {held}"
-    elif "inner_radius_m" in p:
-        geometry = (
-            f"artery r {1e3 * p['inner_radius_m']:g} mm, wall {1e3 * p['wall_m']:g} mm, "
-            f"{1e3 * p['length_m']:g} mm long, {p['arc_deg']:g} deg patch, held on {held}"
-        )
-    elif "mesh_file" in p:
-        geometry = f"a meshed vessel wall ({p['mesh_file']} in the task's folder), held on {held}"
+    geometry = kind_of(spec).geometry(spec)
     if geometry:
         click.echo(click.wrap_text(geometry, 78, initial_indent="geometry     ", subsequent_indent=" " * 13))
     for region, preset in spec.parameters.get("region_tissue", {}).items():

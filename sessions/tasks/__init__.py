@@ -1,6 +1,7 @@
 """The tasks a session can run: a scenario (mesh, materials, fixed nodes) and where the stitch goes.
 
-`spec` (the TaskSpec), `library` (the built-in tasks), `user` (tasks added from a mesh, and the
+`spec` (the TaskSpec), `kinds` (one class per kind of task: how its parameters become a mesh and
+contact candidates), `library` (the built-in tasks), `user` (tasks added from a mesh, and the
 lookup by name), `build` (what a task becomes to run: mesh, tissue, grasp sites, simulation).
 """
 

@@ -8,68 +8,19 @@ from pathlib import Path
 
 import numpy as np
 
+from sessions.tasks.kinds import kind_of
 from sessions.tasks.spec import TaskSpec
-from sessions.tasks.user import check_task_mesh, known_task, task_spec, user_tasks_dir
+from sessions.tasks.user import known_task, task_spec
 
 
 def task_mesh(spec: TaskSpec):
-    """The task's mesh: for a patch, ``stitch_cell_m`` cells over the stitch region (x and y) and
-    through the wall, graded to ``cell_m`` elsewhere, so the needle's force kernel spans 3 cells;
-    for a vessel patch, a wall segment with its arteriotomy at uniform divisions."""
-    from sim.mesh import Calcification, Wound, grid_box_mesh, refined_coordinates, vessel_mesh
-
-    p = spec.parameters
-    if spec.scenario == "mesh_file":
-        from sim.mesh import load_mesh
-
-        return load_mesh(user_tasks_dir() / spec.name / p["mesh_file"])
-    if spec.scenario == "vessel_patch":
-        wound = p["wound"]
-        plaque = p.get("calcification")
-        return vessel_mesh(
-            inner_radius=p["inner_radius_m"],
-            wall_thickness=p["wall_m"],
-            length=p["length_m"],
-            arc_deg=p["arc_deg"],
-            circumferential_divisions=p["divisions"][0],
-            radial_divisions=p["divisions"][1],
-            axial_divisions=p["divisions"][2],
-            wound=Wound(wound["angle_deg"], *wound["z_m"], gap=wound["gap_m"]),
-            calcification=None
-            if plaque is None
-            else Calcification(tuple(plaque["angle_deg"]), tuple(plaque["z_m"]), tuple(plaque["layers"])),
-        )
-    (length, width, thickness), coarse, fine = p["size_m"], p["cell_m"], p["stitch_cell_m"]
-    (x0, x1), (y0, y1) = p["stitch_region_m"]
-    return grid_box_mesh(
-        refined_coordinates(length, coarse, fine, x0, x1),
-        refined_coordinates(width, coarse, fine, y0, y1),
-        refined_coordinates(thickness, coarse, fine, 0.0, thickness),
-    )
+    """The task's mesh, as its kind builds it (:mod:`sessions.tasks.kinds`)."""
+    return kind_of(spec).mesh(spec)
 
 
 def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
-    """Surface nodes in the task's stitch region (a patch: an x, y box at every depth; a vessel
-    patch: an angle and z range of the adventitia): the contact candidates."""
-    points = mesh.points[mesh.surface_nodes]
-    if spec.scenario == "mesh_file":
-        outer = mesh.node_sets.get("outer", mesh.surface_nodes)
-        near = (
-            np.linalg.norm(mesh.points[outer] - np.asarray(spec.entry), axis=1)
-            <= spec.parameters["stitch_radius_m"]
-        )
-        return np.asarray(outer)[near]
-    if spec.scenario == "vessel_patch":
-        region = spec.parameters["stitch_region"]
-        angle = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
-        (a0, a1), (z0, z1) = region["angle_deg"], region["z_m"]
-        inside = (angle >= a0) & (angle <= a1) & (points[:, 2] >= z0 - 1e-9) & (points[:, 2] <= z1 + 1e-9)
-        outer = np.isin(mesh.surface_nodes, mesh.node_sets["outer"])
-        return mesh.surface_nodes[inside & outer]
-    (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
-    inside = (points[:, 0] >= x0 - 1e-9) & (points[:, 0] <= x1 + 1e-9)
-    inside &= (points[:, 1] >= y0 - 1e-9) & (points[:, 1] <= y1 + 1e-9)
-    return mesh.surface_nodes[inside]
+    """The surface nodes of the task's stitch region, as its kind finds them: the contact candidates."""
+    return kind_of(spec).stitch_region_nodes(spec, mesh)
 
 
 def task_preset(task: str):
@@ -103,9 +54,9 @@ def tissue_for(task: str, cache_dir: Path | None = None):
     from sim.fem import BiphaseTissue
 
     spec = task_spec(task)
-    mesh = task_mesh(spec)
-    if spec.scenario == "mesh_file":  # a stored task file can be edited by hand after `tasks add`
-        check_task_mesh(mesh, spec.parameters["fixed"], spec.entry, spec.parameters["stitch_radius_m"])
+    kind = kind_of(spec)
+    mesh = kind.mesh(spec)
+    kind.check(spec, mesh)  # a stored task's mesh file can be edited by hand after `tasks add`
     fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
     candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
     regions = {region: preset.biphase for region, preset in region_presets(task).items()}
