@@ -234,7 +234,8 @@ def throughput(directory: str, samples: int = 3_000_000) -> float:
 
 SERVER = """
 import sys, json, uvicorn
-from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore
+from recorder.remote.routes import create_app
 
 tokens = json.loads(sys.argv[2])
 uvicorn.run(create_app(IngestStore(sys.argv[1], tokens)), host="127.0.0.1", port=int(sys.argv[3]),

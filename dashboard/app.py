@@ -14,7 +14,7 @@ from fastapi.templating import Jinja2Templates
 from dashboard import api, pages, rating_pages
 from dashboard.analysis import AnalysisCache
 from dashboard.auth import LoginRateLimiter
-from dashboard.errors import install_error_handlers
+from dashboard.error_pages import install_error_handlers
 from dashboard.limits import BodyLimit
 from dashboard.settings import DashboardSettings
 from dashboard.streams.replay_jobs import ReplayJobs
@@ -22,7 +22,7 @@ from dashboard.streams.signals import SignalCache
 from metrics.session.registry import display_name
 from metrics.units import significant
 from recorder.remote.ingest import IngestStore
-from recorder.remote.ingest import create_app as create_ingest_app
+from recorder.remote.routes import create_app as create_ingest_app
 from sessions.catalog import Catalog
 from sessions.catalog.store import CatalogStore
 

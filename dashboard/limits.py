@@ -5,7 +5,7 @@ so far, exceed it: a 256 MiB password is never read into memory."""
 
 from __future__ import annotations
 
-from dashboard.errors import error_response
+from dashboard.error_pages import error_response
 
 SIGN_IN_BYTES = 16 * 1024
 """Signing in: a user name and a password (at most 1,024 characters) with room to spare."""

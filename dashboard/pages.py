@@ -136,7 +136,7 @@ def set_study_standard(
 ) -> Response:
     """A supervisor sets a new version of the study's standard on ``task`` (as `vascsim standards
     set` does, signed with their name); refused, the study page again with why."""
-    from sessions.scoring.standards import set_standard
+    from sessions.scoring.setting import set_standard
 
     state = request.app.state
     study = state.store.study(study_id, viewer, whole=True)

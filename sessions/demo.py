@@ -31,7 +31,7 @@ from sessions.catalog.lookups import study_named, study_session_keys
 from sessions.config import cache_dir
 from sessions.running.runner import SessionPlan, run_session
 from sessions.scoring.analysis import analyse_catalog_study, declare_analysis
-from sessions.scoring.standards import set_standard
+from sessions.scoring.setting import set_standard
 from sessions.synthetic import profile_for, scripted_hands
 from sessions.tasks import task_spec, tissue_for
 

@@ -169,3 +169,110 @@ def test_queries_are_written_only_in_the_catalog():
     assert not writers, (
         f"queries belong in {CATALOG} (the store, the engine or a query module), not in {writers}"
     )
+
+
+def first_party_modules() -> dict[str, Path]:
+    """Dotted name -> file of every module of the five packages, compiled extensions included (by
+    their C source: ``from sim.fem import _local_stress`` names a module, not the package)."""
+    modules = {}
+    for package in ORDER:
+        for path in (ROOT / package).rglob("*"):
+            if path.suffix not in (".py", ".c") or ".venv" in path.parts:
+                continue
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return modules
+
+
+def _runtime_imports(tree: ast.AST):
+    """Every import statement that runs (at module level or inside a function), those under
+    ``if TYPE_CHECKING:`` aside (annotations only)."""
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.If)
+            and getattr(node.test, "id", getattr(node.test, "attr", "")) == "TYPE_CHECKING"
+        ):
+            node.body = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            yield node
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the first-party modules it imports anywhere (inside functions too)."""
+    modules = first_party_modules()
+
+    def resolve(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {name: set() for name in modules}
+    for name, path in modules.items():
+        if path.suffix != ".py":
+            continue
+        for node in _runtime_imports(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                if node.level or not node.module or node.module.split(".")[0] not in ORDER:
+                    continue
+                names = [f"{node.module}.{alias.name}" for alias in node.names]
+                targets = {resolve(n) for n in names if n in modules} or {resolve(node.module)}
+            else:
+                targets = {resolve(a.name) for a in node.names if a.name.split(".")[0] in ORDER}
+            graph[name] |= {t for t in targets if t is not None and t != name}
+    return graph
+
+
+def import_loops(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected parts of more than one module (Tarjan, iteratively)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    loops = []
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                part = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    part.append(member)
+                    if member == node:
+                        break
+                if len(part) > 1:
+                    loops.append(sorted(part))
+    return loops
+
+
+def test_no_import_loops_even_inside_functions():
+    graph = import_graph()
+    assert "sim.fem.model" in graph and "sim.fem._local_stress" in graph  # the extension is a module
+    found = import_loops(graph)
+    described = [" <-> ".join(loop) for loop in found]
+    assert not found, f"modules that import each other (at the top or in a function): {described}"
+
+
+def test_the_loop_finder_finds_a_loop_through_a_function():
+    assert import_loops({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert import_loops({"a": {"b"}, "b": set()}) == []

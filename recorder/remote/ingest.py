@@ -305,11 +305,3 @@ def _refuse_non_finite(value: Any, what: str) -> None:
     elif isinstance(value, list):
         for index, item in enumerate(value):
             _refuse_non_finite(item, f"{what}[{index}]")
-
-
-def create_app(store: IngestStore):
-    """The ingest web application (:mod:`recorder.remote.routes`; imported here lazily, so the recorder
-    loads without the web stack)."""
-    from recorder.remote.routes import ingest_app
-
-    return ingest_app(store)

@@ -34,7 +34,7 @@ from recorder.remote.protocol import (
 UNKNOWN_STATION = "missing or unknown station token"
 
 
-def ingest_app(store: IngestStore) -> Starlette:
+def create_app(store: IngestStore) -> Starlette:
     """The application serving ``store``: routes, and errors in the one shape ({"error": ...})."""
     app = Starlette(
         routes=[

@@ -17,7 +17,8 @@ from argon2.exceptions import InvalidHashError, VerificationError
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session as OrmSession
 
-from sessions.catalog.engine import AlreadyExists, CatalogError, NotFound, now
+from sessions.catalog.engine import now
+from sessions.catalog.errors import AlreadyExists, CatalogError, NotFound
 from sessions.catalog.models import ROLES, LoginSession, Participant, StationToken, User
 
 MIN_PASSWORD_LENGTH = 10

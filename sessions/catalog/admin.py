@@ -13,7 +13,8 @@ from typing import Any
 from sqlalchemy import select
 
 from sessions.catalog import accounts
-from sessions.catalog.engine import AlreadyExists, Catalog, NotFound, WrongState
+from sessions.catalog.engine import Catalog
+from sessions.catalog.errors import AlreadyExists, NotFound, WrongState
 from sessions.catalog.models import Participant, StationToken, Study, User
 from sessions.catalog.records import StationRecord, StudyRecord, UserRecord
 

@@ -7,7 +7,6 @@ schema is created and upgraded by the Alembic migrations in ``sessions/catalog/m
 
 from __future__ import annotations
 
-import difflib
 import fcntl
 import math
 import random
@@ -27,48 +26,14 @@ from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
 from recorder.layout import sha256_of
+from sessions.catalog.errors import AlreadyExists, CatalogError, NotFound, WrongState
+from sessions.catalog.groups import group_name
 from sessions.catalog.models import MetricResult, Participant, Session, StreamFile, Study, Task
-from sim.errors import VascsimError
 
 MIGRATIONS = Path(__file__).with_name("migrations")
 SQLITE_BUSY_TIMEOUT_MS = 30_000
 TRIAL_ATTEMPTS = 50  # inserts racing for the next trial number: each conflict retries
 MIGRATION_LOCK_KEY = 0x76617363  # "vasc": the PostgreSQL advisory lock every migrating process takes
-
-
-class CatalogError(VascsimError):
-    """The catalog cannot be opened, or a request names something it does not hold."""
-
-
-class AlreadyExists(CatalogError):
-    """What a request would create is already there (HTTP 409)."""
-
-
-class WrongState(CatalogError):
-    """The request is well formed but what it names is not in a state that allows it (HTTP 409)."""
-
-
-class NotFound(CatalogError):
-    """What a request names is not in the catalog (HTTP 404). ``kind`` says what was looked for
-    ("study", "session", ...), so a front-end can say where to list them."""
-
-    def __init__(
-        self,
-        kind: str,
-        name: object,
-        known: list[str] | None = None,
-        where: str = "",
-        noun: str = "",
-        message: str = "",
-    ) -> None:
-        nearest = difflib.get_close_matches(str(name), known or [], n=1, cutoff=0.6)
-        hint = f"; did you mean {nearest[0]!r}?" if nearest else ""
-        super().__init__(message or f"no {noun or kind} {name!r}{where}{hint}")
-        self.kind = kind
-
-
-class Forbidden(CatalogError):
-    """The request is refused to this user or station (HTTP 403)."""
 
 
 def now() -> datetime:
@@ -209,8 +174,6 @@ class Catalog:
         handedness: str = "right",
         synthetic: bool = False,
     ) -> Participant:
-        from sessions.scoring.groups import group_name
-
         if orm.scalar(select(Participant).where(Participant.study_id == study.id, Participant.code == code)):
             raise AlreadyExists(f"participant {code!r} already exists in study {study.name!r}")
         level = group_name(level, study.custom_groups or (), "level", study.name)

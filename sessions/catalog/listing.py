@@ -9,7 +9,8 @@ from sqlalchemy import case, func, or_, select
 from sqlalchemy.orm import Session as OrmSession
 
 from metrics.session.registry import REGISTRY, REGISTRY_VERSION
-from sessions.catalog.engine import Catalog, WrongState
+from sessions.catalog.engine import Catalog
+from sessions.catalog.errors import WrongState
 from sessions.catalog.models import MetricResult, Participant, Rating, Session, Study, Task, User
 from sessions.catalog.records import ParticipantRecord, SessionRecord, StudyRecord, StudySummary
 from sessions.catalog.scope import EVERYTHING, Scope, visible

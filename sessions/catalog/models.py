@@ -32,7 +32,7 @@ class Study(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     description: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime)
-    # groups this study declared beyond the standard ones (sessions.scoring.groups), lower-case
+    # groups this study declared beyond the standard ones (sessions.catalog.groups), lower-case
     custom_groups: Mapped[list] = mapped_column(JSON, default=list, server_default="[]")
     participants: Mapped[list[Participant]] = relationship(
         back_populates="study", cascade="all, delete-orphan"

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from sqlalchemy import select, true
 from sqlalchemy.orm import Session as OrmSession
 
-from sessions.catalog.engine import Forbidden, NotFound
+from sessions.catalog.errors import Forbidden, NotFound
 from sessions.catalog.models import Participant, Session, Study
 
 STAFF = ("admin", "supervisor", "researcher")

@@ -31,7 +31,7 @@ def standards_set(study: str, task: str, author: str | None, note: str, as_json:
     """
     import getpass
 
-    from sessions.scoring.standards import set_standard
+    from sessions.scoring.setting import set_standard
 
     catalog, _ = open_catalog()
     record = set_standard(catalog, study, task, author or getpass.getuser(), note)
@@ -88,7 +88,7 @@ def standards_rejudge(study: str, task: str, reason: str, author: str | None, as
     they kept from earlier versions. Logged: who, when, why, and how many verdicts changed."""
     import getpass
 
-    from sessions.scoring.verdicts import rejudge
+    from sessions.scoring.setting import rejudge
 
     catalog, _ = open_catalog()
     result = rejudge(catalog, study, task, author or getpass.getuser(), reason)

@@ -67,7 +67,7 @@ def studies_groups(study: str, added: tuple[str, ...]) -> None:
     Every study knows expert, intermediate, trainee and novice; labels are case-insensitive and
     stored lower-case. A label outside the list is refused, so a typo never makes a group nobody
     analyses."""
-    from sessions.scoring.groups import STANDARD_GROUPS, study_groups
+    from sessions.catalog.groups import STANDARD_GROUPS, study_groups
 
     catalog, _ = open_catalog()
     groups = study_groups(catalog, study, added)

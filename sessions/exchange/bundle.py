@@ -344,8 +344,8 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
     Participants come without any account link (accounts are this site's business); database ids
     are this catalog's own."""
     from metrics.session.registry import REGISTRY_VERSION
+    from sessions.catalog.groups import declared_group, group_name
     from sessions.running.runner import stitch_results
-    from sessions.scoring.groups import declared_group, group_name
 
     info = manifest.study
     custom = [declared_group(name) for name in info.groups]

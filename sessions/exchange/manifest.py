@@ -80,7 +80,7 @@ class StudyRecord(_Strict):
     name: Annotated[str, Field(min_length=1, max_length=200)]
     description: Text
     created_at: When
-    # groups the study declared beyond the standard ones (sessions.scoring.groups); older bundles: none
+    # groups the study declared beyond the standard ones (sessions.catalog.groups); older bundles: none
     groups: Annotated[list[_label(32)], Field(max_length=50)] = []
 
 

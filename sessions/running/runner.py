@@ -28,7 +28,6 @@ from sessions.catalog.models import (
     MetricResult,
     StitchResult,
 )
-from sessions.catalog.store import CatalogStore
 from sessions.config import cache_dir
 from sessions.running.hands import instruments, open_forceps_device
 from sessions.running.live import LiveView
@@ -401,8 +400,3 @@ def stitch_results(session_id: int, stitches: pd.DataFrame | None) -> list[Stitc
         for _, row in stitches.iterrows()
         for name in STITCH_QUANTITIES
     ]
-
-
-def study_table(catalog: Catalog, study_name: str) -> pd.DataFrame:
-    """See :meth:`sessions.catalog.store.CatalogStore.study_table` (the store owns it)."""
-    return CatalogStore(catalog).study_table(study_name)

@@ -26,7 +26,7 @@ from sessions.catalog.results import (
     registry_versions,
     study_sessions_with,
 )
-from sessions.running.runner import study_table
+from sessions.catalog.store import CatalogStore
 from sessions.status import SCORABLE
 from sim.errors import VascsimError
 
@@ -204,7 +204,7 @@ def declared_settings(catalog: Catalog, study_name: str, table: pd.DataFrame | N
             return settings_from_json(latest.settings, what), latest.version, latest.author
     if table is None:
         try:
-            table = study_table(catalog, study_name)
+            table = CatalogStore(catalog).study_table(study_name)
         except WrongState:  # nothing scored yet: an analysis can still be declared before the data
             table = None
     return default_settings(table), None, ""
@@ -247,7 +247,7 @@ def analyse_catalog_study(
     ``standard``: "current" judges against the newest standard set for the analysed task
     (:mod:`sessions.scoring.standards`), its marks as stored; where none is set, or an override changes how
     marks are set, or with "candidate", marks are computed from today's data and called candidates."""
-    table = study_table(catalog, study_name)
+    table = CatalogStore(catalog).study_table(study_name)
     settings, version, author = declared_settings(catalog, study_name, table)
     overridden: dict[str, tuple[Any, Any]] = {}
     changes = {k: v for k, v in (overrides or {}).items() if v is not None}

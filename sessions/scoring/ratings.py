@@ -23,7 +23,7 @@ from metrics.errors import MetricsError
 from metrics.instruments import TOTAL, Instrument, instrument
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, now
 from sessions.catalog.models import Rating
-from sessions.catalog.ratings import (
+from sessions.catalog.results import (
     forget_rating,
     has_rated,
     raters_in_order,

@@ -4,29 +4,28 @@ anyone's back.
 Marks computed afresh whenever a page is built move when anyone records a session: adding four
 trainee sessions once changed the demo's benchmarks from four metrics to two and flipped passes of
 people who had done nothing. A standard is therefore *set* (``vascsim standards set``, the demo sets
-its own): :func:`set_standard` runs the study's declared analysis on the task, keeps only marks that
-point the right way (:func:`metrics.study.analysis.benchmark_choice`), and stores them with the experts and
-sessions they came from, the rule, the registry and analysis versions, who and when. From then on
-every analysis of the task (:func:`sessions.scoring.analysis.analyse_catalog_study`) judges against the
-newest version's marks as stored, and says which version it used. A new version applies from when it
-is set; the older ones stay readable (:func:`standard_history`).
+its own): :func:`sessions.scoring.setting.set_standard` runs the study's declared analysis on the
+task, keeps only marks that point the right way (:func:`metrics.study.analysis.benchmark_choice`),
+and stores them with the experts and sessions they came from, the rule, the registry and analysis
+versions, who and when. From then on every analysis of the task
+(:func:`sessions.scoring.analysis.analyse_catalog_study`) judges against the newest version's marks
+as stored, and says which version it used. A new version applies from when it is set; the older ones
+stay readable (:func:`standard_history`).
 """
 
 from __future__ import annotations
 
-import math
 import shlex
 from dataclasses import dataclass
 from datetime import datetime
 
 import pandas as pd
 
-from metrics.session.registry import REGISTRY_VERSION
 from metrics.study.analysis import StudyAnalysis, practice_mask
 from metrics.study.proficiency import BENCHMARK_COLUMNS, mark_drift, mark_intervals, proficiency_benchmarks
-from sessions.catalog import Catalog, WrongState, now
+from sessions.catalog import Catalog
 from sessions.catalog.models import Standard, Study
-from sessions.catalog.standards import latest_version, standards_of
+from sessions.catalog.standards import standards_of
 
 
 @dataclass(frozen=True)
@@ -92,7 +91,7 @@ class StandardRecord:
         }
 
 
-def _record(study: Study, row: Standard) -> StandardRecord:
+def standard_record(study: Study, row: Standard) -> StandardRecord:
     return StandardRecord(
         study.name,
         row.task,
@@ -114,70 +113,13 @@ def standard_history(catalog: Catalog, study_name: str, task: str | None = None)
     """Every version set for the study (of ``task`` when given), oldest first."""
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)
-        return [_record(study, row) for row in standards_of(orm, study.id, task)]
+        return [standard_record(study, row) for row in standards_of(orm, study.id, task)]
 
 
 def current_standard(catalog: Catalog, study_name: str, task: str) -> StandardRecord | None:
     """The newest version of the study's standard on ``task``; None when none was set."""
     versions = standard_history(catalog, study_name, task)
     return versions[-1] if versions else None
-
-
-def set_standard(catalog: Catalog, study_name: str, task: str, author: str, note: str = "") -> StandardRecord:
-    """Set a new version of the study's standard on ``task`` from the study's declared analysis of it
-    today. Refused (WrongState, saying why) when no metric qualifies for a mark."""
-    from sessions.scoring.analysis import analyse_catalog_study
-
-    analysis, source = analyse_catalog_study(catalog, study_name, {"task": task}, standard="candidate")
-    benchmarks = analysis.benchmarks.dropna(subset=["benchmark"])
-    if benchmarks.empty:
-        why = next(
-            (n for n in analysis.notes if n.startswith("No standard")), "no metric qualifies for a mark"
-        )
-        raise WrongState(f"no standard can be set for {task} in study {study_name!r}: {why}")
-    settings = analysis.settings
-    practice = analysis.sessions[practice_mask(analysis.sessions)]
-    skilled = practice[practice[settings.group_col] == settings.skilled_group]
-    intervals = mark_intervals(
-        practice,
-        list(benchmarks["metric"]),
-        settings.group_col,
-        settings.skilled_group,
-        settings.cluster_col,
-        settings.benchmark_rule,
-        seed=settings.seed,
-    )
-    marks = [
-        {
-            "metric": row.metric,
-            "benchmark": float(row.benchmark),
-            "better": row.better,
-            "pass_if": row.pass_if,
-            "experts": int(row.experts),
-            "interval": [v if math.isfinite(v) else None for v in intervals[row.metric]],  # JSON: no NaN
-        }
-        for row in benchmarks.itertuples()
-    ]
-    with catalog.session() as orm:
-        study = catalog.study(orm, study_name)
-        row = Standard(
-            study_id=study.id,
-            task=task,
-            version=latest_version(orm, study.id, task) + 1,
-            rule=settings.benchmark_rule,
-            marks=marks,
-            experts=sorted(map(str, pd.unique(skilled[settings.cluster_col]))),
-            sessions=sorted(map(str, skilled["session_id"])),
-            min_experts=settings.min_experts,
-            registry_version=REGISTRY_VERSION,
-            analysis_version=source.version,
-            set_by=author,
-            set_at=now(),
-            note=note,
-        )
-        orm.add(row)
-        orm.flush()
-        return _record(study, row)
 
 
 def standard_drift(analysis: StudyAnalysis, record: StandardRecord) -> list[dict]:

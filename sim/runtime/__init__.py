@@ -2,8 +2,9 @@
 
 from sim.runtime.safety import ForceSafety, SafetySettings
 from sim.runtime.settings import LayerProcessError, RuntimeSettings, RuntimeSettingsError
-from sim.runtime.simulation import RunResult, Simulation
+from sim.runtime.simulation import Simulation
 from sim.runtime.snapshots import RuntimeEvent
+from sim.runtime.telemetry import RunResult
 
 __all__ = [
     "ForceSafety",

@@ -25,6 +25,7 @@ import sys
 import threading
 import time as clock
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -57,9 +58,11 @@ from sim.runtime.shared import (
     SharedHolder,
     SharedTelemetry,
 )
-from sim.runtime.simulation import LAYERS, RunResult, Simulation
 from sim.runtime.snapshots import RuntimeEvent
-from sim.runtime.telemetry import LoopTelemetry
+from sim.runtime.telemetry import LAYERS, LoopTelemetry, RunResult
+
+if TYPE_CHECKING:  # the simulation it runs; the simulation imports this module
+    from sim.runtime.simulation import Simulation
 
 START_DELAY = 0.2  # s between set-up and the first tick, so every layer starts on time
 WARM_LEAD = 5e-5

@@ -24,7 +24,6 @@ import threading
 import time as wallclock
 import traceback
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,30 +38,11 @@ from sim.needle.forces import NeedleForces
 from sim.needle.interaction import NeedleEvent, NeedleInteraction, PiercingRules
 from sim.runtime.logs import ForceHistory, HapticLog
 from sim.runtime.prefetch import Prefetcher, arc_ahead, line_ahead, needs_column_worker
+from sim.runtime.realtime import process_prepared, run_realtime
 from sim.runtime.safety import ForceSafety
 from sim.runtime.settings import RuntimeSettings
 from sim.runtime.snapshots import FemSnapshot, GraphicsSnapshot, HolderSnapshot, Mailbox, RuntimeEvent
-from sim.runtime.telemetry import LayerSummary, LoopTelemetry
-
-LAYERS = ("haptic", "fem", "graphics", "display")
-
-
-@dataclass
-class RunResult:
-    """How a run ended and what it produced."""
-
-    stop_reason: str
-    end_time: float
-    events: list[NeedleEvent | RuntimeEvent]
-    telemetry: dict[str, LayerSummary]
-    haptic: HapticLog
-    error: str | None = None
-    error_layer: str | None = None
-    wall_seconds: float = 0.0
-
-    @property
-    def completed(self) -> bool:
-        return self.stop_reason == "completed"
+from sim.runtime.telemetry import LAYERS, LoopTelemetry, RunResult
 
 
 class Simulation:
@@ -458,8 +438,6 @@ class Simulation:
     def run_realtime(self, duration: float, pin_cpus: bool = True) -> RunResult:
         """Wall-clock time: the haptic layer in its own process (both hands' devices), the others in
         threads."""
-        from sim.runtime.realtime import process_prepared, run_realtime
-
         self.interaction.live_stress = self.settings.live_stress_in_real_time
         with process_prepared():  # before the column worker is forked: it inherits the settings
             self._cast_candidate_depths()

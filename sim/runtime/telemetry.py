@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:  # annotations of the run's result only
+    from sim.needle.events import NeedleEvent
+    from sim.runtime.logs import HapticLog
+    from sim.runtime.snapshots import RuntimeEvent
 
 
 @dataclass(frozen=True)
@@ -78,3 +84,24 @@ class LoopTelemetry:
             int(np.sum(periods > 2e-3)),
             int(np.sum(periods > 3e-3)),
         )
+
+
+LAYERS = ("haptic", "fem", "graphics", "display")
+
+
+@dataclass
+class RunResult:
+    """How a run ended and what it produced."""
+
+    stop_reason: str
+    end_time: float
+    events: list[NeedleEvent | RuntimeEvent]
+    telemetry: dict[str, LayerSummary]
+    haptic: HapticLog
+    error: str | None = None
+    error_layer: str | None = None
+    wall_seconds: float = 0.0
+
+    @property
+    def completed(self) -> bool:
+        return self.stop_reason == "completed"

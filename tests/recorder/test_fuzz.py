@@ -22,8 +22,9 @@ from recorder import (
     open_session,
     recover,
 )
-from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore
 from recorder.remote.protocol import encode_batch, pack_frame
+from recorder.remote.routes import create_app
 from recorder.schema import EVENT_SCHEMA, SAMPLE_SCHEMA
 from recorder.writer import read_journal, same_values, samples_batch
 

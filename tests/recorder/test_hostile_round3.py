@@ -9,8 +9,9 @@ import pytest
 from starlette.testclient import TestClient
 
 from recorder.json_input import MAX_DEPTH, JSONInputError, parse_json
-from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore
 from recorder.remote.protocol import encode_batch
+from recorder.remote.routes import create_app
 from tests.recorder.test_remote import AUTH, TOKENS, batch, post
 
 DEEP = "[" * 5000 + "]" * 5000

@@ -11,8 +11,9 @@ import pytest
 from starlette.testclient import TestClient
 
 from recorder import open_session
-from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore
 from recorder.remote.protocol import encode_batch
+from recorder.remote.routes import create_app
 from recorder.schema import EVENT_SCHEMA
 from tests.recorder.test_remote import AUTH, TOKENS, batch, events, post
 

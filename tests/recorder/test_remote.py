@@ -15,8 +15,9 @@ import pytest
 from starlette.testclient import TestClient
 
 from recorder import COLUMN, SAMPLE_COLUMNS, RecorderError, SessionWriter, open_session, recover
-from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore
 from recorder.remote.protocol import MAX_BATCH_BYTES, encode_batch, pack_frame
+from recorder.remote.routes import create_app
 from recorder.remote.station import StationUploader
 from recorder.schema import EVENT_SCHEMA, SAMPLE_SCHEMA
 from recorder.writer import read_journal, same_values, samples_batch
@@ -193,7 +194,8 @@ def free_port():
 
 SERVER = """
 import sys, uvicorn
-from recorder.remote.ingest import IngestStore, create_app
+from recorder.remote.ingest import IngestStore
+from recorder.remote.routes import create_app
 uvicorn.run(create_app(IngestStore(sys.argv[1], {"secret-station-a": "station-a"})),
             host="127.0.0.1", port=int(sys.argv[2]), log_level="warning")
 """

@@ -16,9 +16,9 @@ from metrics import from_recorded, metrics_of
 from metrics.signals.tissue import with_tissue_fields
 from recorder import open_session
 from sessions.catalog import CatalogError
+from sessions.catalog.store import CatalogStore
 from sessions.cli import main
 from sessions.exchange.bundle import export_study, import_bundle
-from sessions.running.runner import study_table
 from sessions.tasks import session_tissue
 from tests.conftest import repoint_session_folders
 
@@ -111,7 +111,7 @@ def test_export_then_import_elsewhere_reproduces_identical_metrics(small_study, 
     summary = export_study(source, "course", bundle)
     # header, samples, events, scene per session
     assert summary["sessions"] == 3 and summary["files"] == 12
-    before = study_table(source, "course")
+    before = CatalogStore(source).study_table("course")
     # a second machine: another data directory, always an embedded SQLite catalog
     other_home = tmp_path / "other"
     target = open_catalog(f"sqlite:///{tmp_path / 'other.sqlite'}")
@@ -124,7 +124,7 @@ def test_export_then_import_elsewhere_reproduces_identical_metrics(small_study, 
         "metric_values_differing": 0,  # the streams give exactly the stated values
         "signed_by": None,
     }
-    after = study_table(target, "course")
+    after = CatalogStore(target).study_table("course")
     pd.testing.assert_frame_equal(before, after)
     # the imported stream files give exactly the stored metrics again
     for uid in after["session_id"]:

@@ -260,7 +260,7 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
     from datetime import datetime
 
     from sessions.catalog.models import Rating, Session
-    from sessions.running.runner import study_table
+    from sessions.catalog.store import CatalogStore
 
     catalog, home = demo
     with catalog.session() as orm:
@@ -280,7 +280,7 @@ def test_concurrent_validity_from_catalogued_ratings(demo):
                         created_at=datetime(2026, 12, 2),
                     )
                 )  # fmt: skip
-    table = study_table(catalog, DEMO_STUDY)
+    table = CatalogStore(catalog).study_table(DEMO_STUDY)
     assert table["grs_total"].notna().all() and table["grs_total"].min() >= 12.5  # mean of the two raters
     data = json.loads(_cli(home, "report", "--study", DEMO_STUDY, "--rating", "grs_total", "--json").stdout)
     assert data["overridden"] == {"rating_col": {"declared": None, "used": "grs_total"}}

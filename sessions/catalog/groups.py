@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-from sessions.catalog import CatalogError
+from sessions.catalog.errors import CatalogError
 
 STANDARD_GROUPS = ("expert", "intermediate", "trainee", "novice")
 """The groups every study knows, most skilled first."""
