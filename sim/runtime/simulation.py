@@ -199,32 +199,33 @@ class Simulation:
         nominated = interaction.contacts[0] if interaction.contacts else None
         self.fem.put(
             FemSnapshot(
-                now,
-                step.needle_force,
-                vertices,
-                interaction.state,
-                step.contact_nodes,
-                step.reaction_forces,
-                contact,
-                interaction.tip_speed,
-                interaction.tip_tangent(),
-                -1 if nominated is None else nominated.triangle,
-                (math.nan,) * 3 if nominated is None else tuple(nominated.barycentric.tolist()),
-                interaction.soft_share,
-                interaction.local_stress,
-                interaction.stretch,
-                holder.time,
-                interaction.tip_velocity,
-                *grasp,
+                time=now,
+                needle_force=step.needle_force,
+                needle_vertices=vertices,
+                state=interaction.state,
+                contact_nodes=step.contact_nodes,
+                reaction_forces=step.reaction_forces,
+                contact=contact,
+                tip_speed=interaction.tip_speed,
+                tip_tangent=interaction.tip_tangent(),
+                contact_triangle=-1 if nominated is None else nominated.triangle,
+                barycentric=(math.nan,) * 3 if nominated is None else tuple(nominated.barycentric.tolist()),
+                soft_share=interaction.soft_share,
+                local_stress=interaction.local_stress,
+                stretch=interaction.stretch,
+                holder_time=holder.time,
+                tip_velocity=interaction.tip_velocity,
+                **grasp,
             )
         )
 
-    def _forceps_step(self, now: float, step) -> tuple:
+    def _forceps_step(self, now: float, step) -> dict:
         """The subordinate hand's grasp at this FEM step, superposed with the needle's loads:
-        (the forceps' force on the tissue, the grasped tissue's displacement), or () with no hand."""
+        the snapshot's grasp fields by name (the forceps' force on the tissue, the grasped tissue's
+        displacement, the grasp's nodal loads, the jaws), none with no hand."""
         forceps, hand = self.forceps, self.subordinate_holder.get()
         if forceps is None or hand is None:
-            return ()
+            return {}
         was_grasping, began = forceps.grasping, wallclock.perf_counter()
         forceps.hold(hand.time, hand.pose.position, hand.grip)
         grasp = forceps.fem_step(now, step.contact_nodes, step.reaction_forces)
@@ -233,7 +234,12 @@ class Simulation:
         for event in grasp.events:
             self._emit(event)
         held = (grasp.nodes.copy(), grasp.nodal_forces.copy()) if grasp.nodes.size else None
-        return grasp.force, grasp.displacement, held, (forceps.jaw_point.copy(), forceps.jaw_closed)
+        return {
+            "grasp_force": grasp.force,
+            "grasp_displacement": grasp.displacement,
+            "grasp_loads": held,
+            "jaws": (forceps.jaw_point.copy(), forceps.jaw_closed),
+        }
 
     def graphics_step(self, now: float) -> None:
         fem = self.fem.get()
