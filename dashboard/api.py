@@ -18,9 +18,12 @@ from dashboard.auth import COOKIE, LoginRateLimiter, Viewer, current_viewer, req
 from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
 from dashboard.streams.live import live_stream
 from dashboard.streams.signals import inside, replay_video, session_file
+from metrics.reading.report import write_report
+from metrics.reading.tables import validity_download
 from recorder.layout import SAMPLES_JOURNAL
 from sessions.catalog import accounts
 from sessions.catalog.store import STAFF, UserRecord
+from sessions.exchange.progress import progress_table, write_progress
 from sessions.running.live import live_view_path
 from sessions.scoring import ratings
 from sessions.status import SessionStatus
@@ -172,7 +175,6 @@ def validity(request: Request, study_id: Id, viewer: Staff) -> dict:
     responses=CONFLICT,
 )
 def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
-    from metrics.reading.tables import validity_download
 
     state = _state(request)
     name = state.store.study(study_id, viewer, whole=True).name
@@ -193,8 +195,6 @@ def validity_csv(request: Request, study_id: Id, viewer: Staff) -> Response:
 )
 def progress_file(request: Request, study_id: Id, kind: str, viewer: Staff) -> Response:
     import tempfile
-
-    from sessions.exchange.progress import progress_table, write_progress
 
     if kind not in ("csv", "xlsx"):
         raise not_found(f"progress.{kind}")
@@ -224,7 +224,6 @@ def _plain(name: str) -> str:
     summary="A report figure (box plots or ROC, PNG or SVG)",
 )
 def figure(request: Request, study_id: Id, name: str, viewer: Staff) -> FileResponse:
-    from metrics.reading.report import write_report
 
     if name not in FIGURES:
         raise not_found(f"figure {name!r}")

@@ -29,6 +29,7 @@ from recorder.layout import SAMPLES_FILE
 from sessions.catalog.models import ROLES
 from sessions.catalog.store import STAFF
 from sessions.scoring.ratings import session_ratings
+from sessions.scoring.setting import set_standard
 from sim.errors import VascsimError
 
 router = APIRouter(include_in_schema=False)
@@ -136,7 +137,6 @@ def set_study_standard(
 ) -> Response:
     """A supervisor sets a new version of the study's standard on ``task`` (as `vascsim standards
     set` does, signed with their name); refused, the study page again with why."""
-    from sessions.scoring.setting import set_standard
 
     state = request.app.state
     study = state.store.study(study_id, viewer, whole=True)

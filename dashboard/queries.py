@@ -22,7 +22,9 @@ from metrics.reading.tables import (
     reliability_tables,
     standards_tables,
     summary_in_display_units,
+    table_text,
 )
+from metrics.replay.reference import SIGNALS
 from metrics.session.registry import REGISTRY, REGISTRY_VERSION
 from metrics.study.analysis import practice_mask
 from metrics.study.proficiency import benchmarks_heading, drift_line
@@ -33,6 +35,7 @@ from sessions.scoring.analysis import analysed_task
 from sessions.scoring.review import against_band, expert_band, session_stitches
 from sessions.scoring.standards import set_command
 from sessions.status import SCORABLE
+from sessions.tasks import known_task, task_spec
 from sim.errors import VascsimError
 
 ATTENTION_AFTER_TRIALS = 5
@@ -257,7 +260,6 @@ def session_detail(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer,
 
 def target_bite(task: str) -> float | None:
     """The task's target bite from the wound edge (m), if the task library declares one."""
-    from sessions.tasks import known_task, task_spec
 
     placement = task_spec(task).placement if known_task(task) else None
     return None if placement is None else float(placement["target_bite_m"])
@@ -326,7 +328,6 @@ def validity_report(store: CatalogStore, analyses: AnalysisCache, viewer: Viewer
 
 def _shown(frame: pd.DataFrame) -> dict:
     """A table as the page shows it: its column names and rows of display text."""
-    from metrics.reading.tables import table_text
 
     return {
         "columns": [str(c) for c in frame.columns],
@@ -357,7 +358,6 @@ SIGNAL_BANDS = {"force": ("peak_force", "experts' peak force, middle half")}
 
 def signal_bands(rows: list[dict]) -> dict:
     """The experts' interquartile band of each plotted signal's metric, in the plot's unit."""
-    from metrics.replay.reference import SIGNALS
 
     by_metric = {row["metric"]: row for row in rows}
     bands = {}

@@ -20,6 +20,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
+from recorder.scene import read_scene
 
 EVENT_COLUMNS = ("time", "kind", "entry_angle_deg", "tip_speed", "triangle")
 
@@ -211,7 +212,6 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     # device was sent, which equals it unless the device clamped or scaled it
     reaction = columns("reaction_x", "reaction_y", "reaction_z")
     force = reaction if np.all(np.isfinite(reaction)) else columns("force_x", "force_y", "force_z")
-    from recorder.scene import read_scene
 
     scene = read_scene(session)
     # the subordinate hand where one was recorded (schema 4, its tool point known); a one-handed

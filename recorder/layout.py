@@ -22,6 +22,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from recorder.json_input import JSONInputError, parse_json
 from recorder.schema import RecorderError
 
 HEADER_FILE = "header.json"
@@ -50,7 +51,6 @@ def write_json_atomically(path: Path, data: dict[str, Any]) -> None:
 
 def read_header(directory: Path) -> dict[str, Any]:
     """A session directory's ``header.json``; RecorderError if it is missing, damaged or not an object."""
-    from recorder.json_input import JSONInputError, parse_json
 
     path = directory / HEADER_FILE
     try:

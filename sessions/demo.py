@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from metrics.instruments import GRS
 from metrics.reading.report import write_report
 from metrics.study.analysis import StudyAnalysis, StudySettings
 from sessions.catalog import Catalog, CatalogError, WrongState
@@ -31,6 +32,7 @@ from sessions.catalog.lookups import study_named, study_session_keys
 from sessions.config import cache_dir
 from sessions.running.runner import SessionPlan, run_session
 from sessions.scoring.analysis import analyse_catalog_study, declare_analysis
+from sessions.scoring.ratings import checked_rating, store_ratings
 from sessions.scoring.setting import set_standard
 from sessions.synthetic import profile_for, scripted_hands
 from sessions.tasks import task_spec, tissue_for
@@ -122,8 +124,6 @@ def synthetic_ratings(catalog: Catalog, runs: list, seed: int) -> int:
     motion skill on the 1-5 scale (1 + 4 x skill) plus the rater's leniency and the rater's own noise
     (SD 0.6 per item), rounded and kept within 1-5. Stored as any rating is (checked against the
     instrument); returns how many ratings."""
-    from metrics.instruments import GRS
-    from sessions.scoring.ratings import checked_rating, store_ratings
 
     with catalog.session() as orm:
         rows = study_session_keys(orm, DEMO_STUDY)

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from metrics.replay.export import ReplaySettings, export_replay
 from recorder import open_session
 from sessions.catalog import Catalog, CatalogError, NotFound
 from sessions.catalog.lookups import group_sessions, latest_session_of, session_with_uid
 from sessions.catalog.models import Session
 from sessions.config import cache_dir
+from sessions.scoring.review import experts_on_task
 from sessions.status import SCORABLE
 from sessions.tasks import known_task, tissue_for
 
@@ -82,8 +84,6 @@ def render_blind_replay(
     moves the file into place only once it is whole)."""
     from dataclasses import replace
 
-    from metrics.replay.export import ReplaySettings, export_replay
-
     settings = replace(settings or ReplaySettings(), blind=True, mode="ghost")
     recorded, tissue, _ = inputs if inputs is not None else replay_inputs(catalog, home, uid)
     return export_replay(recorded, tissue, blind_replay_path(home, uid), [], settings, progress=progress).path
@@ -92,8 +92,6 @@ def render_blind_replay(
 def replay_against_experts(catalog: Catalog, home: Path, uid: str) -> Path:
     """Render session ``uid``'s replay against its study's experts on the same task (the most typical
     one ghosted in; the trainee alone when there is none) to ``home/replays/UID-vs.mp4``."""
-    from metrics.replay.export import ReplaySettings, export_replay
-    from sessions.scoring.review import experts_on_task
 
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)

@@ -276,3 +276,27 @@ def test_no_import_loops_even_inside_functions():
 def test_the_loop_finder_finds_a_loop_through_a_function():
     assert import_loops({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert import_loops({"a": {"b"}, "b": set()}) == []
+
+
+COMMAND_LINE = ("sessions/cli/", "dashboard/cli.py")
+"""The command-line modules: they load a command's modules when it runs, so ``--help`` stays quick and
+``sessions.cli`` loads no web module (third-party libraries that are heavy or optional, VTK, PyAV,
+OpenCV, device drivers, are deferred inside functions everywhere, with no first-party module between)."""
+
+
+def test_first_party_modules_are_imported_at_the_top_outside_the_command_line():
+    inside = []
+    for path in python_files():
+        name = path.relative_to(ROOT).as_posix()
+        if name.startswith(COMMAND_LINE):
+            continue
+        for function in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(function, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            for node in _runtime_imports(function):
+                module = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+                if isinstance(node, ast.ImportFrom) and node.level:
+                    module = "relative"
+                if (module or "").split(".")[0] in ORDER:
+                    inside.append(f"{name}:{node.lineno} {module}")
+    assert not inside, f"import these at the top of their modules (no loop needs them inside): {inside}"

@@ -17,7 +17,9 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from metrics.replay.export import ReplaySettings, export_replay
 from sessions.catalog import Catalog, WrongState
+from sessions.replaying import render_blind_replay, replay_inputs
 
 REPLAY_SIZE = (640, 360)
 log = logging.getLogger("vascsim.dashboard")
@@ -48,7 +50,6 @@ class ReplayJobs:
     def start(self, uid: str, blind: bool = False) -> ReplayJob:
         """Start rendering ``uid``'s replay against the experts, or its blind render (refused while
         another renders)."""
-        from sessions.replaying import replay_inputs
 
         with self._lock:
             busy = [j for j in self._jobs.values() if j.state == "rendering"]
@@ -70,8 +71,6 @@ class ReplayJobs:
         return self._jobs.get((uid, blind))
 
     def _render_blind(self, job: ReplayJob, inputs) -> None:
-        from metrics.replay.export import ReplaySettings
-        from sessions.replaying import render_blind_replay
 
         def advance(done: int, total: int) -> None:
             job.done, job.total = done, total
@@ -85,7 +84,6 @@ class ReplayJobs:
             job.state, job.error = "failed", "the blind render failed; the server's log says why"
 
     def _render(self, job: ReplayJob, inputs) -> None:
-        from metrics.replay.export import ReplaySettings, export_replay
 
         recorded, tissue, experts = inputs
 

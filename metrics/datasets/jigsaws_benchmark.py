@@ -29,8 +29,10 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from metrics import compute_session_metrics
 from metrics.datasets.jigsaws import Trial
 from metrics.errors import MetricsError
+from metrics.session.registry import REGISTRY
 
 PROTOCOLS = ("LOSO", "LOUO")
 SETUP_NAMES = {"LOSO": "SuperTrialOut", "LOUO": "UserOut"}
@@ -342,7 +344,6 @@ def _confusion(truth: np.ndarray, predicted: np.ndarray, classes: tuple[str, ...
 
 def benchmark_metrics(table: pd.DataFrame) -> list[str]:
     """The registry's metrics every trial has (JIGSAWS has no force, needle or tissue streams)."""
-    from metrics.session.registry import REGISTRY
 
     names = [m.name for m in REGISTRY if m.name in table.columns]
     return [n for n in names if table[n].notna().all() and table[n].nunique() > 1]
@@ -356,7 +357,6 @@ def run_benchmark(
     table: pd.DataFrame | None = None,
 ) -> BenchmarkResult:
     """Both protocols on one task's trials (``table``: their metrics, computed here when not given)."""
-    from metrics import compute_session_metrics
 
     if not trials:
         raise MetricsError("the JIGSAWS benchmark needs trials")

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from jinja2 import Environment
 
@@ -18,6 +17,7 @@ from metrics.reading.tables import (
     FEEDBACK_BASIS,
     benchmarks_for_reading,
     composite_summary,
+    composite_weights_for_reading,
     concurrent_for_reading,
     csv_with_units,
     curves_for_reading,
@@ -148,11 +148,7 @@ def write_report(analysis: StudyAnalysis, folder: str | Path, title: str = "vasc
     learning = learning_curve_figures(analysis, figures)
     composite = analysis.validity.composite
     composite_text = composite_summary(composite)
-    if composite is None:
-        weights = pd.DataFrame(columns=["metric", "weight"])
-    else:
-        weights = composite.weights.rename_axis("metric").reset_index()
-        weights = weights[weights["weight"].abs() > 0].sort_values("weight", key=np.abs, ascending=False)
+    weights = composite_weights_for_reading(composite, str(analysis.settings.skilled_group))
     notes = [*analysis.validity.notes[1:], *analysis.notes]
     summary = validity_for_reading(analysis)
     registry = REGISTRY.describe()[["name", "unit", "better", "definition", "reference"]]

@@ -12,6 +12,7 @@ from sklearn.metrics import roc_curve
 
 from metrics.reading.figures import new_figure
 from metrics.reading.tables import display_scale, participant_medians
+from metrics.session.registry import display_name
 from metrics.study.analysis import StudyAnalysis, oriented, practice_mask
 from metrics.study.learning import MODELS as LEARNING_MODELS
 
@@ -44,7 +45,7 @@ def box_plot_figure(analysis: StudyAnalysis, folder: Path) -> str:
             axis.scatter(
                 np.full(len(values), k) + np.linspace(-0.08, 0.08, len(values)), values, s=8, alpha=0.6
             )
-        axis.set_title(metric + (" *" if metric in significant else ""), fontsize=9)
+        axis.set_title(display_name(metric) + (" *" if metric in significant else ""), fontsize=9)
         axis.set_ylabel(label, fontsize=8)
         axis.tick_params(labelsize=7)
     for axis in axes.ravel()[len(metrics) :]:
@@ -71,7 +72,7 @@ def roc_figure(analysis: StudyAnalysis, folder: Path) -> str:
             continue
         fpr, tpr, _ = roc_curve(skilled[keep], values[keep])
         area = float(np.trapezoid(tpr, fpr))
-        axis.plot(fpr, tpr, label=f"{metric} (AUC {area:.2f})")
+        axis.plot(fpr, tpr, label=f"{display_name(metric)} (AUC {area:.2f})")
     composite = analysis.validity.composite
     if composite is not None and not math.isnan(composite.auc):
         scores = composite.scores.dropna(subset=["score"])
@@ -140,8 +141,8 @@ def learning_curve_figures(analysis: StudyAnalysis, folder: Path) -> list[str]:
         axis.axhline(factor * bench.benchmark, color="k", linestyle="--", label=f"benchmark ({bench.rule})")
         axis.set_xlabel("trial (squares: retention)", fontsize=8)
         axis.xaxis.set_major_locator(MaxNLocator(integer=True))  # trials are whole sessions
-        axis.set_ylabel(f"{bench.metric} ({label})", fontsize=8)
-        axis.set_title(f"{bench.metric} ({bench.better} is better)", fontsize=9)
+        axis.set_ylabel(f"{display_name(bench.metric)} ({label})", fontsize=8)
+        axis.set_title(f"{display_name(bench.metric)} ({bench.better} is better)", fontsize=9)
         axis.legend(fontsize=7)
     for axis in axes.ravel()[len(benchmarks) :]:
         axis.set_visible(False)

@@ -291,6 +291,25 @@ def composite_summary(composite) -> str:
     return text + "."
 
 
+def composite_weights_for_reading(composite, skilled_group: str = "expert") -> pd.DataFrame:
+    """The composite's weights as a reader takes them: each metric named in words, its weight (the
+    rank-biserial correlation of its values with the skilled group, -1 to 1) and which way the skilled
+    group lies, largest weights first; metrics that carry none are left out (the full table, by key,
+    is tables/composite_weights.csv)."""
+    columns = ["metric", "weight", f"{skilled_group} values"]
+    if composite is None:
+        return pd.DataFrame(columns=columns)
+    weights = composite.weights[composite.weights.abs() > 0].sort_values(key=np.abs, ascending=False)
+    return pd.DataFrame(
+        {
+            columns[0]: [display_name(m) for m in weights.index],
+            columns[1]: [f"{w:+.2f}" for w in weights],
+            columns[2]: ["higher" if w > 0 else "lower" for w in weights],
+        },
+        columns=columns,
+    )
+
+
 def standards_tables(analysis: StudyAnalysis) -> dict[str, pd.DataFrame]:
     """The standard-setting tables as shown: marks in display units, rates in % with intervals."""
     standards = analysis.standards

@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from metrics.replay.hud import HudLine, Key
+from sim.render import FORCEPS_CLOSED_COLOUR, FORCEPS_OPEN_COLOUR
 
 TITLE = "blinded replay"
 """The strip's only text, the same in every frame."""
@@ -48,7 +49,6 @@ def neutral_bites(count: int) -> np.ndarray:
 
 def forceps_keys() -> list[Key]:
     """The subordinate hand's forceps, as :class:`sim.render.TissueRenderer` draws them."""
-    from sim.render import FORCEPS_CLOSED_COLOUR, FORCEPS_OPEN_COLOUR
 
     return [
         Key("line", (tuple(round(255 * c) for c in FORCEPS_OPEN_COLOUR),), "forceps, open"),

@@ -23,14 +23,24 @@ from metrics.errors import MetricsError
 from metrics.replay import blind
 from metrics.replay.blind import blind_keys, forceps_keys
 from metrics.replay.hud import FrameLayout, HudLine, Key, draw_key, value_line
+from metrics.replay.plots import write_signal_plots
 from metrics.replay.reference import expert_reference
 from metrics.replay.stills import insertion_frame_index, stress_map, write_stress_map
 from metrics.replay.track import ReplayTrack, session_track
+from metrics.replay.video import VideoWriter, check_video_path
 from metrics.replay.wound import outline_edges, wound_nodes
 from metrics.signals.alignment import PHASES, phase_starts
+from metrics.signals.placement import (
+    MARK_COLOURS,
+    PlacementTargets,
+    StitchPlacement,
+    mark_colour,
+    stitch_points,
+)
 from metrics.signals.tissue import with_tissue_fields
 from metrics.streams import SessionStreams, from_recorded
 from sim.fem.fields import TissueFieldReplay
+from sim.render import FORCE_ARROW_M_PER_N, RenderFrame, TissueRenderer, stress_colours, write_image
 
 MODES = ("ghost", "side-by-side")
 T = TypeVar("T")
@@ -99,7 +109,6 @@ class SceneReplay:
         return PHASES[reached[-1]] if reached else PHASES[0]
 
     def frame(self, k: int, ghost: NDArray | None = None, ghost_needle: NDArray | None = None):
-        from sim.render import RenderFrame
 
         track = self.track
         drive = track.drives[k]
@@ -135,7 +144,6 @@ class BiteMarks:
 
     @classmethod
     def of(cls, streams, mesh) -> BiteMarks | None:
-        from metrics.signals.placement import PlacementTargets, StitchPlacement, mark_colour, stitch_points
 
         targets = PlacementTargets.from_attributes(dict(streams.attributes))
         stitches = stitch_points(streams.events, mesh)
@@ -215,8 +223,6 @@ def export_replay(
     (surface von Mises in Pa seen along the wall normal) and ``signals.png``/``.svg``.
     """
     from threadpoolctl import threadpool_limits
-
-    from metrics.replay.video import VideoWriter, check_video_path
 
     settings = settings or ReplaySettings()
     if settings.blind and experts:
@@ -309,8 +315,6 @@ def export_replay(
         canvas.close()
     timings["render"] = render_time
     if stills is not None:
-        from metrics.replay.plots import write_signal_plots
-
         written += write_signal_plots(streams, stills, reference)
     seconds = time.perf_counter() - started
     timings["total"] = seconds
@@ -334,7 +338,6 @@ class ReplayCanvas:
         readouts: list[tuple[str, list[HudLine]]] = (),
         blind: bool = False,
     ) -> None:
-        from sim.render import TissueRenderer, stress_colours
 
         views = 2 if settings.mode == "side-by-side" else 1
         self.layout = FrameLayout.of(settings.size, views, readouts)
@@ -390,7 +393,6 @@ class ReplayCanvas:
 def wound_outline(streams: SessionStreams, mesh) -> NDArray[np.int64]:
     """The rim of the wound's cut faces ((E, 2) node ids) for the session's task, empty when the task
     has no wound (:mod:`metrics.replay.wound`)."""
-    from metrics.signals.placement import PlacementTargets
 
     targets = PlacementTargets.from_attributes(dict(streams.attributes))
     point, normal = (None, None) if targets is None else (targets.wound_point, targets.wound_normal)
@@ -400,8 +402,6 @@ def wound_outline(streams: SessionStreams, mesh) -> NDArray[np.int64]:
 def replay_keys(ghost: bool, marks: bool, wound: bool, forceps: bool = False) -> list[Key]:
     """What the key says, for what the video shows (colours as :class:`sim.render.TissueRenderer`
     draws them); ``forceps``: a two-handed session's subordinate hand."""
-    from metrics.signals.placement import MARK_COLOURS
-    from sim.render import FORCE_ARROW_M_PER_N
 
     (near, on_mark), (far, near_mark), (_, off_mark) = MARK_COLOURS
     keys = []
@@ -456,7 +456,6 @@ def _write_insertion_stills(
     folder: Path, scene: SceneReplay, k: int, frame, pixels: NDArray[np.uint8]
 ) -> list[Path]:
     """The insertion frame as rendered (PNG) and its surface stress seen along the wall normal (EXR)."""
-    from sim.render import write_image
 
     folder.mkdir(parents=True, exist_ok=True)
     mesh = scene.fields.mesh

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 from metrics.reading.figures import new_figure
 from metrics.replay.reference import SIGNALS, ExpertReference, signal_of
 from metrics.streams import SessionStreams
+from sim.render import write_image
 
 EVENT_STYLES = {
     "contact_start": ("contact", "tab:blue"),
@@ -75,7 +76,6 @@ def write_signal_plots(
     session: SessionStreams, out_dir: str | Path, reference: ExpertReference | None = None, dpi: int = 100
 ) -> list[Path]:
     """``signals.png`` (through OpenImageIO) and ``signals.svg`` (vector, for papers) in ``out_dir``."""
-    from sim.render import write_image
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
 from metrics.streams import SessionStreams
+from sim.render import write_image
 
 STRESS_MAP_PIXEL_M = 2e-5
 """Stress maps sample the wall every 20 micrometres."""
@@ -52,7 +53,6 @@ def stress_map(
 
 def write_stress_map(path: str | Path, image: NDArray[np.float32]) -> Path:
     """One float channel of von Mises stress (Pa) as OpenEXR."""
-    from sim.render import write_image
 
     return write_image(path, None, float_data=image)
 

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
+from recorder.scene import read_scene
 from sim.devices import ReplayDevice
 from sim.needle import Needle
 from sim.needle.forces import NeedleForces
@@ -54,7 +55,6 @@ class ReplayTrack:
 def session_track(session, tissue, fps: float = 30.0) -> ReplayTrack:
     """The frames of a recorded session: from its scene stream when it has one (the nearest recorded
     graphics frame to each video frame), else by re-simulating it."""
-    from recorder.scene import read_scene
 
     scene = read_scene(session)
     if scene is None or scene.num_rows == 0:

@@ -14,7 +14,9 @@ from metrics.errors import MetricsError
 from metrics.session import force, insertion, motion, placement, subordinate_hand, tissue
 from metrics.session.context import SessionContext
 from metrics.session.registry import REGISTRY, REGISTRY_VERSION
+from metrics.signals.tissue import with_tissue_fields
 from metrics.streams import SessionStreams, from_recorded
+from recorder import open_session
 
 METRIC_GROUPS = (motion, insertion, force, tissue, placement, subordinate_hand)
 """The modules whose ``@metric`` functions fill :data:`REGISTRY` as they are imported: a new group
@@ -32,8 +34,6 @@ def as_streams(item: Any) -> SessionStreams:
     if hasattr(item, "to_streams"):
         return item.to_streams()
     if isinstance(item, str | Path):
-        from recorder import open_session
-
         return from_recorded(open_session(item))
     if hasattr(item, "samples") and hasattr(item, "header"):
         return from_recorded(item)
@@ -89,8 +89,6 @@ def compute_session_metrics(
         streams = as_streams(item)
         model = tissue(streams) if tissue is not None else None
         if model is not None:
-            from metrics.signals.tissue import with_tissue_fields
-
             streams = with_tissue_fields(streams, model)
         rows.append(session_row(streams, metrics))
         if progress is not None:

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.signals.kinematics import LDLJ_CUTOFF_HZ, Movements, UniformMotion, find_movements
+from metrics.signals.placement import PlacementTargets, StitchPlacement
 from metrics.streams import SessionStreams
 
 MOTION_RATE_HZ = 100.0
@@ -82,7 +83,6 @@ class SessionContext:
     def placement(self):
         """Each stitch's placement against the task's targets
         (:class:`metrics.signals.placement.StitchPlacement`), or None without stitch points or targets."""
-        from metrics.signals.placement import PlacementTargets, StitchPlacement
 
         targets = PlacementTargets.from_attributes(dict(self.streams.attributes))
         stitches = self.streams.stitches

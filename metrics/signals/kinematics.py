@@ -13,7 +13,6 @@ from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from metrics.errors import MetricsError
 
@@ -46,6 +45,8 @@ def smooth(
     """Zero-phase low-pass along axis 0; returns the input when the signal is too short to filter."""
     if cutoff_hz >= rate / 2:
         return values
+    from scipy import signal  # deferred: importing scipy.signal costs every command about 0.7 s
+
     sos = signal.butter(4, cutoff_hz, fs=rate, output="sos")
     padlen = 3 * (2 * len(sos) + 1)
     if values.shape[0] <= padlen:
@@ -147,6 +148,8 @@ def find_movements(
     min_prominence: float = MIN_PEAK_PROMINENCE,
 ) -> Movements:
     """Movement segmentation by absolute thresholds (see :class:`Movements`; docs/metrics.md)."""
+    from scipy.signal import find_peaks  # deferred: see smooth()
+
     speed = motion.speed
     peaks, starts, ends = [], [], []
     for first, last in zip(*_above(speed > speed_threshold), strict=True):
@@ -160,7 +163,7 @@ def find_movements(
         # a peak of its own: >= 2 mm/s and >= 10 % of this movement's top speed above its valleys
         # (the low-pass's ringing beside a fast reach is not a submovement)
         prominence = max(min_prominence, LOCAL_PROMINENCE_FRACTION * float(inside.max()))
-        found, _ = signal.find_peaks(inside, prominence=prominence)
+        found, _ = find_peaks(inside, prominence=prominence)
         if found.size == 0:
             found = np.array([int(np.argmax(inside))])
         found = found + first

@@ -30,6 +30,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from metrics.streams import NeedleFrames
+from sim.fem.fields import TissueFieldReplay
 
 PASSAGE_COLUMNS = ("track_offset", "swept_area", "wound_edge_stress")
 IN_WALL = (2, 3)  # pierced, exited
@@ -106,7 +107,6 @@ class WoundEdgeStress:
     """Peak von Mises stress (Pa) of a tissue's wound-edge elements under recorded drives."""
 
     def __init__(self, tissue) -> None:
-        from sim.fem.fields import TissueFieldReplay
 
         self.elements = tissue.mesh.wound_edge_elements
         self._replay = TissueFieldReplay(tissue, elements=self.elements) if self.elements.size else None

@@ -27,6 +27,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from metrics.signals.passage import passage_columns
+from metrics.signals.placement import stitch_points
 from metrics.streams import SessionStreams
 from sim.fem import Tissue
 from sim.fem.fields import IndentationStress, LocalStress, TissueFieldReplay
@@ -90,12 +92,8 @@ def with_tissue_fields(
     streams the runtime recorded are kept; only what is missing is derived. Streams that lack what
     is needed (needle state, tip, contact triangle and weights, tip speed) are returned unchanged."""
     if streams.stitches is None and len(streams.events):  # where each bite went, on this mesh
-        from metrics.signals.placement import stitch_points
-
         stitches = stitch_points(streams.events, tissue.mesh)
         if streams.needle_frames is not None:  # and how the needle went through the wall
-            from metrics.signals.passage import passage_columns
-
             stitches = passage_columns(stitches, streams.needle_frames, tissue)
         streams = dataclasses.replace(streams, stitches=stitches)
     needed = ("needle_state", "tip_position", "contact_triangle", "contact_barycentric", "tip_speed")

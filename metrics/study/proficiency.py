@@ -29,7 +29,7 @@ import pandas as pd
 from scipy import stats
 
 from metrics.errors import MetricsError
-from metrics.session.registry import REGISTRY
+from metrics.session.registry import REGISTRY, display_name
 from metrics.study.statistics import contrasting_groups_mark
 from metrics.units import shown
 
@@ -196,7 +196,6 @@ def mark_drift(marks: Sequence[dict], today: pd.DataFrame) -> list[dict]:
 def drift_line(entry: dict) -> str:
     """One drift entry in words and display units: "peak force: today's experts would put the mark at
     <= 520 mN (set at <= 400 mN, interval 360 mN to 450 mN): more lenient"."""
-    from metrics.session.registry import display_name
 
     sign = "<=" if REGISTRY[entry["metric"]].better == "lower" else ">="
     return (

@@ -30,6 +30,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
 from metrics.errors import MetricsError
+from metrics.instruments import TOTAL, instrument
+from metrics.units import interval_text
 
 ICC_KINDS = ("ICC(1,1)", "ICC(2,1)", "ICC(3,1)", "ICC(1,k)", "ICC(2,k)", "ICC(3,k)")
 ICC_MEANING = {
@@ -354,7 +356,6 @@ def rater_agreement(ratings: pd.DataFrame, instrument_name: str, confidence: flo
     latest counts, rows in time order). One row per item and the total: sessions and raters in the
     largest complete block, ICC(2,1) and ICC(2,k) with their intervals (absolute agreement), and
     Krippendorff's alpha over every rating (ordinal for items, interval for the total)."""
-    from metrics.instruments import TOTAL, instrument
 
     spec = instrument(instrument_name)
     mine = ratings[ratings["instrument"].str.upper() == spec.name]
@@ -394,7 +395,6 @@ def rater_agreement(ratings: pd.DataFrame, instrument_name: str, confidence: flo
 def agreement_shown(table: pd.DataFrame, compact: bool = False) -> pd.DataFrame:
     """:func:`rater_agreement`'s table as a person reads it: each estimate with its interval (and
     Koo & Li's reading for ICC(2,1)); ``compact`` (80 columns) leaves ICC(2,k) out."""
-    from metrics.units import interval_text
 
     def estimates(key: str, reading: bool = False) -> list[str]:
         readings = table["reading"] if reading else [""] * len(table)

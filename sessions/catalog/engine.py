@@ -25,6 +25,7 @@ from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError, Ope
 from sqlalchemy.orm import Session as OrmSession
 from sqlalchemy.orm import sessionmaker
 
+from metrics.session.registry import REGISTRY_VERSION
 from recorder.layout import sha256_of
 from sessions.catalog.errors import AlreadyExists, CatalogError, NotFound, WrongState
 from sessions.catalog.groups import group_name
@@ -280,7 +281,6 @@ def stream_file(session_id: int, path: Path) -> StreamFile:
 
 def metric_results(session_id: int, values: dict[str, float]) -> list[MetricResult]:
     """Metric rows of one session under the current registry version (NaN stored as NULL)."""
-    from metrics.session.registry import REGISTRY_VERSION
 
     return [
         MetricResult(

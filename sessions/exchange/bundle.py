@@ -30,8 +30,14 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from metrics import metrics_of
+from metrics.session.registry import REGISTRY_VERSION
+from metrics.signals.placement import stitch_table
+from recorder import RecorderError
 from recorder.json_input import JSONInputError, JSONTooDeep, parse_json
+from recorder.layout import HEADER_FILE, read_header
 from sessions.catalog import AlreadyExists, Catalog, CatalogError, metric_results
+from sessions.catalog.groups import declared_group, group_name
 from sessions.catalog.lookups import first_catalogued, study_named
 from sessions.catalog.models import (
     AnalysisDeclaration,
@@ -61,6 +67,8 @@ from sessions.exchange.manifest import (
 )
 from sessions.exchange.signing import SIGNATURE, trusted_fingerprint
 from sessions.exchange.signing import verify as verify_signature
+from sessions.running.runner import scored_streams, stitch_results
+from sessions.scoring.analysis import settings_from_json
 from sessions.status import SCORABLE
 
 
@@ -242,8 +250,6 @@ manifest would score one task's motion on another's wall."""
 def _check_headers(manifest: Manifest, staging: Path) -> None:
     """CatalogError naming the session and the key unless every recorded session's own header
     (those with a header.json: the simulator's) agrees with its manifest entry."""
-    from recorder import RecorderError
-    from recorder.layout import HEADER_FILE, read_header
 
     for entry in manifest.sessions:
         folder = staging / entry.uid
@@ -264,9 +270,6 @@ def _check_headers(manifest: Manifest, staging: Path) -> None:
 def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> dict[str, tuple]:
     """Every scorable session's metrics and per-stitch placement computed from its extracted streams;
     an error names the session."""
-    from metrics import metrics_of
-    from metrics.signals.placement import stitch_table
-    from sessions.running.runner import scored_streams
 
     labels = {p.code: p.group_label for p in manifest.participants}
     computed = {}
@@ -292,7 +295,6 @@ def _recompute(manifest: Manifest, staging: Path, home: Path, progress=None) -> 
 
 def _check_analyses(entries: Any, bundle: str | Path) -> None:
     """Every declared analysis version of a bundle, checked as a declaration made here would be."""
-    from sessions.scoring.analysis import settings_from_json
 
     if not isinstance(entries, list):
         raise CatalogError(f"bundle {bundle}: 'analyses' must be a list of declared versions")
@@ -343,9 +345,6 @@ def _add_rows(catalog: Catalog, orm, manifest: Manifest, home: Path, computed: d
 
     Participants come without any account link (accounts are this site's business); database ids
     are this catalog's own."""
-    from metrics.session.registry import REGISTRY_VERSION
-    from sessions.catalog.groups import declared_group, group_name
-    from sessions.running.runner import stitch_results
 
     info = manifest.study
     custom = [declared_group(name) for name in info.groups]

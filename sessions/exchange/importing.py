@@ -5,8 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from metrics import metrics_of
+from metrics.bench.camera import Camera
+from metrics.bench.tracking import TRACK_FILE, read_video, save_track, track_frames
 from metrics.datasets import jigsaws
-from sessions.catalog import Catalog, CatalogError, metric_results, now, stream_file
+from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
 from sessions.catalog.lookups import participant_coded, session_with_uid
 from sessions.catalog.models import Participant, Rating, Session
 
@@ -101,9 +103,6 @@ def import_bench_video(
     The tracked path (``track.parquet``) and the camera calibration are the session's files;
     its motion metrics are computed like any other session's (force and tissue metrics are
     NaN: a video has neither). Returns the session id and its metrics."""
-    from metrics.bench.camera import Camera
-    from metrics.bench.tracking import TRACK_FILE, read_video, save_track, track_frames
-    from sessions.catalog import new_uid
 
     with catalog.session() as orm:  # names first: a typo must not cost a whole tracking run
         study = catalog.study(orm, study_name)

@@ -26,7 +26,7 @@ from typing import Any
 import httpx
 
 from sessions.catalog import CatalogError
-from sessions.exchange.xapi import Statement, voiding
+from sessions.exchange.xapi import Statement, XapiSettings, study_statements, voiding
 
 XAPI_VERSION = "1.0.3"
 BATCH = 50
@@ -284,7 +284,6 @@ def configured(home: Path) -> dict[str, StudyLrs]:
 
 def configure(home: Path, study: str, settings: StudyLrs) -> None:
     """Store the study's LRS (checked first: a bad endpoint or home page is refused, nothing stored)."""
-    from sessions.exchange.xapi import XapiSettings
 
     LrsEndpoint(settings.endpoint, settings.key, "")
     XapiSettings(settings.home_page, settings.activity_base)
@@ -297,7 +296,6 @@ def configure(home: Path, study: str, settings: StudyLrs) -> None:
 
 def push_study(catalog: Any, home: Path, study: str, secret: str, resend: bool = False) -> PushResult:
     """Push the study's statements to its configured LRS."""
-    from sessions.exchange.xapi import XapiSettings, study_statements
 
     settings = configured(home).get(study)
     if settings is None:

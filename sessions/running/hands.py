@@ -18,7 +18,11 @@ from typing import NamedTuple
 import numpy as np
 
 from sessions.catalog import CatalogError
+from sessions.running.scene import access_direction, task_camera
 from sessions.tasks import TaskSpec, grasp_sites
+from sim.devices.openhaptics import OpenHapticsDevice
+from sim.devices.spacemouse import SpaceMouse, find_spacemice
+from sim.devices.workspace import WorkspaceMapping, view_axes
 from sim.needle import Pose
 
 SUB_DEVICES = ("none", "spacemouse", "openhaptics")
@@ -65,7 +69,6 @@ def forceps_start(spec: TaskSpec) -> Pose:
         raise CatalogError(
             f"task {spec.name!r} has no wound edge for the forceps to hold: it is a one-handed task"
         )
-    from sessions.running.scene import access_direction
 
     return Pose(sites[0] + FORCEPS_START_HEIGHT_M * access_direction(spec), np.eye(3))
 
@@ -75,8 +78,6 @@ def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, ta
     scene from :func:`forceps_start`; ``taken``: the needle's device name (two SpaceMice: the second
     one found holds the forceps)."""
     if name == "spacemouse":
-        from sim.devices.spacemouse import SpaceMouse, find_spacemice
-
         identity = None
         if taken == "spacemouse":
             found = find_spacemice()
@@ -85,8 +86,6 @@ def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, ta
             identity = found[1]
         device = SpaceMouse(identity)
     elif name == "openhaptics":
-        from sim.devices.openhaptics import OpenHapticsDevice
-
         device = OpenHapticsDevice()
     else:
         raise CatalogError(f"unknown second device {name!r}; one of {', '.join(SUB_DEVICES[1:])}")
@@ -96,7 +95,5 @@ def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, ta
 def forceps_on(device, spec: TaskSpec, left_handed: bool = False):
     """An open hand-held ``device`` as the forceps: its first reading is :func:`forceps_start`, its axes
     the live view's (mirrored for a left hand), 1:1 (:class:`sim.devices.workspace.WorkspaceMapping`)."""
-    from sessions.running.scene import task_camera
-    from sim.devices.workspace import WorkspaceMapping, view_axes
 
     return WorkspaceMapping(device, forceps_start(spec), view_axes(*task_camera(spec)), mirror=left_handed)

@@ -6,9 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from sessions.config import cache_dir
+from sessions.running.hud import HudLimits
+from sessions.running.scene import scene_facts
 from sessions.running.window import LiveWindow, ViewSettings
+from sessions.scoring.review import expert_band
+from sessions.tasks import task_preset, tissue_for
 from sim.devices.discovery import display_available
-from sim.devices.mouse import MouseMapping
+from sim.devices.mouse import MouseDevice, MouseHand, MouseMapping
 
 VIEWS = ("window", "none")
 """``--view`` choices: a window on this station's display, or none (the dashboard's live page still
@@ -38,12 +43,6 @@ class LiveView:
     def window(self, spec, device, catalog, home: Path, ids: tuple[int, int], uid: str = "") -> LiveWindow:
         """The window for session ``uid`` of task ``spec`` with ``device``, in study and task ``ids``;
         it publishes its view for the dashboard (:func:`live_view_path`) when ``uid`` is given."""
-        from sessions.config import cache_dir
-        from sessions.running.hud import HudLimits
-        from sessions.running.scene import scene_facts
-        from sessions.scoring.review import expert_band
-        from sessions.tasks import task_preset, tissue_for
-        from sim.devices.mouse import MouseDevice, MouseHand
 
         band = expert_band(catalog, *ids).get("peak_force")
         limits = HudLimits(

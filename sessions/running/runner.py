@@ -18,9 +18,12 @@ from typing import NamedTuple
 import pandas as pd
 
 from metrics import REGISTRY_VERSION, SessionStreams, from_recorded, metrics_of
+from metrics.bench.tracking import TRACK_FILE, load_track
+from metrics.datasets.jigsaws import Trial, read_kinematics
 from metrics.signals.placement import STITCH_QUANTITIES, stitch_table
 from metrics.signals.tissue import with_tissue_fields
 from recorder import SessionWriter, open_session
+from recorder import recover as recover_files
 from recorder.runtime import RuntimeRecorder
 from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
 from sessions.catalog.lookups import forget_results, forget_stream_files, session_in_directory
@@ -31,6 +34,7 @@ from sessions.catalog.models import (
 from sessions.config import cache_dir
 from sessions.running.hands import instruments, open_forceps_device
 from sessions.running.live import LiveView
+from sessions.running.scene import LIVE_TIME_FACTOR, mapped_onto_task, start_pose, stop_when_done
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
 from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import (
@@ -41,9 +45,12 @@ from sessions.tasks import (
     task_simulation,
     task_spec,
 )
-from sim.devices import DeviceIdentity, ScriptedDevice, SuturingPass
+from sim.devices import DeviceIdentity, ReplayDevice, ScriptedDevice, SuturingPass
 from sim.devices.assisting import ScriptedHands, assisting_hand
+from sim.devices.mouse import MouseDevice
+from sim.devices.openhaptics import OpenHapticsDevice
 from sim.devices.scripted import SuturingPassParameters, sequence_of_passes
+from sim.devices.spacemouse import SpaceMouse
 from sim.needle import Needle
 from sim.runtime import RuntimeSettings
 
@@ -134,8 +141,6 @@ def open_device(
         trajectory, duration = sequence_of_passes(passes)
         return OpenedDevice(ScriptedDevice(trajectory), duration, subordinate)
     if spec.startswith("replay:"):
-        from sim.devices import ReplayDevice
-
         uid = spec.split(":", 1)[1]
         with catalog.session() as orm:
             row = catalog.recorded_session(orm, uid)
@@ -150,17 +155,10 @@ def open_device(
         )
         return OpenedDevice(device, float(recorded["time"].iloc[-1]))
     if spec == "mouse":
-        from sessions.running.scene import start_pose
-        from sim.devices.mouse import MouseDevice
-
         return OpenedDevice(MouseDevice(start_pose(task)), None)
     if spec == "spacemouse":
-        from sim.devices.spacemouse import SpaceMouse
-
         return OpenedDevice(SpaceMouse(), None)  # mapped onto the task's scene by run_session
     if spec == "openhaptics":
-        from sim.devices.openhaptics import OpenHapticsDevice
-
         return OpenedDevice(OpenHapticsDevice(), None)
     raise CatalogError(
         f"unknown device {spec!r}; use scripted, mouse, spacemouse, openhaptics or replay:SESSION"
@@ -217,8 +215,6 @@ def run_session(
         hands = instruments(plan.device, plan.sub_device, "left" if left else "right")
         device, natural, subordinate = open_device(hands.needle, plan, catalog, parameters)
         if hands.needle in MAPPED_DEVICES:  # the hand's workspace onto the task's scene, as shown
-            from sessions.running.scene import mapped_onto_task
-
             device = mapped_onto_task(device, spec, left_handed=left)
         if hands.forceps is not None:  # a person's second hand: the forceps on their own device
             subordinate = open_forceps_device(hands.forceps, spec, left, taken=hands.needle)
@@ -226,8 +222,6 @@ def run_session(
             duration = natural if duration is None else min(duration, natural)
         duration = duration if duration is not None else natural
         if duration is None:  # a live device: until done or stopped, within a bound the arena needs
-            from sessions.running.scene import LIVE_TIME_FACTOR
-
             duration = LIVE_TIME_FACTOR * spec.time_budget_s
         window = None
         if view is not None and plan.clock == "realtime":
@@ -244,8 +238,6 @@ def run_session(
     writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
     simulation = RuntimeRecorder(writer).attach(simulated)
     if window is not None:
-        from sessions.running.scene import stop_when_done
-
         window.simulation = simulation
         stop_when_done(simulation, spec.stitch_count)
     try:
@@ -287,7 +279,6 @@ def recover_session(catalog: Catalog, target: str) -> tuple[str | None, dict]:
     The recorder turns the journal into verified Parquet files (header marked recovered);
     the catalog row, when there is one, becomes ``recovered`` with the files' SHA-256 and
     can then be scored. Returns (uid or None for an uncatalogued directory, header)."""
-    from recorder import recover as recover_files
 
     folder = Path(target)
     with catalog.session() as orm:
@@ -318,12 +309,8 @@ def scored_streams(
     (cached under ``home/cache``; ``home`` defaults to VASCSIM_HOME); a bench video's tracked
     path is the session's data; a JIGSAWS trial's is its kinematics file."""
     if device == "bench-video":
-        from metrics.bench.tracking import TRACK_FILE, load_track
-
         return load_track(directory / TRACK_FILE).to_streams(uid, code, label)
     if device == "jigsaws":  # one kinematics file; labels come from the catalog, not the file
-        from metrics.datasets.jigsaws import Trial, read_kinematics
-
         samples = read_kinematics(directory)
         return Trial(directory.stem, "", code, 0, label, "", float("nan"), {}, samples).to_streams()
     streams = from_recorded(open_session(directory))

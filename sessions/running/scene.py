@@ -13,6 +13,7 @@ from sessions.running.hud import HudLimits
 from sessions.running.window import SceneFacts
 from sessions.tasks import TaskSpec
 from sim.devices.suturing import SuturingPass, SuturingPassParameters
+from sim.devices.workspace import WorkspaceMapping, view_axes
 from sim.needle import Needle, Pose
 
 CAMERA_DISTANCE_M = 0.024
@@ -100,6 +101,5 @@ def mapped_onto_task(device, spec: TaskSpec, left_handed: bool = False):
     """A position or rate device (Touch, SpaceMouse) seen through the task's view: its pose at the first
     reading is the task's starting pose, its axes the screen's, 1:1, mirrored for a left hand
     (:class:`sim.devices.workspace.WorkspaceMapping`)."""
-    from sim.devices.workspace import WorkspaceMapping, view_axes
 
     return WorkspaceMapping(device, start_pose(spec), view_axes(*task_camera(spec)), mirror=left_handed)

@@ -19,7 +19,7 @@ from pathlib import Path
 from sessions.catalog import Catalog
 from sessions.running.live import LiveView
 from sessions.running.screens import Line, Screen, wrapped
-from sessions.scoring.review import SessionReview, review_session
+from sessions.scoring.review import SessionReview, experts_on_task, review_session
 from sessions.tasks import TaskSpec, task_spec
 
 COUNTDOWN_S = 3
@@ -148,7 +148,6 @@ def run_station(
     """The station's loop (see the module docstring); ``run_trial()`` runs one session and returns its
     uid, ``replay(uid)`` renders it against the experts and returns where; ``trials`` bounds the loop.
     Returns the uids of the trials run."""
-    from sessions.scoring.review import experts_on_task
 
     spec = task_spec(plan.task)
     uids: list[str] = []

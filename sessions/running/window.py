@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from sessions.running.hud import HudLimits, HudTracker
 from sim.devices.mouse import GRIP_KEYS, MouseHand, PoseChannel
 from sim.errors import VascsimError
+from sim.render import TissueRenderer
 from sim.runtime.display import DisplayScene
 
 LIVE_VIEW_EVERY = 2
@@ -116,7 +117,6 @@ class LiveWindow:
     def prepare(self, request_stop: Callable[..., None], session_time: Callable[[], float]) -> None:
         """Open the window (in the display process: the process that draws into it).
         ``request_stop(reason)`` stops the run; ``session_time()`` is the session's clock (s)."""
-        from sim.render import TissueRenderer
 
         self._request_stop, self._session_time = request_stop, session_time
         settings = self.settings

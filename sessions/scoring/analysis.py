@@ -17,7 +17,9 @@ from typing import Any
 import pandas as pd
 
 from metrics.errors import MetricsError
+from metrics.session.registry import REGISTRY, REGISTRY_VERSION
 from metrics.study.analysis import StudyAnalysis, StudySettings, analyse_study
+from metrics.study.proficiency import check_rule, drift_line
 from sessions.catalog import Catalog, CatalogError, WrongState, now
 from sessions.catalog.models import AnalysisDeclaration
 from sessions.catalog.results import (
@@ -27,7 +29,11 @@ from sessions.catalog.results import (
     study_sessions_with,
 )
 from sessions.catalog.store import CatalogStore
+from sessions.scoring.ratings import study_ratings
+from sessions.scoring.standards import current_standard, set_command, standard_drift
+from sessions.scoring.verdicts import kept_verdicts
 from sessions.status import SCORABLE
+from sessions.tasks import task_spec
 from sim.errors import VascsimError
 
 DECLARABLE = (
@@ -118,8 +124,6 @@ def settings_from_json(data: dict, what: str) -> StudySettings:
 
 
 def _check(settings: StudySettings, what: str) -> None:
-    from metrics.session.registry import REGISTRY
-    from metrics.study.proficiency import check_rule
 
     if len(settings.groups) != 2 or settings.groups[0] == settings.groups[1]:
         raise CatalogError(f"{what}: groups must name two different groups; got {list(settings.groups)!r}")
@@ -263,8 +267,6 @@ def analyse_catalog_study(
         }
         settings = merged
     settings, primaries = with_primary_metrics(settings, table)
-    from sessions.scoring.ratings import study_ratings
-    from sessions.scoring.standards import current_standard, set_command
 
     task = analysed_task(settings, table)
     stored = None
@@ -275,9 +277,6 @@ def analyse_catalog_study(
     analysis.standard_label = stored.label() if stored is not None else ""
     if stored is not None:
         analysis.notes.append(f"Judged against the study's {stored.label()} on {task}, its marks as set.")
-        from metrics.study.proficiency import drift_line
-        from sessions.scoring.standards import standard_drift
-        from sessions.scoring.verdicts import kept_verdicts
 
         analysis = kept_verdicts(catalog, study_name, task, analysis)
         analysis.standard_drift = standard_drift(analysis, stored)
@@ -354,7 +353,6 @@ def analysed_task(settings: StudySettings, table: pd.DataFrame) -> str | None:
 def with_primary_metrics(settings: StudySettings, table: pd.DataFrame) -> tuple[StudySettings, bool]:
     """``settings`` with its metrics, when it declares none, set to the analysed task's primary metrics
     that the table has (:attr:`sessions.tasks.TaskSpec.primary_metrics`); and whether that was done."""
-    from sessions.tasks import task_spec
 
     task = analysed_task(settings, table)
     if settings.metrics is not None or "task" not in table.columns or task is None:
@@ -371,7 +369,6 @@ def with_primary_metrics(settings: StudySettings, table: pd.DataFrame) -> tuple[
 
 def participants_left_out(catalog: Catalog, study_name: str, analysis: StudyAnalysis) -> list[dict]:
     """Every participant of the study absent from ``analysis``, with the reason in words."""
-    from sessions.catalog.store import CatalogStore
 
     settings = analysis.settings
     analysed = set(map(str, analysis.sessions[settings.cluster_col]))
@@ -394,7 +391,6 @@ def participants_left_out(catalog: Catalog, study_name: str, analysis: StudyAnal
 
 def metric_versions(catalog: Catalog, session_ids: list[int]) -> dict[int, str]:
     """Per session id: "current", "stale (vN)" (scored only by an older metric registry) or "none"."""
-    from metrics.session.registry import REGISTRY_VERSION
 
     with catalog.session() as orm:
         found = registry_versions(orm, session_ids)
@@ -425,7 +421,6 @@ def stale_sessions(catalog: Catalog, study_name: str) -> list[str]:
 
 def imported_unverified_sessions(catalog: Catalog, study_name: str) -> list[str]:
     """Sessions of the study whose current-registry metrics were imported, not computed here."""
-    from metrics.session.registry import REGISTRY_VERSION
 
     with catalog.session() as orm:
         study = catalog.study(orm, study_name)

@@ -13,10 +13,14 @@ from dataclasses import dataclass
 import pandas as pd
 
 from metrics.reading.band import against_band, expert_quartiles
+from metrics.reading.feedback import session_feedback
 from metrics.session.registry import REGISTRY_VERSION, display_name
+from metrics.units import shown
 from sessions.catalog import Catalog
 from sessions.catalog.results import group_metric_values, stitch_values, task_id_named
+from sessions.scoring.analysis import analyse_catalog_study
 from sessions.status import SCORABLE
+from sim.errors import VascsimError
 
 EXPERT_GROUP = "expert"
 
@@ -92,7 +96,6 @@ def review_session(catalog: Catalog, uid: str, rows: list[dict] | None = None) -
     session's task) and against the experts' band: one function, so the station's feedback screen and
     ``vascsim run`` say the same thing (what to work on is the same function as ``sessions show``'s).
     ``rows``: the session against the experts' band when the caller has read it already."""
-    from metrics.reading.feedback import session_feedback
 
     with catalog.session() as orm:
         row = catalog.recorded_session(orm, uid)
@@ -109,9 +112,6 @@ def _against_standard(
     catalog: Catalog, study: str, task: str, uid: str, rows: list[dict]
 ) -> tuple[str, str, list[dict], pd.DataFrame | None]:
     """(verdict, the standard in words, each benchmark's reading, the benchmarks table or None)."""
-    from metrics.units import shown
-    from sessions.scoring.analysis import analyse_catalog_study
-    from sim.errors import VascsimError
 
     if all(row["expert_q1"] is None for row in rows):  # the band is the experts' on this task
         why = f"no standard for {task} yet: no expert of this study has a scored session of it"

@@ -18,6 +18,7 @@ from pathlib import Path
 import pandas as pd
 
 from sessions.catalog import Catalog, CatalogError
+from sessions.config import data_home
 from sessions.running.runner import ScoringInput, scoring_input, session_scores, store_scores
 
 
@@ -48,8 +49,6 @@ def _relocated(inputs: list[ScoringInput], home: Path | None, data_root: str) ->
     """Each session's folder under ``data_root`` instead of the data directory (the same relative
     path): where the workers find the sessions (a mount or an fsspec URL)."""
     import dataclasses
-
-    from sessions.config import data_home
 
     base = (home or data_home()).resolve()
     moved = []

@@ -11,6 +11,11 @@ import numpy as np
 from sessions.tasks.kinds import kind_of
 from sessions.tasks.spec import TaskSpec
 from sessions.tasks.user import known_task, task_spec
+from sim.calibration.presets import tissue_preset
+from sim.devices.assisting import edge_grasp
+from sim.fem import BiphaseTissue
+from sim.needle import Needle
+from sim.runtime import Simulation
 
 
 def task_mesh(spec: TaskSpec):
@@ -25,7 +30,6 @@ def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
 
 def task_preset(task: str):
     """The task's tissue preset (:mod:`sim.calibration.presets`): biphase parameters and needle forces."""
-    from sim.calibration.presets import tissue_preset
 
     return tissue_preset(task_spec(task).parameters.get("tissue", "paper"))
 
@@ -33,7 +37,6 @@ def task_preset(task: str):
 def region_presets(task: str) -> dict:
     """Mesh region name -> tissue preset for the task's regions that differ from its wall (e.g. a
     calcified plaque); empty for a uniform wall."""
-    from sim.calibration.presets import tissue_preset
 
     return {
         region: tissue_preset(name)
@@ -51,7 +54,6 @@ def region_forces(task: str, mesh) -> dict:
 def tissue_for(task: str, cache_dir: Path | None = None):
     """The task's precomputed tissue model (built once per process, cached on disk): the preset's
     biphase wall on the task mesh, its condensed inverse over the stitch region's surface nodes."""
-    from sim.fem import BiphaseTissue
 
     spec = task_spec(task)
     kind = kind_of(spec)
@@ -77,7 +79,6 @@ def session_tissue(streams, cache_dir: Path | None = None):
 def edge_grasps(spec: TaskSpec) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per bite, where the subordinate hand takes the wound edge and the way it lifts it
     (:func:`sim.devices.assisting.edge_grasp`: the rim beside the entry); none without a wound."""
-    from sim.devices.assisting import edge_grasp
 
     placement = spec.placement or {}
     if placement.get("wound_point") is None:
@@ -96,8 +97,6 @@ def task_simulation(task: str, device, cache_dir: Path | None = None, **options)
     """A :class:`sim.runtime.Simulation` of ``task`` driven by ``device``: the task's tissue, the
     curved needle, its preset's needle forces and its regions' own (a calcified plaque pierces at
     its own threshold). ``options`` go to the Simulation (e.g. ``settings``)."""
-    from sim.needle import Needle
-    from sim.runtime import Simulation
 
     tissue = tissue_for(task, cache_dir)
     if options.get("subordinate") is not None and "grasp_sites" not in options:

@@ -11,9 +11,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from sessions.config import data_home
 from sessions.tasks.library import TASKS
 from sessions.tasks.spec import TaskSpec
+from sim.calibration.presets import tissue_preset
 from sim.errors import VascsimError
+from sim.mesh import save_mesh
 
 # -- tasks added from a mesh (`vascsim tasks add`): VASCSIM_HOME/tasks/NAME/{task.json,mesh.vtu} ------
 USER_TASK_FILE = "task.json"
@@ -21,7 +24,6 @@ USER_MESH_FILE = "mesh.vtu"
 
 
 def user_tasks_dir() -> Path:
-    from sessions.config import data_home
 
     return data_home() / "tasks"
 
@@ -86,9 +88,6 @@ def add_mesh_task(
     nearest point of its outer surface, in along the inward normal there; contact candidates are
     the outer surface's nodes within ``stitch_radius``; ``fixed`` names the node sets held."""
     import re
-
-    from sim.calibration.presets import tissue_preset
-    from sim.mesh import save_mesh
 
     if not re.fullmatch(r"[a-z0-9][a-z0-9-]{1,40}", name):
         raise VascsimError(f"task name {name!r}: 2-41 lower-case letters, digits and dashes")

@@ -10,6 +10,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.fem import BiphaseParameters, BiphaseTissue
 from sim.mesh import TetMesh, box_mesh
+from sim.needle import Needle, Pose, rotation_aligning
+from sim.needle.interaction import NeedleInteraction
+from sim.needle.load import KernelLoad, kernel_factory
 
 # Where the scripted needle touches the top face: barycentric weights on the contact triangle.
 NEEDLE_WEIGHTS = (0.5, 0.3, 0.2)
@@ -137,8 +140,6 @@ def kernel_indentation_curve(
     ``normal`` (the same :class:`sim.needle.load.KernelLoad` a first touch builds there)."""
     from types import SimpleNamespace
 
-    from sim.needle.load import KernelLoad, kernel_factory
-
     mesh = tissue.mesh
     n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
     centroids = mesh.points[mesh.surface_triangles].mean(axis=1)
@@ -188,8 +189,6 @@ class PressedNeedle:
     """
 
     def __init__(self, tissue, forces, point: ArrayLike, normal: ArrayLike, step: float = 2e-5) -> None:
-        from sim.needle import Needle, rotation_aligning
-        from sim.needle.interaction import NeedleInteraction
 
         self.normal = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
         self.point = np.asarray(point, dtype=np.float64)
@@ -203,7 +202,6 @@ class PressedNeedle:
         self.force = self._place(self.depth)
 
     def _place(self, depth: float) -> float:
-        from sim.needle import Pose
 
         tip = self.point - depth * self.normal
         pose = Pose(tip - self.rotation @ self.needle.vertices[0], self.rotation)

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.calibration.indentation import paper_cube
+from sim.devices.scripted import SuturingPass
 from sim.errors import ModelError
 from sim.mesh import TetMesh, Wound, box_mesh, vessel_mesh
 
@@ -91,8 +92,6 @@ def practice_passes(case: Scenario, needle, count: int) -> list:
     on the cube's top face a 3 x 3 grid of entry points 2 mm apart; on an artery entry points around
     its outer surface (angles 200-325 deg, 8-20 mm along it), bites along its axis."""
     import math
-
-    from sim.devices.scripted import SuturingPass
 
     if case.name == "paper_cube":
         spots = [(0.003 + 0.002 * (k % 3), 0.003 + 0.002 * ((k // 3) % 3)) for k in range(count)]

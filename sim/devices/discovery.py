@@ -10,6 +10,8 @@ import sys
 from dataclasses import asdict, dataclass
 
 from sim.devices.base import DeviceError
+from sim.devices.spacemouse import find_spacemice
+from sim.devices.usb_discovery import scan_usb
 
 
 @dataclass(frozen=True)
@@ -29,8 +31,6 @@ def list_devices() -> list[DeviceReport]:
     """Connected SpaceMice (hidapi), known USB haptic/input devices (pyusb), and the drivers."""
     reports: list[DeviceReport] = []
     try:
-        from sim.devices.spacemouse import find_spacemice
-
         for identity in find_spacemice():
             reports.append(
                 DeviceReport(
@@ -43,8 +43,6 @@ def list_devices() -> list[DeviceReport]:
     except (ImportError, OSError) as error:
         reports.append(DeviceReport("SpaceMouse family", "spacemouse", "hidapi", f"unavailable: {error}"))
     try:
-        from sim.devices.usb_discovery import scan_usb
-
         seen = {r.connection for r in reports}
         for identity, known in scan_usb():
             connection = f"usb {identity.vendor_id:04x}:{identity.product_id:04x}"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sim.devices.base import DeviceIdentity
+from sim.devices.base import DeviceError, DeviceIdentity
 from sim.devices.spacemouse import SPACEMOUSE_PRODUCTS
 
 
@@ -34,8 +34,6 @@ def identify(vendor_id: int, product_id: int) -> KnownDevice | None:
 def scan_usb(backend: object | None = None) -> list[tuple[DeviceIdentity, KnownDevice]]:
     """Known devices on the USB bus. Raises DeviceError if no libusb backend is available."""
     import usb.core
-
-    from sim.devices.base import DeviceError
 
     try:
         devices = list(usb.core.find(find_all=True, backend=backend))

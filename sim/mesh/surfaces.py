@@ -40,7 +40,7 @@ from sim.errors import MeshError
 from sim.mesh.generators import default_layer_names
 from sim.mesh.io import quiet_reading
 from sim.mesh.quality import MeshQuality, mesh_quality
-from sim.mesh.tetmesh import TetMesh, signed_volumes
+from sim.mesh.tetmesh import OUTWARD_FACES, TetMesh, signed_volumes
 
 UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6}
 
@@ -386,7 +386,6 @@ def _node_sets(
     """``inner``, ``outer`` and one ``endK`` per cut end, from the mesh's boundary nodes: on the lumen
     or outer surface when within ``tolerance`` (m) of it; the others (and a cut end's rim) belong to
     the end whose loop is nearest."""
-    from sim.mesh.tetmesh import OUTWARD_FACES
 
     faces = tets[:, OUTWARD_FACES].reshape(-1, 3)
     keys = np.sort(faces, axis=1)

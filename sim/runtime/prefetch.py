@@ -24,6 +24,7 @@ from sim.collision.mesh import CollisionMesh
 from sim.errors import SolverError
 from sim.fem import Tissue, TissueModel
 from sim.geometry import circle_through
+from sim.runtime.osrt import PR_SET_PDEATHSIG, libc_functions
 
 AHEAD_NODES = 6
 """Surface nodes nearest the point the tip is heading for, solved right after that triangle's own."""
@@ -153,7 +154,6 @@ def _end_with(parent: int) -> None:
     """Die when ``parent`` dies, killed included (Linux: PR_SET_PDEATHSIG). Its pipe never reports the
     parent gone while a sibling (the haptic or display process) holds the parent's end, so an orphaned
     worker would otherwise wait for a request for ever."""
-    from sim.runtime.osrt import PR_SET_PDEATHSIG, libc_functions
 
     libc = libc_functions()
     if libc is not None:

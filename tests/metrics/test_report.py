@@ -153,3 +153,31 @@ def test_concurrent_validity_reads_rho_with_its_interval_and_no_metric_unit():
     # issue 44, seen 10: the names a person reads, not the registry's keys
     assert shown["metric"].tolist() == [display_name("path_length"), display_name("task_time")]
     assert "path_length" not in shown["metric"].tolist()
+
+
+def test_the_composite_weights_read_as_metric_names_with_the_way_the_experts_lie(analysis, tmp_path):
+    """Seen in the report: the composite's weight table listed metric keys (``path_length``) and bare
+    signed numbers; it now names each metric in words and says whether the experts' values are higher
+    or lower, largest weight first, and the same table is in the Markdown report."""
+    from metrics.reading.tables import composite_weights_for_reading
+
+    weights = analysis.validity.composite.weights
+    table = composite_weights_for_reading(analysis.validity.composite, "expert")
+    carried = weights[weights.abs() > 0]
+    assert list(table.columns) == ["metric", "weight", "expert values"]
+    assert len(table) == len(carried) > 0
+    assert set(table["metric"]) == {display_name(m) for m in carried.index}
+    assert not set(table["metric"]) & set(PRIMARY)  # names, not keys
+    sizes = [abs(float(w)) for w in table["weight"]]
+    assert sizes == sorted(sizes, reverse=True)
+    for name, weight, side in table.itertuples(index=False):
+        key = next(m for m in carried.index if display_name(m) == name)
+        assert float(weight) == pytest.approx(carried[key], abs=0.005)
+        assert side == ("higher" if carried[key] > 0 else "lower")
+    # path length: experts move less, so their values are lower and the weight negative
+    assert table.set_index("metric").at[display_name("path_length"), "expert values"] == "lower"
+    page = write_report(analysis, tmp_path / "report", title="Demo study")
+    for text in (page.read_text(), (page.parent / "report.md").read_text()):
+        assert str(escape(display_name("path_length"))) in text or display_name("path_length") in text
+        assert "expert values" in text
+    assert composite_weights_for_reading(None).empty
