@@ -12,6 +12,7 @@ A new kind is one class here and one entry in :data:`KINDS`.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import ClassVar
 
 import numpy as np
@@ -23,25 +24,26 @@ from sim.errors import VascsimError
 from sim.mesh import Calcification, Wound, grid_box_mesh, load_mesh, refined_coordinates, vessel_mesh
 
 
-class TaskKind:
+class TaskKind(ABC):
     """One kind of task (see the module docstring)."""
 
     scenario: ClassVar[str]
 
+    @abstractmethod
     def mesh(self, spec: TaskSpec):
         """The task's tetrahedral mesh (:class:`sim.mesh.TetMesh`, metres)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def stitch_region_nodes(self, spec: TaskSpec, mesh) -> NDArray[np.int64]:
         """The surface nodes of the task's stitch region: the contact candidates."""
-        raise NotImplementedError
 
+    @abstractmethod
     def geometry(self, spec: TaskSpec) -> str:
         """The geometry in a line, in millimetres, with what holds it."""
-        raise NotImplementedError
 
     def check(self, spec: TaskSpec, mesh) -> None:
         """Refuse a mesh the task cannot run on (nothing to check for a built-in kind)."""
+        return None  # a built-in kind builds its own mesh from checked parameters
 
 
 class WallPatch(TaskKind):

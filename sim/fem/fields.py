@@ -302,7 +302,7 @@ class LocalStress:
     (q right-hand sides), then each FEM step is a (6E x q) product and a maximum.
     """
 
-    __slots__ = ("_edges", "_operator", "_response", "_rest", "_rest_length", "_split", "elements", "watched")
+    __slots__ = ("_operator", "_response", "_rest", "_rest_length", "_split", "elements", "watched")
 
     def __init__(
         self,
@@ -342,7 +342,6 @@ class LocalStress:
         edges = (
             np.unique(np.sort(pairs.reshape(-1, 2), axis=1), axis=0) if self._split else np.zeros((0, 2), int)
         )
-        self._edges = edges
         self._rest = mesh.points[local[edges[:, 1]]] - mesh.points[local[edges[:, 0]]]
         self._rest_length = np.einsum("ij,ij->i", self._rest, self._rest)  # squared
         per_node = response.reshape(len(local), 3, -1)
