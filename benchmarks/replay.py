@@ -26,9 +26,7 @@ import numpy as np
 
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
-from metrics.bench.camera import Camera  # noqa: E402
-from metrics.bench.synthetic import default_camera_matrix, write_bench_video  # noqa: E402
-from metrics.bench.tracking import read_video, track_frames  # noqa: E402
+from metrics.bench.tracking import track_frames  # noqa: E402
 from metrics.replay.export import ReplaySettings, export_replay  # noqa: E402
 from recorder import SessionWriter, open_session  # noqa: E402
 from recorder.runtime import RuntimeRecorder  # noqa: E402
@@ -40,6 +38,9 @@ from sim.devices.scripted import sequence_of_passes  # noqa: E402
 from sim.fem import BiphaseTissue  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
+from sim.tracking.camera import Camera  # noqa: E402
+from sim.tracking.synthetic import default_camera_matrix, write_bench_video  # noqa: E402
+from sim.tracking.video import read_video  # noqa: E402
 
 ARTERY = tissue_preset("porcine-artery").biphase  # the calibrated wall the default needle forces suit
 

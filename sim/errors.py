@@ -40,3 +40,7 @@ class CacheError(VascsimError):
 
 class VascsimWarning(UserWarning):
     """Base class of vascsim's warnings (e.g. Poisson's ratio above the paper's stable limit)."""
+
+
+class TrackingError(VascsimError, ValueError):
+    """A camera, its calibration, an instrument's markers or a video source failed or was refused."""

@@ -29,8 +29,8 @@ def calibrate(images, out, squares, square_mm, marker_mm, dictionary) -> None:
     """
     import cv2
 
-    from metrics.bench.camera import BoardSpec, calibrate_charuco
     from metrics.errors import MetricsError
+    from sim.tracking.camera import BoardSpec, calibrate_charuco
 
     frames = []
     for path in images:

@@ -39,13 +39,13 @@ def import_video(
     every frame; the smoothed path becomes a session of the study with the same
     motion metrics as simulator sessions (no force or tissue metrics).
     """
-    from metrics.bench.tracking import ToolMarker
     from sessions.exchange.importing import import_bench_video
+    from sim.tracking.markers import MarkerBody
 
     existing_path(video, "video")
     existing_path(camera_file, "camera calibration")
     offset = tuple(v / 1e3 for v in number_pair(tip_offset_mm, "--tip-offset-mm", float, 3))
-    marker = ToolMarker(marker_id, marker_mm / 1e3, offset)
+    marker = MarkerBody.flat(marker_id, marker_mm / 1e3, offset)
     catalog, home = open_catalog()
     with progress_bar(transient=True) as progress:
         task = progress.add_task("tracking", total=None, last="")

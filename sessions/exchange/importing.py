@@ -5,12 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from metrics import metrics_of
-from metrics.bench.camera import Camera
-from metrics.bench.tracking import TRACK_FILE, read_video, save_track, track_frames
+from metrics.bench.tracking import TRACK_FILE, save_track, track_frames
 from metrics.datasets import jigsaws
 from sessions.catalog import Catalog, CatalogError, metric_results, new_uid, now, stream_file
 from sessions.catalog.lookups import participant_coded, session_with_uid
 from sessions.catalog.models import Participant, Rating, Session
+from sim.tracking.camera import Camera
+from sim.tracking.video import read_video
 
 
 def import_jigsaws(

@@ -5,10 +5,12 @@ import numpy as np
 import pytest
 
 from metrics import SessionStreams, metrics_of
-from metrics.bench.camera import Camera, calibrate_charuco
-from metrics.bench.synthetic import charuco_views, default_camera_matrix, write_bench_video
-from metrics.bench.tracking import read_video, smooth_path, track_frames
+from metrics.bench.tracking import smooth_path, track_frames
 from metrics.errors import MetricsError
+from sim.errors import TrackingError
+from sim.tracking.camera import Camera, calibrate_charuco
+from sim.tracking.synthetic import charuco_views, default_camera_matrix, write_bench_video
+from sim.tracking.video import read_video
 
 MOTION = ("task_time", "path_length", "economy_of_motion", "log_dimensionless_jerk", "spectral_arc_length")
 
@@ -36,13 +38,13 @@ def test_charuco_calibration_recovers_the_camera(calibration, tmp_path):
     np.testing.assert_array_equal(again.matrix, camera.matrix)
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
-    with pytest.raises(MetricsError, match="is not readable"):
+    with pytest.raises(TrackingError, match="is not readable"):
         Camera.load(bad)
 
 
 def test_too_few_board_views_is_a_clear_error():
     blank = [np.full((480, 640), 128, np.uint8)] * 4
-    with pytest.raises(MetricsError, match="found in 0 of 4 images"):
+    with pytest.raises(TrackingError, match="found in 0 of 4 images"):
         calibrate_charuco(blank)
 
 

@@ -1,9 +1,12 @@
-"""Synthetic bench video with a known camera and a known marker trajectory, to test the tracker.
+"""Synthetic video with a known camera and known instrument motion, to test the tracker.
 
-Planar textures (the tool marker, a ChArUco board) are drawn into frames through the
-exact homography of the pinhole camera, supersampled 4x inside the region they cover
-and averaged down, over a textured background with sensor noise. The ground-truth tip
-path is returned with the video, so tracking error is measured, not assumed.
+Planar textures (an instrument's markers, a ChArUco board) are drawn into frames through
+the exact homography of the pinhole camera, supersampled 4x inside the region they cover
+and averaged down, over a textured background with sensor noise. A marker body's faces
+that turn away from the camera are not drawn (a convex body hides nothing else). Motion
+blur averages sub-frame renders over the exposure; an occluder (a hand passing in front)
+covers the instrument in given spans. The ground-truth poses are returned with the
+video, so tracking error is measured, not assumed.
 """
 
 from __future__ import annotations
@@ -13,8 +16,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.bench.camera import BoardSpec, aruco_dictionary
-from metrics.bench.tracking import ToolMarker
+from sim.tracking.camera import BoardSpec, aruco_dictionary
+from sim.tracking.markers import MarkerBody, MarkerFace
 
 SUPERSAMPLE = 4
 
@@ -76,16 +79,35 @@ def draw_plane(
     )
 
 
-def marker_texture(marker: ToolMarker, pixels: int = 480) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
-    """The marker with a white quiet zone of one quarter side, and that texture's corners in the marker
-    frame (m)."""
+def face_texture(
+    body: MarkerBody, face: MarkerFace, pixels: int = 480
+) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+    """One face's texture, the marker on white (a quarter side of quiet zone on a flat marker, the
+    whole cube face on a cube), and that texture's corners in the body frame (m)."""
     import cv2
 
-    inner = cv2.aruco.generateImageMarker(aruco_dictionary(marker.dictionary), marker.marker_id, pixels)
-    border = pixels // 4
+    inner = cv2.aruco.generateImageMarker(aruco_dictionary(body.dictionary), face.marker_id, pixels)
+    half_m = body.cube_m / 2 if body.cube_m > 0 else body.side_m * 0.75
+    border = int(round(pixels * (half_m / body.side_m - 0.5)))
     texture = cv2.copyMakeBorder(inner, border, border, border, border, cv2.BORDER_CONSTANT, value=255)
-    h = marker.side_m * (0.5 + border / pixels)
-    return texture, np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    h = body.side_m * (0.5 + border / pixels)
+    local = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    return texture, local @ face.frame().T + np.asarray(face.centre, dtype=float)
+
+
+def draw_body(
+    frame: NDArray[np.uint8],
+    textures: list[tuple[NDArray[np.uint8], NDArray[np.float64]]],
+    rotation: NDArray[np.float64],
+    translation: NDArray[np.float64],
+    camera_matrix: NDArray[np.float64],
+) -> None:
+    """Draw the faces of a body posed by (rotation, translation) that face the camera."""
+    for texture, corners in textures:
+        centre = corners.mean(axis=0)
+        normal = np.cross(corners[3] - corners[0], corners[1] - corners[0])  # out of the face
+        if np.dot(rotation @ normal, rotation @ centre + translation) < 0:
+            draw_plane(frame, texture, corners, rotation, translation, camera_matrix)
 
 
 def rotation_xyz(angles: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -128,35 +150,88 @@ def write_bench_video(
     fps: int = 30,
     size: tuple[int, int] = (1920, 1080),
     camera_matrix: NDArray[np.float64] | None = None,
-    marker: ToolMarker | None = None,
+    marker: MarkerBody | None = None,
     seed: int = 0,
     noise: float = 2.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Render the suturing motion to a video file (lossless-quality H.264); returns (time, true tip path)."""
-    import av
-
-    marker = marker or ToolMarker()
-    camera_matrix = default_camera_matrix(size) if camera_matrix is None else camera_matrix
-    rng = np.random.default_rng(seed)
+    """Render the suturing motion of a flat-marked needle holder; returns (time, true tip path)."""
+    marker = marker or MarkerBody.flat()
     time = np.arange(int(round(duration_s * fps))) / fps
     rotations, positions = suturing_motion(time)
-    texture, corners = marker_texture(marker)
+    camera_matrix = default_camera_matrix(size) if camera_matrix is None else camera_matrix
+    write_instrument_video(path, rotations, positions, marker, fps, size, camera_matrix, seed, noise)
+    return time, np.einsum("nij,j->ni", rotations, np.asarray(marker.tip_offset_m)) + positions
+
+
+def write_instrument_video(
+    path: str | Path,
+    rotations: NDArray[np.float64],
+    positions: NDArray[np.float64],
+    body: MarkerBody,
+    fps: float = 30.0,
+    size: tuple[int, int] = (1280, 720),
+    camera_matrix: NDArray[np.float64] | None = None,
+    seed: int = 0,
+    noise: float = 2.0,
+    blur_frames: NDArray[np.float64] | None = None,
+    occluded: NDArray[np.bool_] | None = None,
+) -> None:
+    """Render a body posed per frame by ``rotations`` (n, 3, 3) and ``positions`` (n, 3) (camera frame,
+    m) to a video file (high-quality H.264 at ``fps``).
+
+    ``blur_frames`` (n, 3, 3 + 3) optional: per frame the body's pose at the end of the exposure (rotation
+    columns then position), blurred by averaging 4 renders along the way; ``occluded`` (n,) bool: frames
+    where a hand covers the instrument (a dark patch over every marker)."""
+    import av
+
+    camera_matrix = (
+        default_camera_matrix(size, focal_px=size[0] * 0.9) if camera_matrix is None else camera_matrix
+    )
+    rng = np.random.default_rng(seed)
+    textures = [face_texture(body, face) for face in body.faces]
     bench = background(size, rng)
-    offset = np.asarray(marker.tip_offset_m)
     with av.open(str(path), mode="w") as container:
-        stream = container.add_stream("libx264", rate=fps, options={"crf": "12", "preset": "veryfast"})
+        stream = container.add_stream(
+            "libx264", rate=int(round(fps)), options={"crf": "12", "preset": "veryfast"}
+        )
         stream.width, stream.height = size
         stream.pix_fmt = "yuv420p"
-        for rotation, translation in zip(rotations, positions, strict=True):
-            frame = bench.copy()
-            draw_plane(frame, texture, corners, rotation, translation, camera_matrix)
+        for k, (rotation, translation) in enumerate(zip(rotations, positions, strict=True)):
+            if blur_frames is None:
+                frame = bench.copy()
+                draw_body(frame, textures, rotation, translation, camera_matrix)
+            else:
+                end_rotation, end_position = blur_frames[k][:, :3], blur_frames[k][:, 3]
+                renders = []
+                for s in np.linspace(0.0, 1.0, 4):
+                    frame = bench.copy()
+                    turn = _interpolate_rotation(rotation, end_rotation, s)
+                    draw_body(frame, textures, turn, (1 - s) * translation + s * end_position, camera_matrix)
+                    renders.append(frame.astype(np.float32))
+                frame = np.mean(renders, axis=0).astype(np.uint8)
+            if occluded is not None and occluded[k]:
+                _cover(frame, body, rotation, translation, camera_matrix)
             frame = np.clip(frame + rng.normal(0, noise, frame.shape), 0, 255).astype(np.uint8)
             for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="gray")):
                 container.mux(packet)
         for packet in stream.encode():
             container.mux(packet)
-    tips = np.einsum("nij,j->ni", rotations, offset) + positions
-    return time, tips
+
+
+def _interpolate_rotation(start, end, s: float) -> NDArray[np.float64]:
+    from scipy.spatial.transform import Rotation, Slerp
+
+    return Slerp([0.0, 1.0], Rotation.from_matrix([start, end]))([s]).as_matrix()[0]
+
+
+def _cover(frame, body: MarkerBody, rotation, translation, camera_matrix) -> None:
+    """A dark patch (a hand) over every marker of the body."""
+    points = np.concatenate([body.corners(k) for k in body.ids]) @ rotation.T + translation
+    projected = points @ camera_matrix.T
+    image = projected[:, :2] / projected[:, 2:3]
+    low = np.maximum(image.min(axis=0) - 4, 0).astype(int)
+    high = np.minimum(image.max(axis=0) + 4, [frame.shape[1], frame.shape[0]]).astype(int)
+    frame[low[1] : high[1], low[0] : high[0]] = 60
 
 
 def charuco_views(

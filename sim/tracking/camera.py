@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from metrics.errors import MetricsError
+from sim.errors import TrackingError
 
 DICTIONARY = "DICT_4X4_50"
 
@@ -24,7 +24,7 @@ def aruco_dictionary(name: str = DICTIONARY):
     import cv2
 
     if not hasattr(cv2.aruco, name):
-        raise MetricsError(f"unknown ArUco dictionary {name!r} (e.g. DICT_4X4_50, DICT_5X5_100)")
+        raise TrackingError(f"unknown ArUco dictionary {name!r} (e.g. DICT_4X4_50, DICT_5X5_100)")
     return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
 
 
@@ -75,14 +75,52 @@ class Camera:
         path = Path(path)
         try:
             data = json.loads(path.read_text())
-            return cls(
+            if not isinstance(data, dict) or set(data) - {"matrix", "distortion", "size", "rms_px"}:
+                raise ValueError("expected an object with matrix, distortion, size and rms_px")
+            camera = cls(
                 np.array(data["matrix"], dtype=np.float64).reshape(3, 3),
                 np.array(data["distortion"], dtype=np.float64),
-                (int(data["size"][0]), int(data["size"][1])),
-                float(data.get("rms_px", float("nan"))),
+                _image_size(data["size"]),
+                float(data["rms_px"] if data.get("rms_px") is not None else "nan"),
             )
         except (OSError, ValueError, KeyError, TypeError) as error:
-            raise MetricsError(f"camera calibration {path} is not readable: {error}") from None
+            raise TrackingError(f"camera calibration {path} is not readable: {error}") from None
+        problem = camera.problem()
+        if problem:
+            raise TrackingError(f"camera calibration {path} is not a camera: {problem}; calibrate again")
+        return camera
+
+    def problem(self) -> str | None:
+        """What makes this model impossible (None when it is a camera): a pinhole with positive focal
+        lengths, its centre inside the image, OpenCV's 4, 5, 8, 12 or 14 finite distortion terms."""
+        K, distortion = self.matrix, self.distortion
+        width, height = self.size
+        if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+            return "the focal lengths must be finite and positive"
+        if np.any(K[1:, 0] != 0) or K[2, 1] != 0 or K[2, 2] != 1:
+            return "the intrinsic matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]]"
+        if not (0 <= K[0, 2] < width and 0 <= K[1, 2] < height):
+            centre = f"({K[0, 2]:.1f}, {K[1, 2]:.1f}) px"
+            return f"the principal point {centre} lies outside the {width}x{height} image"
+        if (
+            distortion.ndim != 1
+            or distortion.size not in (4, 5, 8, 12, 14)
+            or not np.all(np.isfinite(distortion))
+        ):
+            return "the distortion must be 4, 5, 8, 12 or 14 finite numbers"
+        if not (np.isnan(self.rms) or 0 <= self.rms < 1e3):
+            return f"the reprojection error {self.rms} px is not a pixel error"
+        return None
+
+
+def _image_size(size) -> tuple[int, int]:
+    if (
+        not isinstance(size, list)
+        or len(size) != 2
+        or not all(isinstance(v, int) and 0 < v <= 16384 for v in size)
+    ):
+        raise ValueError(f"size must be [width, height] in pixels (1-16384), got {size!r}")
+    return size[0], size[1]
 
 
 def calibrate_charuco(
@@ -106,7 +144,7 @@ def calibrate_charuco(
         object_points.append(found_object.astype(np.float32))
         image_points.append(found_image.astype(np.float32))
     if len(object_points) < 3:
-        raise MetricsError(
+        raise TrackingError(
             f"the ChArUco board was found in {len(object_points)} of {len(images)} images; calibration needs "
             "at least 3 views with the board seen at different angles"
         )
