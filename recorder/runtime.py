@@ -34,6 +34,7 @@ _SUB_ROTATION = column_span("sub_qw", "sub_qx", "sub_qy", "sub_qz")
 _SUB_JAW = COLUMN["sub_jaw"]
 _GRASP_DISPLACEMENT = column_span("grasp_dx", "grasp_dy", "grasp_dz")
 _GRASP_FORCE = column_span("grasp_fx", "grasp_fy", "grasp_fz")
+_TOOL_TRACKING, _SUB_TRACKING = COLUMN["tool_tracking"], COLUMN["sub_tracking"]
 
 
 def quaternion_of(rotation: NDArray[np.float64]) -> tuple[float, float, float, float]:
@@ -128,6 +129,7 @@ class RuntimeRecorder:
         if fem is not None:
             row[_REACTION] = fem.needle_force  # the tissue's, not what the device was sent
         row[_GRIP] = sample.buttons & 1
+        row[_TOOL_TRACKING] = sample.tracking
         if self._subordinate is not None:
             self._subordinate_hand(row, fem)
         row[_PERIOD] = 0.0 if self._last_time is None else now - self._last_time
@@ -147,6 +149,7 @@ class RuntimeRecorder:
         row[_SUB_DISPLACEMENT] = sample.position - self._sub_start
         row[_SUB_ROTATION] = quaternion_of(sample.rotation)
         row[_SUB_JAW] = sample.buttons & 1
+        row[_SUB_TRACKING] = sample.tracking
         if fem is not None and fem.grasp_force is not None:
             row[_GRASP_DISPLACEMENT] = fem.grasp_displacement
             row[_GRASP_FORCE] = fem.grasp_force

@@ -13,13 +13,15 @@ from sim.forceps import FORCEPS_EVENT_KINDS
 from sim.needle.interaction import EVENT_KINDS as NEEDLE_EVENT_KINDS
 from sim.runtime.shared import EVENT_CODES as RUNTIME_EVENT_KINDS
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 """2 added the tissue's reaction force on the needle (``reaction_x/y/z``); 3 the tip's velocity vector
 (``tip_vx/vy/vz``, where 2 stored only its speed) and dropped ``compute`` (written 0 in every sample);
 4 the subordinate hand's forceps: their tool point and orientation, jaws, the grasped tissue's
-displacement and the forceps' force on it (``sub_x`` ... ``grasp_fz``). Older files are read with the
-columns they lack NaN (not recorded) and without ``compute``."""
-READABLE_VERSIONS = (1, 2, 3, 4)
+displacement and the forceps' force on it (``sub_x`` ... ``grasp_fz``); 5 how each hand's pose was
+obtained (``tool_tracking``, ``sub_tracking``: measured, or a camera's predicted or held pose). Older
+files are read with the columns they lack NaN (not recorded), their tracking columns 0 (every device
+before the camera measured its pose), and without ``compute``."""
+READABLE_VERSIONS = (1, 2, 3, 4, 5)
 
 
 class RecorderError(VascsimError):
@@ -81,12 +83,15 @@ SAMPLE_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("grasp_fx", "N", "the forceps' force on the tissue"),
     ("grasp_fy", "N", ""),
     ("grasp_fz", "N", ""),
+    ("tool_tracking", "1", "dominant tool pose: 0 measured, 1 predicted (camera frames late), 2 held (lost)"),
+    ("sub_tracking", "1", "subordinate tool pose: 0 measured, 1 predicted, 2 held"),
 )
+TRACKING_COLUMNS = ("tool_tracking", "sub_tracking")
 REACTION_COLUMNS = ("reaction_x", "reaction_y", "reaction_z")
 VELOCITY_COLUMNS = ("tip_vx", "tip_vy", "tip_vz")
 SAMPLE_COLUMNS = tuple(name for name, _, _ in SAMPLE_FIELDS)
 COLUMN = {name: i for i, name in enumerate(SAMPLE_COLUMNS)}
-SUBORDINATE_COLUMNS = SAMPLE_COLUMNS[COLUMN["sub_x"] :]
+SUBORDINATE_COLUMNS = SAMPLE_COLUMNS[COLUMN["sub_x"] : COLUMN["grasp_fz"] + 1]
 """The columns schema version 4 added: the subordinate hand's forceps."""
 
 
@@ -99,7 +104,13 @@ def column_span(*names: str) -> slice:
     return slice(first, first + len(names))
 
 
-INTEGER_COLUMNS = {"contact_triangle": pa.int32(), "pierced": pa.int8(), "grip": pa.int8()}
+INTEGER_COLUMNS = {
+    "contact_triangle": pa.int32(),
+    "pierced": pa.int8(),
+    "grip": pa.int8(),
+    "tool_tracking": pa.int8(),
+    "sub_tracking": pa.int8(),
+}
 
 
 def _field(name: str, unit: str, description: str) -> pa.Field:
@@ -111,7 +122,8 @@ SAMPLE_SCHEMA = pa.schema(
     [_field(*spec) for spec in SAMPLE_FIELDS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": str(SCHEMA_VERSION)},
 )
-_V3_FIELDS = tuple(spec for spec in SAMPLE_FIELDS if spec[0] not in SUBORDINATE_COLUMNS)
+_V4_FIELDS = tuple(spec for spec in SAMPLE_FIELDS if spec[0] not in TRACKING_COLUMNS)
+_V3_FIELDS = tuple(spec for spec in _V4_FIELDS if spec[0] not in SUBORDINATE_COLUMNS)
 _V2_FIELDS = (
     *(spec for spec in _V3_FIELDS if spec[0] not in (*REACTION_COLUMNS, *VELOCITY_COLUMNS)),
     ("compute", "s", "haptic step compute time"),
@@ -129,17 +141,25 @@ SAMPLE_SCHEMA_V3 = pa.schema(
     [_field(*spec) for spec in _V3_FIELDS],
     metadata={"vascsim.schema": "samples", "vascsim.schema_version": "3"},
 )
-OLDER_SAMPLE_SCHEMAS = {1: SAMPLE_SCHEMA_V1, 2: SAMPLE_SCHEMA_V2, 3: SAMPLE_SCHEMA_V3}
+SAMPLE_SCHEMA_V4 = pa.schema(
+    [_field(*spec) for spec in _V4_FIELDS],
+    metadata={"vascsim.schema": "samples", "vascsim.schema_version": "4"},
+)
+OLDER_SAMPLE_SCHEMAS = {1: SAMPLE_SCHEMA_V1, 2: SAMPLE_SCHEMA_V2, 3: SAMPLE_SCHEMA_V3, 4: SAMPLE_SCHEMA_V4}
 
 
 def upgraded_samples(table: pa.Table) -> pa.Table:
     """An older samples table in the current layout: the columns it lacks added as NaN (not recorded),
-    the ones the current one dropped (``compute``) left out."""
+    the tracking columns as 0 (measured), the ones the current one dropped (``compute``) left out."""
     import numpy as np
 
     for field in SAMPLE_SCHEMA:
         if field.name not in table.column_names:
-            table = table.append_column(field, pa.array(np.full(table.num_rows, np.nan)))
+            if field.name in TRACKING_COLUMNS:
+                values = pa.array(np.zeros(table.num_rows, dtype=np.int8), type=field.type)
+            else:
+                values = pa.array(np.full(table.num_rows, np.nan))
+            table = table.append_column(field.with_type(values.type), values)
     return table.select(list(SAMPLE_COLUMNS)).cast(SAMPLE_SCHEMA)
 
 

@@ -40,6 +40,7 @@ REMEDIES = {
     "choose-versus": "pass --vs SESSION or --vs-group GROUP",
     "choose-device": "pass --device {}",
     "declare-group": "declare another with `vascsim studies groups {} --add NAME`",
+    "calibrate": "calibrate it with `vascsim calibrate --live` (or from photos: `vascsim calibrate`)",
 }
 """A domain error's remedy (:attr:`sim.errors.VascsimError.remedy`) as the command that applies it."""
 

@@ -31,7 +31,8 @@ from sessions.catalog.models import (
     MetricResult,
     StitchResult,
 )
-from sessions.config import cache_dir
+from sessions.config import cache_dir, data_home
+from sessions.running.camera import open_camera_device
 from sessions.running.hands import instruments, open_forceps_device
 from sessions.running.live import LiveView
 from sessions.running.scene import LIVE_TIME_FACTOR, mapped_onto_task, start_pose, stop_when_done
@@ -88,7 +89,7 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
     }
 
 
-MAPPED_DEVICES = ("spacemouse", "openhaptics")
+MAPPED_DEVICES = ("spacemouse", "openhaptics", "camera")
 """Devices whose own frame is mapped onto the task's scene (sessions.running.scene.mapped_onto_task)."""
 LIVE_SETTINGS = RuntimeSettings(display_delay_frames=0, display_on_haptic_core=True)
 """A person's live view draws the newest graphics frame, with the haptic core's idle time to draw it in
@@ -109,9 +110,11 @@ def open_device(
     plan: SessionPlan,
     catalog: Catalog,
     parameters: SuturingPassParameters | ScriptedHands | None,
+    home: Path | None = None,
 ) -> OpenedDevice:
     """The device named by ``--device`` (and, for a scripted session given both hands' parameters
-    on a task with a wound edge, the subordinate hand's), and the session's duration."""
+    on a task with a wound edge, the subordinate hand's), and the session's duration. ``home``: the
+    data directory, where a camera's calibration and the instruments' registered tips are kept."""
     task = task_spec(plan.task)
     if spec == "scripted":
         hands = (
@@ -160,8 +163,12 @@ def open_device(
         return OpenedDevice(SpaceMouse(), None)  # mapped onto the task's scene by run_session
     if spec == "openhaptics":
         return OpenedDevice(OpenHapticsDevice(), None)
+    if spec == "camera" or spec.startswith("camera:"):  # mapped onto the task's scene by run_session
+        device, length = open_camera_device(spec, plan.clock, home or data_home())
+        return OpenedDevice(device, length)
     raise CatalogError(
-        f"unknown device {spec!r}; use scripted, mouse, spacemouse, openhaptics or replay:SESSION"
+        f"unknown device {spec!r}; use scripted, mouse, spacemouse, openhaptics, camera[:INDEX|URL|FILE] "
+        "or replay:SESSION"
     )
 
 
@@ -210,11 +217,14 @@ def run_session(
     plan = replace(plan, trial=row.trial)
     if callable(parameters):
         parameters = parameters(row.trial)
+    device = subordinate = None
     try:
         left = plan.handedness == "left" or (view is not None and view.mapping.handedness == "left")
         hands = instruments(plan.device, plan.sub_device, "left" if left else "right")
-        device, natural, subordinate = open_device(hands.needle, plan, catalog, parameters)
-        if hands.needle in MAPPED_DEVICES:  # the hand's workspace onto the task's scene, as shown
+        device, natural, subordinate = open_device(hands.needle, plan, catalog, parameters, home)
+        if (
+            hands.needle.split(":", 1)[0] in MAPPED_DEVICES
+        ):  # the hand's workspace onto the task's scene, as shown
             device = mapped_onto_task(device, spec, left_handed=left)
         if hands.forceps is not None:  # a person's second hand: the forceps on their own device
             subordinate = open_forceps_device(hands.forceps, spec, left, taken=hands.needle)
@@ -231,6 +241,7 @@ def run_session(
             options["subordinate"] = subordinate
         simulated = task_simulation(plan.task, device, cache_dir(home), **options)
     except BaseException:  # nothing was recorded: no row, journal or ring is left behind
+        close_devices(device, subordinate)
         with catalog.session() as orm:
             orm.delete(catalog.recorded_session(orm, uid))
         raise
@@ -249,11 +260,26 @@ def run_session(
         writer.close()
         _finish(catalog, uid, directory, "failed", f"{type(error).__name__}: {error}".strip())
         raise
+    finally:
+        close_devices(device, subordinate)
     writer.close()
     _finish(catalog, uid, directory, "complete")
     if score:
         score_session(catalog, uid, home)
     return uid
+
+
+def close_devices(*devices) -> None:
+    """Let go of each opened device (a camera's tracking process, a HID handle), each even if another
+    fails to."""
+    for device in devices:
+        close = getattr(device, "close", None)
+        if close is None:
+            continue
+        try:
+            close()
+        except OSError:
+            pass  # already gone (unplugged): nothing left to let go of
 
 
 def study_and_task_ids(catalog: Catalog, uid: str) -> tuple[int, int]:

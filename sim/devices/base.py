@@ -74,6 +74,10 @@ class DeviceSample:
     velocity: NDArray[np.float64]
     buttons: int = 0
     pose: Pose | None = None
+    tracking: int = 0
+    """How the pose was obtained: 0 measured (every device but a camera, and a camera's pose from a frame
+    that saw the instrument), 1 predicted (a camera's frames late), 2 held (tracking lost: frozen);
+    sim.tracking.channel."""
 
     def pressed(self, button: int) -> bool:
         return bool(self.buttons >> button & 1)

@@ -46,7 +46,7 @@ class WorkspaceMapping:
         rotation = turn @ self.start.rotation
         velocity = to_world @ sample.velocity
         pose = Pose.unchecked(position, rotation)
-        return DeviceSample(time, position, rotation, velocity, sample.buttons, pose)
+        return DeviceSample(time, position, rotation, velocity, sample.buttons, pose, sample.tracking)
 
     def write_force(self, force: NDArray[np.float64]) -> None:
         """The tissue's force (world) in the device's own frame."""

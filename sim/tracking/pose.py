@@ -26,6 +26,9 @@ from sim.tracking.markers import MarkerBody
 
 AMBIGUOUS_FIT_RATIO = 0.5
 """IPPE's two poses count as equally good when the better reprojection error is over half the other's."""
+MIN_FACING = 0.5
+"""A face turned further than ~70 deg from the camera (cosine below this) is left out of a pose that
+other faces can give: its corners are foreshortened to a few pixels and blurred."""
 SEARCH_MARGIN = 1.5
 """The window searched first spans the last sighting plus this many times its size on each side."""
 
@@ -121,6 +124,10 @@ class BodyTracker:
             return None
         rotation, translation, error = single
         if len(seen) > 1:
+            # a face seen at a grazing angle has foreshortened, blurred corners: leave it out
+            facing = {k: v for k, v in seen.items() if self._facing(k, rotation, translation) >= MIN_FACING}
+            seen = facing if facing else {largest: seen[largest]}
+        if len(seen) > 1:
             object_points = np.concatenate([self.body.corners(k) for k in seen])
             image_points = np.concatenate(list(seen.values()))
             guess_r = cv2.Rodrigues(rotation)[0]
@@ -135,6 +142,13 @@ class BodyTracker:
                 error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - image_points) ** 2, 1))))
         tip = rotation @ np.asarray(self.body.tip_offset_m, dtype=np.float64) + translation
         return BodyPose(rotation, translation, tip, error, len(seen))
+
+    def _facing(self, marker_id: int, rotation, translation) -> float:
+        """Cosine of the angle between a face's outward normal and the direction to the camera."""
+        face = self.body.faces[self.body.ids.index(marker_id)]
+        normal = rotation @ face.frame()[:, 2]
+        centre = rotation @ np.asarray(face.centre) + translation
+        return float(-np.dot(normal, centre) / np.linalg.norm(centre))
 
     def _single_marker(
         self, marker_id: int, corners: NDArray[np.float64]

@@ -144,6 +144,27 @@ def suturing_motion(time: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDA
     return rotations, position
 
 
+def wrist_motion(time: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """An instrument handled at 30 cm: per frame the body's rotation (n, 3, 3) and position (n, 3) in the
+    camera frame (m). The hand reaches and returns (+/-4 cm), the wrist rolls the instrument about its
+    shaft through 200 deg and back (the needle-driving turn), and tilts it by up to 20 deg."""
+    linear = time / max(time[-1], 1e-9)
+    tau = linear + np.sin(2 * np.pi * linear) / (2 * np.pi)
+    position = np.column_stack(
+        [
+            0.04 * np.sin(2 * np.pi * tau),
+            0.02 * np.sin(4 * np.pi * tau),
+            0.30 + 0.03 * np.sin(2 * np.pi * tau + 0.7),
+        ]
+    )
+    roll = np.radians(100.0) * np.sin(2 * np.pi * tau)
+    tilt = np.radians(20.0) * np.sin(4 * np.pi * tau + 0.4)
+    rotations = np.array(
+        [FACING_CAMERA @ rotation_xyz(np.array([t, r, 0.0])) for r, t in zip(roll, tilt, strict=True)]
+    )
+    return rotations, position
+
+
 def write_bench_video(
     path: str | Path,
     duration_s: float = 6.0,

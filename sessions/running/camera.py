@@ -1,0 +1,125 @@
+"""A station's camera set-up: its calibration, the instruments' registered tips, the camera device.
+
+Kept in the data directory so a course sets up once per station:
+
+- ``camera.json``: the camera's calibration (:class:`sim.tracking.camera.Camera`), written by the
+  calibrate command (from photos, or live from the camera);
+- ``instruments.json``: each instrument's tip offset in its marker cube's frame (mm), with the
+  pivot calibration's residual, written by ``instruments register``; an instrument never registered
+  uses its nominal offset (:data:`sim.tracking.markers.INSTRUMENTS`).
+
+The file is read as data someone else may have edited: every field is checked before use.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+
+from sessions.catalog import CatalogError
+from sim.devices.camera import PLACEMENTS, CameraDevice, camera_source
+from sim.tracking.camera import Camera
+from sim.tracking.markers import INSTRUMENTS, MarkerBody
+
+CAMERA_FILE = "camera.json"
+INSTRUMENTS_FILE = "instruments.json"
+MAX_TIP_OFFSET_MM = 400.0
+"""No instrument's tip lies further than this from its marker cube."""
+
+
+def camera_calibration(home: Path) -> Camera:
+    """The station's camera calibration, or an error saying how to make one."""
+    path = home / CAMERA_FILE
+    if not path.exists():
+        raise CatalogError(
+            f"this station's camera is not calibrated ({path} does not exist)", remedy=("calibrate", "camera")
+        )
+    return Camera.load(path)
+
+
+def registered_tips(home: Path) -> dict[str, dict]:
+    """{instrument: {"tip_offset_mm": [x, y, z], "residual_mm": r, "registered_at": iso}} as stored."""
+    path = home / INSTRUMENTS_FILE
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise CatalogError(f"{path} is not readable: {error}; register the instruments again") from None
+    if not isinstance(data, dict):
+        raise CatalogError(f"{path} must hold an object of instruments; register the instruments again")
+    for name, entry in data.items():
+        problem = _entry_problem(name, entry)
+        if problem:
+            raise CatalogError(f"{path}: {problem}; register the instruments again")
+    return data
+
+
+def _entry_problem(name: object, entry: object) -> str | None:
+    if name not in INSTRUMENTS:
+        return f"unknown instrument {name!r} (one of {', '.join(INSTRUMENTS)})"
+    if not isinstance(entry, dict) or set(entry) != {"tip_offset_mm", "residual_mm", "registered_at"}:
+        return f"{name}: expected tip_offset_mm, residual_mm and registered_at"
+    offset = entry["tip_offset_mm"]
+    if not (
+        isinstance(offset, list)
+        and len(offset) == 3
+        and all(isinstance(v, (int, float)) and math.isfinite(v) for v in offset)
+        and math.hypot(*offset) <= MAX_TIP_OFFSET_MM
+    ):
+        return f"{name}: tip_offset_mm must be three finite numbers within {MAX_TIP_OFFSET_MM:.0f} mm"
+    residual = entry["residual_mm"]
+    if not (isinstance(residual, (int, float)) and math.isfinite(residual) and residual >= 0):
+        return f"{name}: residual_mm must be a finite number, not negative"
+    try:
+        datetime.fromisoformat(str(entry["registered_at"]))
+    except ValueError:
+        return f"{name}: registered_at must be an ISO date-time"
+    return None
+
+
+def instrument_body(home: Path, name: str) -> MarkerBody:
+    """An instrument's markers with its registered tip (its nominal tip when never registered)."""
+    if name not in INSTRUMENTS:
+        raise CatalogError(f"unknown instrument {name!r}; one of {', '.join(INSTRUMENTS)}")
+    body = INSTRUMENTS[name]
+    entry = registered_tips(home).get(name)
+    if entry is None:
+        return body
+    return body.with_tip([v / 1e3 for v in entry["tip_offset_mm"]])
+
+
+def save_tip(home: Path, name: str, tip_offset_m, residual_m: float) -> Path:
+    """Store an instrument's registered tip (written whole to a new file, then renamed over the old)."""
+    data = registered_tips(home)
+    data[name] = {
+        "tip_offset_mm": [round(float(v) * 1e3, 4) for v in tip_offset_m],
+        "residual_mm": round(float(residual_m) * 1e3, 4),
+        "registered_at": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    path = home / INSTRUMENTS_FILE
+    home.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix(".json.partial")
+    partial.write_text(json.dumps(data, indent=2))
+    partial.replace(path)
+    return path
+
+
+def open_camera_device(
+    spec: str, clock: str, home: Path, instrument: str = "needle-holder", placement: str = "facing"
+) -> tuple[CameraDevice, float | None]:
+    """The device ``camera[:INDEX|URL|FILE]`` names for ``instrument``, and a video file's length (s)."""
+    source = camera_source(spec.split(":", 1)[1] if ":" in spec else "0")
+    if clock == "simulated" and not isinstance(source, Path):
+        raise CatalogError(
+            "a live camera runs in real time; a simulated clock replays a video file (camera:FILE)"
+        )
+    if placement not in PLACEMENTS:
+        raise CatalogError(f"unknown camera placement {placement!r}; one of {', '.join(PLACEMENTS)}")
+    device = CameraDevice(
+        source, camera_calibration(home), instrument_body(home, instrument), clock,
+        device_from_camera=PLACEMENTS[placement],
+    )  # fmt: skip
+    return device, device.duration

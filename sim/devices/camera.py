@@ -1,0 +1,243 @@
+"""Real instruments tracked by a camera as a live device: ``camera:INDEX``, ``camera:URL``, ``camera:FILE``.
+
+A trainee holds a real needle holder with a printed marker cube on its handle in front of a webcam.
+Each frame goes through :class:`sim.tracking.pose.BodyTracker` (markers, pose, tip) and
+:class:`sim.tracking.channel.PoseEstimator` (jump test, filter); the haptic loop reads the newest
+estimate through :class:`sim.tracking.channel.PosePredictor` (extrapolated to the tick, labelled
+measured / predicted / held, rate-limited). The label reaches the recording (``DeviceSample.tracking``).
+
+Where the frames are processed depends on the clock:
+
+- **simulated** (a video file only): in :meth:`CameraDevice.read`, every frame up to the tick's time,
+  in order, so a run is repeatable; the video's first frame that shows the instrument is session
+  time 0;
+- **real time**: in a tracking process of its own (started when the device opens, so the camera
+  never takes the haptic core), which publishes estimates through shared memory. A live camera's
+  frames carry their grab time on ``time.perf_counter``, the clock the haptic loop runs on; a video
+  file is played at its own pace from the session's first tick.
+
+Either way the device opens only once the instrument has been seen (``acquire_timeout_s``): the
+workspace mapping anchors the task's starting pose on the first reading, which must be a real one.
+
+Poses leave the device in a haptic device's frame (x to the trainee's right, y up the screen, z out of
+the screen), with the table as the task's wall: the trainee's hands over a table move the instrument
+as they would over the tissue, so the table's right, away-from-the-trainee and up are the screen's
+right, up and out of the screen (towards the tissue is down to the table). ``device_from_camera``
+turns the camera's axes into those. The default is a webcam on the monitor looking at the trainee
+(``FACING_TRAINEE``); a camera above the table looking down, the image's top away from the trainee, is
+``ABOVE_TABLE``; a registration with the calibration board lying on the table measures it exactly.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time as clock
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.devices.base import INPUT_ONLY_LIMITS, DeviceError, DeviceIdentity, DeviceLostError, DeviceSample
+from sim.tracking.camera import Camera
+from sim.tracking.channel import PoseEstimator, PosePredictor, SharedEstimate
+from sim.tracking.markers import NEEDLE_HOLDER, MarkerBody
+from sim.tracking.pose import BodyTracker
+from sim.tracking.video import LiveCamera, VideoFile
+
+FACING_TRAINEE = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, -1.0, 0.0]])
+"""Camera on the monitor at the hands' height, looking at the trainee: the image's right is the
+trainee's left, the image's down is down to the table, the optical axis points at the trainee."""
+ABOVE_TABLE = np.diag([1.0, -1.0, -1.0])
+"""Camera above the table looking down, the image's top away from the trainee: the image's right is
+the trainee's right, the image's down points at the trainee, the optical axis down to the table."""
+PLACEMENTS = {"facing": FACING_TRAINEE, "above": ABOVE_TABLE}
+ACQUIRE_TIMEOUT_S = 10.0
+
+
+def camera_source(spec: str) -> int | str | Path:
+    """What ``camera:SPEC`` names: a camera index, a stream URL, or a video file (which must exist)."""
+    if spec.isdigit():
+        return int(spec)
+    if "://" in spec:
+        return spec
+    path = Path(spec).expanduser()
+    if not path.is_file():
+        raise DeviceError(
+            f"camera source {spec!r} is neither a camera index (0, 1, ...), a stream URL nor a video file"
+        )
+    return path
+
+
+def _frames(source: int | str | Path) -> tuple[Iterator[tuple[float, NDArray[np.uint8]]], object]:
+    opened = VideoFile(source) if isinstance(source, Path) else LiveCamera(source)
+    return iter(opened), opened
+
+
+class CameraDevice:
+    """One instrument tracked by a camera, read by the haptic loop (see the module docstring).
+
+    camera: the calibrated camera model; body: the instrument's markers and tip; clock: "realtime" or
+    "simulated"; filter_kind: "one-euro" or "kalman"; device_from_camera: 3x3 rotation (camera axes into
+    the device's); grip_closed: the jaws' state reported (the needle held) until a jaw signal exists.
+    """
+
+    limits = INPUT_ONLY_LIMITS
+
+    def __init__(
+        self,
+        source: int | str | Path,
+        camera: Camera,
+        body: MarkerBody = NEEDLE_HOLDER,
+        clock_kind: str = "realtime",
+        filter_kind: str = "kalman",
+        device_from_camera: NDArray[np.float64] = FACING_TRAINEE,
+        acquire_timeout_s: float = ACQUIRE_TIMEOUT_S,
+        grip_closed: bool = True,
+    ) -> None:
+        self.source, self.camera, self.body = source, camera, body
+        self.clock_kind = clock_kind
+        self.identity = DeviceIdentity("camera", f"{body.name} tracked by camera {source}")
+        self._axes = np.asarray(device_from_camera, dtype=np.float64)
+        self._buttons = 1 if grip_closed else 0
+        self._estimator = PoseEstimator(filter_kind)
+        self._fps = 30.0
+        self.duration: float | None = None  # a video file's length from the first sighting (s)
+        self._process = None
+        self._owner = os.getpid()
+        if clock_kind == "simulated":
+            if not isinstance(source, Path):
+                raise DeviceError("a simulated clock replays a video file; a live camera needs real time")
+            self._open_in_process(acquire_timeout_s)
+        else:
+            self._open_tracking_process(acquire_timeout_s)
+        self._predictor = PosePredictor(1.0 / self._fps)
+        self._go = False
+
+    # -- simulated clock: frames processed in read(), in order --------------------------------
+    def _open_in_process(self, timeout_s: float) -> None:
+        video = VideoFile(self.source)
+        self._fps = video.fps
+        self._frames = iter(video)
+        self._tracker = BodyTracker(self.camera, self.body)
+        self._next: tuple[float, NDArray[np.uint8]] | None = None
+        self._origin = 0.0
+        for stamp, frame in self._frames:
+            if stamp > timeout_s:
+                break
+            estimate = self._estimator.update(stamp, self._tracker.locate(frame))
+            if estimate is not None and estimate.measured:
+                self._origin = stamp
+                known = video.frame_count / video.fps if video.frame_count else None
+                self.duration = None if known is None else max(known - stamp - 1.0 / video.fps, 0.0)
+                return
+        raise DeviceError(self._not_seen(timeout_s))
+
+    def _advance(self, time: float) -> None:
+        video_time = time + self._origin
+        while True:
+            if self._next is None:
+                self._next = next(self._frames, None)
+                if self._next is None:
+                    raise DeviceLostError(f"the video {self.source} has ended")
+            stamp, frame = self._next
+            if stamp > video_time:
+                return
+            self._estimator.update(stamp, self._tracker.locate(frame))
+            self._next = None
+
+    # -- real time: a tracking process publishing through shared memory -----------------------
+    def _open_tracking_process(self, timeout_s: float) -> None:
+        self._shared = SharedEstimate()
+        self._go_at = multiprocessing.get_context("fork").Value("d", 0.0, lock=False)
+        self._problem = multiprocessing.get_context("fork").Array("c", 400, lock=False)
+        context = multiprocessing.get_context("fork")
+        self._process = context.Process(target=self._track, name="vascsim-camera", daemon=True)
+        self._process.start()
+        deadline = clock.perf_counter() + timeout_s
+        while clock.perf_counter() < deadline:
+            estimate = self._shared.get()
+            if estimate is not None and estimate.measured:
+                self._fps = self._shared.fps or 30.0
+                return
+            if self._shared.ended:
+                break
+            clock.sleep(0.01)
+        problem = self._problem.value.decode()
+        self.close()
+        raise DeviceError(problem or self._not_seen(timeout_s))
+
+    def _track(self) -> None:
+        """The tracking process: frames in, estimates out, until the source ends or the parent stops."""
+        try:
+            frames, opened = _frames(self.source)
+            self._shared.fps = float(getattr(opened, "fps", 30.0))
+            tracker = BodyTracker(self.camera, self.body)
+            paced = isinstance(self.source, Path)
+            origin = None
+            for stamp, frame in frames:
+                if not paced:  # a live camera: grab times are already on the haptic loop's clock
+                    estimate = self._estimator.update(stamp, tracker.locate(frame))
+                    if estimate is not None:
+                        self._shared.put(estimate)
+                    continue
+                if origin is None:  # acquiring: as fast as frames decode, until the first sighting
+                    estimate = self._estimator.update(stamp, tracker.locate(frame))
+                    if estimate is not None and estimate.measured:
+                        origin = stamp
+                        self._shared.put(estimate)
+                        while not self._go_at.value:
+                            clock.sleep(0.001)
+                        self._shared.put(replace(estimate, frame_time=self._go_at.value))
+                    continue
+                due = self._go_at.value + (stamp - origin)  # the file plays at its own pace from the go
+                while (wait := due - clock.perf_counter()) > 0:
+                    clock.sleep(min(wait, 0.005))
+                estimate = self._estimator.update(stamp, tracker.locate(frame))
+                if estimate is not None:
+                    self._shared.put(replace(estimate, frame_time=due))
+            self._problem.value = f"the video {self.source} has ended".encode()[:399]
+        except Exception as error:  # the parent reads why, and the haptic loop stops cleanly
+            self._problem.value = f"camera {self.source}: {error}".encode()[:399]
+        finally:
+            self._shared.end()
+
+    # -- the haptic loop's side ----------------------------------------------------------------
+    def read(self, time: float) -> DeviceSample:
+        if self.clock_kind == "simulated":
+            self._advance(time)
+            estimate = self._estimator.estimate
+            age = time + self._origin - estimate.frame_time
+        else:
+            if not self._go and time > 0.0:  # the session's first tick: a file starts playing
+                self._go_at.value = clock.perf_counter()
+                self._go = True
+            estimate = self._shared.get()
+            if self._shared.ended and self._problem.value:
+                raise DeviceLostError(self._problem.value.decode())
+            # the estimate's time is on the perf_counter clock; this tick's is `time` on the session's
+            age = clock.perf_counter() - estimate.frame_time if self._go else 0.0
+        position, rotation, velocity, state = self._predictor.at(time, estimate, age)
+        axes = self._axes
+        return DeviceSample(
+            time, axes @ position, axes @ rotation, axes @ velocity, self._buttons, tracking=state
+        )
+
+    def write_force(self, force: NDArray[np.float64]) -> None:
+        """A camera feels nothing: the force is shown on the heads-up gauge, never felt."""
+
+    def close(self) -> None:
+        """Stop the tracking process (from the process that started it; a forked copy leaves it)."""
+        if self._process is not None and os.getpid() == self._owner:
+            self._process.terminate()
+            self._process.join(2.0)
+            self._process = None
+
+    def _not_seen(self, timeout_s: float) -> str:
+        ids = ", ".join(str(i) for i in self.body.ids)
+        return (
+            f"the {self.body.name}'s markers ({ids}) were not seen by camera {self.source} within "
+            f"{timeout_s:.0f} s: hold it in view, facing the camera, in good light"
+        )
