@@ -20,6 +20,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
+from metrics.signals.tracked import tracked_path
 from recorder.scene import read_scene
 
 EVENT_COLUMNS = ("time", "kind", "entry_angle_deg", "tip_speed", "triangle")
@@ -217,12 +218,19 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     # the subordinate hand where one was recorded (schema 4, its tool point known); a one-handed
     # session's zero displacement would read as a perfectly still hand, so it is left unmeasured
     two_handed = bool(np.all(np.isfinite(columns("sub_x", "sub_y", "sub_z"))))
+    time = column("time").astype(np.float64)
+    tool = columns("tool_x", "tool_y", "tool_z")
+    if str(header.get("device", "")).startswith("camera"):  # measured poses only, smoothed
+        measured = column("tool_tracking") == 0
+        if measured.sum() >= 4:
+            tool = tracked_path(time, np.where(measured[:, None], tool, np.nan))
+        metadata = dict(metadata, tool_measured_fraction=float(measured.mean()))
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),
         participant_id=participant_id or metadata.get("participant_id"),
         label=label or metadata.get("label"),
-        time=column("time").astype(np.float64),
-        tool_position=columns("tool_x", "tool_y", "tool_z"),
+        time=time,
+        tool_position=tool,
         tip_position=columns("tip_x", "tip_y", "tip_z"),
         force=force,
         needle_state=column("pierced").astype(np.int8),

@@ -17,15 +17,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
+from metrics.signals.tracked import TRACKED_SMOOTHING_HZ, gap_lengths, tracked_path
 from metrics.streams import SessionStreams
 from sim.tracking.camera import Camera
 from sim.tracking.markers import MarkerBody
 from sim.tracking.pose import BodyTracker
 
-SMOOTHING_HZ = 3.0
-"""Low-pass cut-off for the tracked path. At 30 frames/s a marker's pose noise (~0.5 mm per frame at
-30 cm) dominates above ~3 Hz, where deliberate suturing hand motion has little power; at 6 Hz the
-jerk-based smoothness (LDLJ) of a tracked path was 10 % off its ground truth, at 3 Hz 1.7 %."""
+SMOOTHING_HZ = TRACKED_SMOOTHING_HZ
 MAX_GAP_S = 0.5
 """Gaps without the marker up to this long are interpolated; longer ones stop the import."""
 
@@ -79,30 +77,16 @@ def track_frames(
 
 def smooth_path(time: NDArray[np.float64], raw: NDArray[np.float64], cutoff_hz: float = SMOOTHING_HZ):
     """Fill short gaps linearly, then a zero-phase 4th-order Butterworth low-pass at ``cutoff_hz``."""
-    from scipy.signal import butter, sosfiltfilt
-
     found = np.isfinite(raw[:, 0])
     if found.sum() < 4:
         raise MetricsError(f"the marker was found in {int(found.sum())} frames; tracking needs at least 4")
-    gaps = _gap_lengths(found, time)
+    gaps = gap_lengths(found, time)
     if gaps.max(initial=0.0) > MAX_GAP_S:
         raise MetricsError(
             f"the marker was lost for {gaps.max():.2f} s (more than {MAX_GAP_S} s); check lighting and that "
             "the marker faces the camera"
         )
-    filled = np.column_stack([np.interp(time, time[found], raw[found, k]) for k in range(3)])
-    rate = 1.0 / float(np.median(np.diff(time)))
-    if cutoff_hz >= rate / 2:
-        return filled
-    sos = butter(4, cutoff_hz, fs=rate, output="sos")
-    return sosfiltfilt(sos, filled, axis=0)
-
-
-def _gap_lengths(found: NDArray[np.bool_], time: NDArray[np.float64]) -> NDArray[np.float64]:
-    edges = np.diff(np.r_[0, (~found).astype(int), 0])
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    step = float(np.median(np.diff(time)))
-    return (stops - starts) * step
+    return tracked_path(time, raw, cutoff_hz)
 
 
 TRACK_FILE = "track.parquet"

@@ -1,4 +1,4 @@
-"""`vascsim calibrate`: a bench camera's intrinsics from photos of a ChArUco board."""
+"""`vascsim calibrate`: a camera's intrinsics from a ChArUco board, from photos or live from the camera."""
 
 from __future__ import annotations
 
@@ -7,41 +7,88 @@ import click
 from sessions.cli.base import (
     existing_path,
     number_pair,
+    open_catalog,
     user_errors,
 )
 
 
 @click.command()
-@click.argument("images", nargs=-1, required=True)
+@click.argument("images", nargs=-1)
+@click.option("--live", is_flag=True, help="Calibrate from the camera's own frames, guided view by view.")
 @click.option(
-    "-o", "--out", required=True, type=click.Path(dir_okay=False), help="Calibration JSON to write."
-)
+    "--source", default="camera:0", show_default=True,
+    help="With --live: camera:INDEX, a stream URL, or a video file of the board.",
+)  # fmt: skip
+@click.option(
+    "-o", "--out", type=click.Path(dir_okay=False),
+    help="Calibration JSON to write (default with --live: this station's, in the data directory).",
+)  # fmt: skip
 @click.option("--squares", default="7x5", show_default=True, help="ChArUco board squares, COLUMNSxROWS.")
 @click.option("--square-mm", default=30.0, show_default=True, type=click.FloatRange(min=1.0))
 @click.option("--marker-mm", default=22.0, show_default=True, type=click.FloatRange(min=1.0))
 @click.option("--dictionary", default="DICT_4X4_50", show_default=True, help="ArUco dictionary of the board.")
+@click.option(
+    "--timeout", default=180.0, show_default=True, type=click.FloatRange(min=5.0),
+    help="With --live: give up after this many seconds.",
+)  # fmt: skip
 @user_errors
-def calibrate(images, out, squares, square_mm, marker_mm, dictionary) -> None:
-    """Calibrate a bench camera from photos of a ChArUco board (10-20 views, varied tilt).
+def calibrate(images, live, source, out, squares, square_mm, marker_mm, dictionary, timeout) -> None:
+    """Calibrate a camera from views of a ChArUco board (square-on and tilted each way).
 
-    Writes the intrinsic matrix, distortion and the reprojection error (pixels) as
-    JSON, for `vascsim import-video --camera`.
+    From photos: IMAGES are 10-20 photos of the board; --out names the JSON to write
+    (for `vascsim import-video --camera`). Live (--live): hold the board in front of
+    the camera and turn it as the progress line asks (square-on, tilted left, right,
+    up, down); the fit is written as this station's calibration, which the camera
+    device (`--device camera`) uses. Either way the reprojection error is reported
+    (pixels), and a live fit over 1 px is refused.
     """
+    from pathlib import Path
+
+    from sim.tracking.camera import BoardSpec
+
+    board = BoardSpec(number_pair(squares, "--squares"), square_mm / 1e3, marker_mm / 1e3, dictionary)
+    if live:
+        if images:
+            raise click.UsageError("give either board photos or --live, not both")
+        _calibrate_live(source, board, Path(out) if out else None, timeout)
+        return
+    if not images or not out:
+        raise click.UsageError("give board photos and --out, or calibrate from the camera with --live")
     import cv2
 
-    from metrics.errors import MetricsError
-    from sim.tracking.camera import BoardSpec, calibrate_charuco
+    from sim.errors import TrackingError
+    from sim.tracking.camera import calibrate_charuco
 
     frames = []
     for path in images:
         existing_path(path, "board photo")
         image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
         if image is None:
-            raise MetricsError(f"{path} is not an image OpenCV can read")
+            raise TrackingError(f"{path} is not an image OpenCV can read")
         frames.append(image)
-    board = BoardSpec(number_pair(squares, "--squares"), square_mm / 1e3, marker_mm / 1e3, dictionary)
     camera = calibrate_charuco(frames, board)
     camera.save(out)
     click.echo(
         f"calibration: {out} (reprojection error {camera.rms:.3f} px, focal {camera.matrix[0, 0]:.1f} px)"
+    )
+
+
+def _calibrate_live(source: str, board, out, timeout: float) -> None:
+    from sessions.running.camera import calibrate_live
+
+    _, home = open_catalog()
+    shown = {"last": None}
+
+    def progress(kept, missing) -> None:
+        if kept is not None:
+            click.echo(f"  kept a view: {kept}", err=True)
+        line = "all views taken" if not missing else "still to show: " + ", ".join(missing)
+        if line != shown["last"]:
+            click.echo(line, err=True)
+            shown["last"] = line
+
+    camera, path = calibrate_live(source, home, board, out, progress, timeout)
+    click.echo(
+        f"calibration: {path} (reprojection error {camera.rms:.3f} px, focal {camera.matrix[0, 0]:.1f} px, "
+        f"{camera.size[0]}x{camera.size[1]})"
     )

@@ -21,7 +21,8 @@ def devices(as_json: bool) -> None:
     devices (3D Systems Touch/Phantom, Novint Falcon, Force Dimension, 3Dconnexion)
     on the USB bus through pyusb; reports whether the OpenHaptics driver can be
     used; the keyboard and mouse (the station window's needle holder) where a display
-    exists; the scripted and replay devices are always available.
+    exists; cameras (video4linux) for instruments tracked by their printed markers
+    (``--device camera:INDEX``); the scripted and replay devices are always available.
     """
     from sim.devices.discovery import list_devices
 

@@ -15,13 +15,19 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
+
 from sessions.catalog import CatalogError
-from sim.devices.camera import PLACEMENTS, CameraDevice, camera_source
-from sim.tracking.camera import Camera
+from sim.devices.camera import PLACEMENTS, CameraDevice, camera_source, open_frames
+from sim.tracking.camera import BoardSpec, Camera
+from sim.tracking.guided import CalibrationViews
 from sim.tracking.markers import INSTRUMENTS, MarkerBody
+from sim.tracking.pivot import PivotResult, pivot_calibration
+from sim.tracking.pose import BodyTracker
 
 CAMERA_FILE = "camera.json"
 INSTRUMENTS_FILE = "instruments.json"
@@ -123,3 +129,72 @@ def open_camera_device(
         device_from_camera=PLACEMENTS[placement],
     )  # fmt: skip
     return device, device.duration
+
+
+def _source_of(spec: str):
+    """A camera index, URL or video file from ``camera:SPEC`` or ``SPEC``."""
+    return camera_source(spec.split(":", 1)[1] if spec.startswith("camera:") else spec)
+
+
+def calibrate_live(
+    spec: str,
+    home: Path,
+    board: BoardSpec | None = None,
+    out: Path | None = None,
+    progress: Callable[[str | None, list[str]], None] | None = None,
+    timeout_s: float = 180.0,
+) -> tuple[Camera, Path]:
+    """Calibrate the camera ``spec`` (index, URL or a video of the board) from the frames it sends,
+    guided view by view (``progress(kind kept or None, kinds missing)`` after each frame); writes the
+    station's calibration (``out``, default the data directory's) only when the fit is good."""
+    views = CalibrationViews(board)
+    frames, opened = open_frames(_source_of(spec))
+    start = None
+    try:
+        for stamp, frame in frames:
+            start = stamp if start is None else start
+            kept = views.offer(stamp, frame)
+            if progress is not None:
+                progress(kept, views.missing())
+            if not views.missing() or stamp - start > timeout_s:
+                break
+    finally:
+        opened.close()
+    camera = views.calibrate()
+    path = out or home / CAMERA_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    camera.save(path)
+    return camera, path
+
+
+def register_instrument(
+    spec: str,
+    home: Path,
+    name: str,
+    seconds: float = 15.0,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[PivotResult, Path]:
+    """Pivot calibration of ``name`` from the camera ``spec`` (``seconds`` of a live camera, or a whole
+    video file); stores the tip only when the result is good."""
+    body = INSTRUMENTS.get(name)
+    if body is None:
+        raise CatalogError(f"unknown instrument {name!r}; one of {', '.join(INSTRUMENTS)}")
+    tracker = BodyTracker(camera_calibration(home), body)
+    rotations, translations = [], []
+    frames, opened = open_frames(_source_of(spec))
+    start = None
+    try:
+        for stamp, frame in frames:
+            start = stamp if start is None else start
+            if stamp - start > seconds:
+                break
+            pose = tracker.locate(frame)
+            if pose is not None:
+                rotations.append(pose.rotation)
+                translations.append(pose.translation)
+                if progress is not None:
+                    progress(len(rotations))
+    finally:
+        opened.close()
+    result = pivot_calibration(np.array(rotations).reshape(-1, 3, 3), np.array(translations).reshape(-1, 3))
+    return result, save_tip(home, name, result.tip_offset, result.residual)

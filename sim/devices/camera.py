@@ -71,7 +71,8 @@ def camera_source(spec: str) -> int | str | Path:
     return path
 
 
-def _frames(source: int | str | Path) -> tuple[Iterator[tuple[float, NDArray[np.uint8]]], object]:
+def open_frames(source: int | str | Path) -> tuple[Iterator[tuple[float, NDArray[np.uint8]]], object]:
+    """(time, grey frame) pairs from a video file or a live camera, and the opened source (to close)."""
     opened = VideoFile(source) if isinstance(source, Path) else LiveCamera(source)
     return iter(opened), opened
 
@@ -124,6 +125,7 @@ class CameraDevice:
         self._tracker = BodyTracker(self.camera, self.body)
         self._next: tuple[float, NDArray[np.uint8]] | None = None
         self._origin = 0.0
+        self._played_out = False
         for stamp, frame in self._frames:
             if stamp > timeout_s:
                 break
@@ -131,17 +133,18 @@ class CameraDevice:
             if estimate is not None and estimate.measured:
                 self._origin = stamp
                 known = video.frame_count / video.fps if video.frame_count else None
-                self.duration = None if known is None else max(known - stamp - 1.0 / video.fps, 0.0)
+                self.duration = None if known is None else max(known - stamp, 0.0)
                 return
         raise DeviceError(self._not_seen(timeout_s))
 
     def _advance(self, time: float) -> None:
         video_time = time + self._origin
-        while True:
+        while not self._played_out:
             if self._next is None:
                 self._next = next(self._frames, None)
-                if self._next is None:
-                    raise DeviceLostError(f"the video {self.source} has ended")
+                if self._next is None:  # the last frame's pose is held to the session's end
+                    self._played_out = True
+                    return
             stamp, frame = self._next
             if stamp > video_time:
                 return
@@ -150,6 +153,8 @@ class CameraDevice:
 
     # -- real time: a tracking process publishing through shared memory -----------------------
     def _open_tracking_process(self, timeout_s: float) -> None:
+        """Start the tracking process and wait for its first sighting. A file that plays out ends the
+        process quietly (the last pose is held); a failure leaves its reason for the haptic loop."""
         self._shared = SharedEstimate()
         self._go_at = multiprocessing.get_context("fork").Value("d", 0.0, lock=False)
         self._problem = multiprocessing.get_context("fork").Array("c", 400, lock=False)
@@ -170,9 +175,9 @@ class CameraDevice:
         raise DeviceError(problem or self._not_seen(timeout_s))
 
     def _track(self) -> None:
-        """The tracking process: frames in, estimates out, until the source ends or the parent stops."""
+        """The tracking process: frames in, estimates out, until the source ends or the device closes."""
         try:
-            frames, opened = _frames(self.source)
+            frames, opened = open_frames(self.source)
             self._shared.fps = float(getattr(opened, "fps", 30.0))
             tracker = BodyTracker(self.camera, self.body)
             paced = isinstance(self.source, Path)
@@ -198,7 +203,6 @@ class CameraDevice:
                 estimate = self._estimator.update(stamp, tracker.locate(frame))
                 if estimate is not None:
                     self._shared.put(replace(estimate, frame_time=due))
-            self._problem.value = f"the video {self.source} has ended".encode()[:399]
         except Exception as error:  # the parent reads why, and the haptic loop stops cleanly
             self._problem.value = f"camera {self.source}: {error}".encode()[:399]
         finally:

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 from sim.devices.base import DeviceError
 from sim.devices.spacemouse import find_spacemice
 from sim.devices.usb_discovery import scan_usb
+from sim.tracking.video import list_cameras
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,16 @@ def list_devices() -> list[DeviceReport]:
             "ready" if display_available() else "needs a display (the station's window)",
         )
     )
+    cameras = list_cameras()
+    for name, product in cameras:
+        reports.append(DeviceReport(f"{product} (instruments with printed markers)", "camera", name, "ready"))
+    if not cameras:
+        reports.append(
+            DeviceReport(
+                "camera (instruments with printed markers)", "camera", "camera:INDEX, URL or FILE",
+                "no camera found; a stream URL or a video file still works",
+            )
+        )  # fmt: skip
     reports.append(DeviceReport("scripted trajectory", "scripted", "none (built in)", "ready"))
     reports.append(DeviceReport("recorded session", "replay", "none (built in)", "ready"))
     return reports

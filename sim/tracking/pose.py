@@ -1,7 +1,8 @@
 """An instrument's pose in one camera frame, from the markers of its body that are in view.
 
-Per frame: ArUco detection with sub-pixel corner refinement (first in a window around the last
-sighting, then over the whole image), then the body's pose:
+Per frame: ArUco detection (first in a window around the last sighting, then over the whole image),
+each marker's corners refined as the meeting points of its fitted edges (:func:`refined_corners`),
+then the body's pose:
 
 - **one marker seen**: ``cv2.solvePnP`` with IPPE for squares. A square seen nearly face-on has two
   poses that fit about equally (mirror images); a clearly better fit decides, otherwise the one
@@ -26,7 +27,7 @@ from sim.tracking.markers import MarkerBody
 
 AMBIGUOUS_FIT_RATIO = 0.5
 """IPPE's two poses count as equally good when the better reprojection error is over half the other's."""
-MIN_FACING = 0.5
+MIN_FACING = 0.35
 """A face turned further than ~70 deg from the camera (cosine below this) is left out of a pose that
 other faces can give: its corners are foreshortened to a few pixels and blurred."""
 SEARCH_MARGIN = 1.5
@@ -55,6 +56,75 @@ def marker_detector(dictionary: str):
     parameters.cornerRefinementMaxIterations = 50
     parameters.cornerRefinementMinAccuracy = 0.01
     return cv2.aruco.ArucoDetector(aruco_dictionary(dictionary), parameters)
+
+
+EDGE_SAMPLES = 48
+"""Points located along each of a marker's four outer edges."""
+EDGE_END_FRACTION = 0.08
+"""The points keep this fraction of the side away from each corner (where two edges blur together)."""
+EDGE_REACH_PX = 3.0
+"""How far across the detector's edge the true one is looked for (px; less on a marker seen small or
+at a slant, so the search never reaches the cube's own edge beyond the white margin)."""
+MAX_CORNER_SHIFT = 0.25
+"""A refined corner further than this fraction of the marker's shortest side (and over 2 px) from the
+detector's is not trusted: the detector's are kept. (The detector's own corner can be 4 px out on a
+marker seen at a slant, 20 px across; the edges put it back within 0.4 px.)"""
+
+
+def refined_corners(grey: NDArray[np.uint8], quad: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A marker's corners as the intersections of straight lines fitted to its four outer edges.
+
+    ``cv2.cornerSubPix`` (the detector's refinement) is made for the saddle corners of a chessboard; on
+    the L-shaped outer corner of a black square it is pulled inwards by the blur, so a marker looks
+    smaller and further away (0.55 mm of depth bias at 30 cm on 92-pixel markers). Edges are located
+    without that bias: across each side at :data:`EDGE_SAMPLES` points, the edge is the centroid of the
+    intensity gradient; a total-least-squares line through them, and adjacent lines meet at a corner.
+    With this the tip of the synthetic wrist video came within 0.39 mm RMS of the truth (0.90 mm with
+    the detector's corners)."""
+    import cv2
+
+    image = grey.astype(np.float32)
+    lines = []
+    for k in range(4):
+        start, end = quad[k], quad[(k + 1) % 4]
+        along = end - start
+        length = float(np.linalg.norm(along))
+        if length < 8.0:
+            return quad
+        unit = along / length
+        across = np.array([-unit[1], unit[0]])
+        # the white margin round a cube's marker is an eighth of its side: the search stays inside it
+        height = abs(float(np.dot(quad[(k + 2) % 4] - start, across)))
+        reach = min(EDGE_REACH_PX, 0.08 * height)
+        offsets = np.linspace(-reach, reach, 25)
+        fractions = np.linspace(EDGE_END_FRACTION, 1 - EDGE_END_FRACTION, EDGE_SAMPLES)
+        base = start + fractions[:, None] * along
+        points = base[:, None, :] + offsets[None, :, None] * across
+        profile = cv2.remap(
+            image, points[..., 0].astype(np.float32), points[..., 1].astype(np.float32), cv2.INTER_LINEAR
+        )
+        gradient = np.abs(np.diff(profile, axis=1))
+        gradient = np.maximum(gradient - 0.2 * gradient.max(axis=1, keepdims=True), 0.0)
+        weight = gradient.sum(axis=1)
+        if np.any(weight <= 0):
+            return quad
+        middle = (offsets[:-1] + offsets[1:]) / 2
+        edge = base + ((gradient * middle).sum(axis=1) / weight)[:, None] * across
+        centre = edge.mean(axis=0)
+        direction = np.linalg.svd(edge - centre)[2][0]
+        normal = np.array([-direction[1], direction[0]])
+        lines.append((normal, float(normal @ centre)))
+    refined = np.empty_like(quad)
+    for k in range(4):
+        (n1, d1), (n2, d2) = lines[k - 1], lines[k]
+        system = np.array([n1, n2])
+        if abs(np.linalg.det(system)) < 1e-6:
+            return quad
+        refined[k] = np.linalg.solve(system, [d1, d2])
+    shortest = float(np.linalg.norm(quad - np.roll(quad, 1, axis=0), axis=1).min())
+    if np.linalg.norm(refined - quad, axis=1).max() > max(2.0, MAX_CORNER_SHIFT * shortest):
+        return quad
+    return refined
 
 
 def grey_of(frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
@@ -92,7 +162,7 @@ class BodyTracker:
         if ids is None:
             return {}
         return {
-            int(i): c.reshape(4, 2).astype(np.float64)
+            int(i): refined_corners(grey, c.reshape(4, 2).astype(np.float64))
             for i, c in zip(ids.ravel(), corners, strict=True)
             if int(i) in self._ids
         }

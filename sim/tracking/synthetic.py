@@ -144,11 +144,14 @@ def suturing_motion(time: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDA
     return rotations, position
 
 
-def wrist_motion(time: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def wrist_motion(
+    time: NDArray[np.float64], duration: float | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """An instrument handled at 30 cm: per frame the body's rotation (n, 3, 3) and position (n, 3) in the
     camera frame (m). The hand reaches and returns (+/-4 cm), the wrist rolls the instrument about its
-    shaft through 200 deg and back (the needle-driving turn), and tilts it by up to 20 deg."""
-    linear = time / max(time[-1], 1e-9)
+    shaft through 200 deg and back (the needle-driving turn), and tilts it by up to 20 deg, over
+    ``duration`` (s, by default the last time)."""
+    linear = time / max(duration or time[-1], 1e-9)
     tau = linear + np.sin(2 * np.pi * linear) / (2 * np.pi)
     position = np.column_stack(
         [
@@ -163,6 +166,67 @@ def wrist_motion(time: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArra
         [FACING_CAMERA @ rotation_xyz(np.array([t, r, 0.0])) for r, t in zip(roll, tilt, strict=True)]
     )
     return rotations, position
+
+
+def pivot_motion(
+    count: int, body: MarkerBody, pivot: NDArray[np.float64], tilt_deg: float = 30.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """An instrument pivoting about its tip resting at ``pivot`` (camera frame, m): ``count`` poses
+    (rotations, body origins) sweeping a cone of half-angle ``tilt_deg`` twice round."""
+    rotations, origins = [], []
+    upright = FACING_CAMERA @ rotation_xyz(np.array([0.0, np.radians(45.0), 0.0]))  # an edge to the camera
+    for k in range(count):
+        turn = 4 * np.pi * k / count
+        tilt = np.radians(tilt_deg) * (0.4 + 0.6 * k / max(count - 1, 1))
+        rotation = rotation_xyz(np.array([tilt * np.cos(turn), 0.0, tilt * np.sin(turn)])) @ upright
+        rotations.append(rotation)
+        origins.append(pivot - rotation @ np.asarray(body.tip_offset_m))
+    return np.array(rotations), np.array(origins)
+
+
+def board_views_video(
+    path: str | Path,
+    board: BoardSpec | None = None,
+    size: tuple[int, int] = (1280, 720),
+    camera_matrix: NDArray[np.float64] | None = None,
+    fps: int = 10,
+    hold_frames: int = 4,
+) -> NDArray[np.float64]:
+    """A video of a ChArUco board held square-on and tilted 25 deg left, right, up and down, three
+    places each (each view held ``hold_frames`` frames), as a person calibrating live would show it.
+    Returns the camera matrix used."""
+    import av
+
+    board = board or BoardSpec()
+    camera_matrix = (
+        default_camera_matrix(size, focal_px=size[0] * 0.9) if camera_matrix is None else camera_matrix
+    )
+    rng = np.random.default_rng(5)
+    columns, rows = board.squares
+    width_m, height_m = columns * board.square_m, rows * board.square_m
+    texture = board.board().generateImage((columns * 120, rows * 120), marginSize=0, borderBits=1)
+    corners = np.array([[0, 0, 0], [width_m, 0, 0], [width_m, height_m, 0], [0, height_m, 0]], dtype=float)
+    centre = np.array([width_m / 2, height_m / 2, 0.0])
+    tilt = np.radians(25.0)
+    turns = [(0.0, 0.0), (0.0, -tilt), (0.0, tilt), (tilt, 0.0), (-tilt, 0.0)]
+    places = [np.array([-0.03, -0.01, 0.42]), np.array([0.0, 0.01, 0.38]), np.array([0.03, 0.0, 0.46])]
+    bench = background(size, rng)
+    with av.open(str(path), mode="w") as container:
+        stream = container.add_stream("libx264", rate=fps, options={"crf": "12", "preset": "veryfast"})
+        stream.width, stream.height = size
+        stream.pix_fmt = "yuv420p"
+        for about_x, about_y in turns:
+            for place in places:
+                rotation = rotation_xyz(np.array([about_x, about_y, 0.0]))
+                frame = bench.copy()
+                draw_plane(frame, texture, corners, rotation, place - rotation @ centre, camera_matrix)
+                for _ in range(hold_frames):
+                    noisy = np.clip(frame + rng.normal(0, 1.5, frame.shape), 0, 255).astype(np.uint8)
+                    for packet in stream.encode(av.VideoFrame.from_ndarray(noisy, format="gray")):
+                        container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    return camera_matrix
 
 
 def write_bench_video(

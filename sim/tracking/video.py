@@ -50,7 +50,10 @@ class VideoFile:
             self._container.close()
 
     def close(self) -> None:
-        self._container.close()
+        try:
+            self._container.close()
+        except Exception:  # PyAV raises on a second close; the file is closed either way
+            pass
 
 
 def read_video(path: str | Path) -> tuple[Iterable[NDArray[np.uint8]], float, int]:

@@ -1,0 +1,97 @@
+"""Calibrating a camera live: which views of the ChArUco board are still missing, then the fit.
+
+A good calibration needs the board seen square-on and tilted each way (the tilts are what pin the
+focal length down), filling much of the image. :class:`CalibrationViews` watches the frames, finds
+the board in each, sorts it by how it is tilted (a rough pose from a nominal focal length is enough
+to tell), keeps the best few views of each kind, and says which kinds are still missing, so the
+person holding the board is guided view by view. When every kind has enough views it calibrates
+(:func:`sim.tracking.camera.calibrate_charuco`) and refuses a poor fit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.errors import TrackingError
+from sim.tracking.camera import BoardSpec, Camera, calibrate_charuco
+
+KINDS = ("square-on", "tilted left", "tilted right", "tilted up", "tilted down")
+VIEWS_PER_KIND = 3
+TILT_DEG = 15.0
+"""A board turned more than this about a side axis counts as tilted that way."""
+MIN_CORNERS = 12
+MIN_SPACING_S = 0.3
+"""Frames kept for one kind are at least this far apart (consecutive frames are near copies)."""
+MAX_RMS_PX = 1.0
+"""A calibration whose reprojection error exceeds 1 px is refused (a sharp board gives 0.1-0.5 px)."""
+
+
+class CalibrationViews:
+    """Collects board views by kind (see the module docstring)."""
+
+    def __init__(self, board: BoardSpec | None = None) -> None:
+        import cv2
+
+        self.board = board or BoardSpec()
+        self._charuco = self.board.board()
+        self._detector = cv2.aruco.CharucoDetector(self._charuco)
+        self.views: dict[str, list[tuple[float, int, NDArray[np.uint8]]]] = {kind: [] for kind in KINDS}
+        self.size: tuple[int, int] | None = None
+
+    def offer(self, time: float, frame: NDArray[np.uint8]) -> str | None:
+        """Look at one frame (grey); returns the kind of view it was kept as, or None."""
+        import cv2
+
+        self.size = (frame.shape[1], frame.shape[0])
+        corners, ids, _, _ = self._detector.detectBoard(frame)
+        if ids is None or len(ids) < MIN_CORNERS:
+            return None
+        object_points, image_points = self._charuco.matchImagePoints(corners, ids)
+        width, height = self.size
+        nominal = np.array([[0.9 * width, 0, width / 2], [0, 0.9 * width, height / 2], [0, 0, 1.0]])
+        ok, rotation, _ = cv2.solvePnP(object_points, image_points, nominal, None)
+        if not ok:
+            return None
+        kind = _kind(cv2.Rodrigues(rotation)[0])
+        kept = self.views[kind]
+        if kept and time - kept[-1][0] < MIN_SPACING_S:
+            return None
+        kept.append((time, len(ids), frame.copy()))
+        kept.sort(key=lambda view: -view[1])  # the views with most corners first
+        del kept[VIEWS_PER_KIND:]
+        return kind
+
+    def missing(self) -> list[str]:
+        """The kinds of view that still need more (each needs :data:`VIEWS_PER_KIND`)."""
+        return [kind for kind in KINDS if len(self.views[kind]) < VIEWS_PER_KIND]
+
+    def calibrate(self) -> Camera:
+        """The camera from the views kept; refuses when a kind is missing or the fit is poor."""
+        missing = self.missing()
+        if missing:
+            raise TrackingError(
+                f"the board still has to be shown {', '.join(missing)}; hold it in view, turned that way"
+            )
+        frames = [frame for kind in KINDS for _, _, frame in self.views[kind]]
+        camera = calibrate_charuco(frames, self.board)
+        if not camera.rms <= MAX_RMS_PX:
+            raise TrackingError(
+                f"the calibration's reprojection error is {camera.rms:.2f} px (at most {MAX_RMS_PX:.1f} px): "
+                "hold the board flat and still, in focus and in even light, and calibrate again"
+            )
+        return camera
+
+
+def _kind(rotation: NDArray[np.float64]) -> str:
+    """Which way the board's normal turns from the optical axis (camera frame: x right, y down)."""
+    normal = rotation[:, 2]  # the board's z axis, into the board, in the camera frame
+    left_right = math.degrees(math.atan2(normal[0], normal[2]))
+    up_down = math.degrees(math.atan2(normal[1], normal[2]))
+    if max(abs(left_right), abs(up_down)) < TILT_DEG:
+        return "square-on"
+    if abs(left_right) >= abs(up_down):
+        return "tilted right" if left_right > 0 else "tilted left"
+    return "tilted down" if up_down > 0 else "tilted up"
