@@ -20,7 +20,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
-from metrics.signals.tracked import tracked_path
+from metrics.signals.tracked import CAMERA_SMOOTHING_HZ, tracked_path
 from recorder.scene import read_scene
 
 EVENT_COLUMNS = ("time", "kind", "entry_angle_deg", "tip_speed", "triangle")
@@ -223,7 +223,7 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     if str(header.get("device", "")).startswith("camera"):  # measured poses only, smoothed
         measured = column("tool_tracking") == 0
         if measured.sum() >= 4:
-            tool = tracked_path(time, np.where(measured[:, None], tool, np.nan))
+            tool = tracked_path(time, np.where(measured[:, None], tool, np.nan), CAMERA_SMOOTHING_HZ)
         metadata = dict(metadata, tool_measured_fraction=float(measured.mean()))
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),

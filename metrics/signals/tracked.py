@@ -6,7 +6,8 @@ tracking is lost (:mod:`sim.tracking.channel`). Path length and smoothness compu
 1 kHz stream would count the noise and the extrapolation's small corrections as movement. The motion
 metrics therefore read a camera session's tool path as the bench-video importer reads a tracked
 video: samples whose pose was predicted or held are left out and bridged by straight lines, and the
-path is low-passed, zero-phase, at :data:`TRACKED_SMOOTHING_HZ`.
+path is low-passed, zero-phase: at :data:`CAMERA_SMOOTHING_HZ` for a live camera session, at
+:data:`TRACKED_SMOOTHING_HZ` for a bench video (one flat marker, whose poses are noisier).
 """
 
 from __future__ import annotations
@@ -17,9 +18,14 @@ from numpy.typing import NDArray
 from metrics.signals.kinematics import smooth
 
 TRACKED_SMOOTHING_HZ = 3.0
-"""Low-pass cut-off for a camera-tracked path. At 30 frames/s a marker's pose noise (~0.5 mm per
-frame at 30 cm) dominates above ~3 Hz, where deliberate suturing hand motion has little power; at 6 Hz
-the jerk-based smoothness (LDLJ) of a tracked bench path was 10 % off its ground truth, at 3 Hz 1.7 %."""
+"""Low-pass cut-off for a bench video's tracked path. At 30 frames/s a flat marker's pose noise (~0.5 mm
+per frame at 30 cm) dominates above ~3 Hz, where deliberate suturing hand motion has little power; at
+6 Hz the jerk-based smoothness (LDLJ) of a tracked bench path was 10 % off its ground truth, at 3 Hz 1.7 %."""
+CAMERA_SMOOTHING_HZ = 4.0
+"""Low-pass cut-off for a live camera session's tool path (a marker cube, corners on fitted edges,
+0.1-0.5 mm per frame at 30 cm). A filmed scripted wall stitch played back through ``camera:FILE``
+(``benchmarks/camera.py``) kept its path length within 0.5 % and SPARC within 0.3 % at 4 Hz, against
+2.0 % and 5.9 % at 3 Hz and 1.8 % and 3.5 % at 6 Hz."""
 
 
 def gap_lengths(found: NDArray[np.bool_], time: NDArray[np.float64]) -> NDArray[np.float64]:

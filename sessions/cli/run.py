@@ -27,8 +27,9 @@ from sessions.cli.station import LIVE_DEVICES, sub_device_option, view_options
     "--device",
     default="scripted",
     show_default=True,
-    help="scripted, mouse (keyboard and mouse in the live window), spacemouse, openhaptics, or "
-    "replay:SESSION to play a recorded session back.",
+    help="scripted, mouse (keyboard and mouse in the live window), spacemouse, openhaptics, "
+    "camera[:INDEX|URL|FILE] (real instruments with printed markers; a video file replays through the "
+    "same tracking), or replay:SESSION to play a recorded session back.",
 )
 @click.option(
     "--skill",

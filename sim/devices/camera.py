@@ -166,6 +166,11 @@ class CameraDevice:
             estimate = self._shared.get()
             if estimate is not None and estimate.measured:
                 self._fps = self._shared.fps or 30.0
+                if isinstance(self.source, Path):  # the video's length from its first sighting
+                    video = VideoFile(self.source)
+                    length = video.frame_count / video.fps if video.frame_count else None
+                    video.close()
+                    self.duration = None if length is None else max(length - self._shared.origin, 0.0)
                 return
             if self._shared.ended:
                 break
@@ -181,6 +186,7 @@ class CameraDevice:
             self._shared.fps = float(getattr(opened, "fps", 30.0))
             tracker = BodyTracker(self.camera, self.body)
             paced = isinstance(self.source, Path)
+            interval = 1.0 / max(self._shared.fps, 1.0)
             origin = None
             for stamp, frame in frames:
                 if not paced:  # a live camera: grab times are already on the haptic loop's clock
@@ -191,7 +197,7 @@ class CameraDevice:
                 if origin is None:  # acquiring: as fast as frames decode, until the first sighting
                     estimate = self._estimator.update(stamp, tracker.locate(frame))
                     if estimate is not None and estimate.measured:
-                        origin = stamp
+                        origin = self._shared.origin = stamp
                         self._shared.put(estimate)
                         while not self._go_at.value:
                             clock.sleep(0.001)
@@ -200,6 +206,9 @@ class CameraDevice:
                 due = self._go_at.value + (stamp - origin)  # the file plays at its own pace from the go
                 while (wait := due - clock.perf_counter()) > 0:
                     clock.sleep(min(wait, 0.005))
+                if clock.perf_counter() > due + interval:  # behind: the next frame is due, skip to it
+                    self._shared.dropped += 1
+                    continue
                 estimate = self._estimator.update(stamp, tracker.locate(frame))
                 if estimate is not None:
                     self._shared.put(replace(estimate, frame_time=due))

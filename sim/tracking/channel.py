@@ -203,11 +203,14 @@ class SharedEstimate:
     """The newest :class:`Estimate` of one instrument, between processes (seqlock).
 
     Layout: [seq, frame_time, position 3, velocity 3, rotation 9, angular velocity 3, measured,
-    frames, lost frames, frame rate, (spare), ended]. ``ended``: the source has no more frames (a file
-    played out) or failed.
+    frames, lost frames, frame rate, origin, ended, dropped]. ``dropped``: frames the tracking process
+    skipped because the next one was already due (it keeps up with the newest, never falls behind);
+    ``origin``: a video file's time (s) of the first frame
+    that saw the instrument (session time 0); ``ended``: the source has no more frames (a file played
+    out) or failed.
     """
 
-    DOUBLES = 26
+    DOUBLES = 27
 
     def __init__(self) -> None:
         self._map = mmap.mmap(-1, 8 * self.DOUBLES)
@@ -233,6 +236,22 @@ class SharedEstimate:
     @fps.setter
     def fps(self, value: float) -> None:
         self._slot[23] = value
+
+    @property
+    def dropped(self) -> int:
+        return int(self._slot[26])
+
+    @dropped.setter
+    def dropped(self, value: int) -> None:
+        self._slot[26] = value
+
+    @property
+    def origin(self) -> float:
+        return float(self._slot[24])
+
+    @origin.setter
+    def origin(self, value: float) -> None:
+        self._slot[24] = value
 
     def end(self) -> None:
         self._slot[25] = 1.0

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from sim.devices.camera import FACING_TRAINEE, CameraDevice
 from sim.errors import TrackingError
 from sim.tracking.camera import Camera
-from sim.tracking.channel import HELD, MEASURED, PoseEstimator, PosePredictor
+from sim.tracking.channel import HELD, MEASURED, PREDICTED, Estimate, PoseEstimator, PosePredictor
 from sim.tracking.filters import (
     ConstantVelocityKalman,
     OneEuroFilter,
@@ -156,7 +156,6 @@ def test_a_pose_that_jumps_further_than_a_hand_can_move_is_refused_until_three_a
 def test_the_predictor_extrapolates_labels_and_limits_speed():
     """Within 1.5 frame intervals a pose is measured (extrapolated by its velocity), later predicted,
     beyond 2.5 intervals no further; the output never outruns 0.5 m/s."""
-    from sim.tracking.channel import PREDICTED, Estimate
 
     estimate = Estimate(0.0, np.zeros(3), np.array([0.1, 0.0, 0.0]), np.eye(3), np.zeros(3), True)
     predictor = PosePredictor(1 / 30)

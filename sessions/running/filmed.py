@@ -1,0 +1,61 @@
+"""A scripted pass filmed: the video a station's camera would take of a real needle holder moved
+exactly as a scripted hand moves it, so a ``camera:FILE`` session can be checked against the scripted
+session that made it (issue 47's end-to-end test and ``benchmarks/camera.py``).
+
+The holder's poses (world frame, the task's scene) are read from the scripted device at the video's
+frame times and put in front of the camera through the inverse of what the camera device and the
+workspace mapping do (:mod:`sim.devices.camera`, :class:`sim.devices.workspace.WorkspaceMapping`), so
+that playing the video back through them reproduces the scripted motion 1:1 about its first pose. The
+marker cube sits on the holder's shaft (the holder frame's z axis, about which the wrist turns the
+needle), rolled by ``roll_deg`` about it; its tip (the holder frame's origin) starts ``distance_m``
+from the camera.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sessions.running.runner import SessionPlan, open_device
+from sessions.running.scene import task_camera
+from sessions.tasks import task_spec
+from sim.devices.camera import PLACEMENTS
+from sim.devices.scripted import SuturingPassParameters
+from sim.devices.workspace import view_axes
+from sim.tracking.markers import NEEDLE_HOLDER, MarkerBody
+from sim.tracking.synthetic import default_camera_matrix, rotation_xyz, write_instrument_video
+
+HOLDER_FROM_BODY = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+"""The cube's axes in the holder's frame: its x along the holder's x, its y (towards the instrument's
+back end) along the holder's -z (the shaft), its z along the holder's y."""
+
+
+def film_scripted_pass(
+    task: str,
+    parameters: SuturingPassParameters,
+    path: str | Path,
+    size: tuple[int, int] = (1280, 720),
+    fps: float = 30.0,
+    placement: str = "facing",
+    roll_deg: float = 0.0,
+    distance_m: float = 0.32,
+    body: MarkerBody = NEEDLE_HOLDER,
+) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """Render the pass; returns (its duration in s, the camera matrix, the tip's path in the camera
+    frame at each frame (m))."""
+    device, duration, _ = open_device("scripted", SessionPlan("filmed", "filmed", task, 1), None, parameters)
+    times = np.arange(0.0, duration, 1.0 / fps)
+    samples = [device.read(t) for t in times]
+    positions = np.array([s.position for s in samples])
+    rotations = np.array([s.rotation for s in samples])
+    to_camera = PLACEMENTS[placement].T @ view_axes(*task_camera(task_spec(task))).T  # world -> camera
+    mount = HOLDER_FROM_BODY @ rotation_xyz(np.array([0.0, np.radians(roll_deg), 0.0]))
+    cubes = np.array([to_camera @ r @ mount for r in rotations])
+    start = np.array([0.0, 0.08, distance_m])  # the tip low in the image, the cube above it
+    tips = start + (positions - positions[0]) @ to_camera.T
+    origins = tips - np.einsum("nij,j->ni", cubes, np.asarray(body.tip_offset_m))
+    matrix = default_camera_matrix(size, focal_px=size[0] * 0.9)
+    write_instrument_video(path, cubes, origins, body, fps, size, matrix)
+    return float(duration), matrix, tips
