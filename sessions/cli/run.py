@@ -11,7 +11,7 @@ from sessions.cli.base import (
     user_errors,
 )
 from sessions.cli.lrs import push_after_scoring
-from sessions.cli.station import LIVE_DEVICES, sub_device_option, view_options
+from sessions.cli.station import is_live, sub_device_option, view_options
 
 
 @click.command()
@@ -86,7 +86,7 @@ def run(
         )
     if device == SCRIPTED_DEVICE:
         click.echo("note: a scripted pass, not a person's hand: the session is marked synthetic", err=True)
-    clock = "realtime" if realtime or device in LIVE_DEVICES else "simulated"
+    clock = "realtime" if realtime or is_live(device) else "simulated"
     plan = SessionPlan(study, participant, task, None, phase, device, clock, sub_device, handedness)
     parameters = (lambda trial: scripted_hands(skill, seed=trial)) if device == "scripted" else None
     with stderr_console().status(f"running {participant} on {device}..."):

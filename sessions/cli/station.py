@@ -12,7 +12,29 @@ import click
 from sessions.cli.base import open_catalog, parse_size, user_errors
 
 LIVE_DEVICES = ("mouse", "spacemouse", "openhaptics")
-"""Devices a person moves: their sessions run on the real-time clock."""
+"""Devices a person moves: their sessions run on the real-time clock (and a live camera, below)."""
+
+
+def is_camera(device: str) -> bool:
+    return device == "camera" or device.startswith("camera:")
+
+
+def is_live(device: str) -> bool:
+    """Whether ``device`` is moved by a person now: a live device, or a camera (index or stream; a video
+    file plays on a simulated clock unless asked for real time)."""
+    if device in LIVE_DEVICES or device == "camera":
+        return True
+    spec = device.split(":", 1)[1] if is_camera(device) else ""
+    return is_camera(device) and (spec.isdigit() or "://" in spec)
+
+
+def station_device(_context, _parameter, value: str) -> str:
+    """``--device`` of the station: a live device, a camera, or the scripted hand."""
+    if value in (*LIVE_DEVICES, "scripted") or is_camera(value):
+        return value
+    raise click.BadParameter(
+        f"{value!r}: one of {', '.join(LIVE_DEVICES)}, camera[:INDEX|URL|FILE], scripted"
+    )
 
 
 def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -92,11 +114,12 @@ def sub_device_option(command: Callable[..., Any]) -> Callable[..., Any]:
 )
 @click.option(
     "--device",
-    type=click.Choice([*LIVE_DEVICES, "scripted"]),
     default="mouse",
     show_default=True,
-    help="The needle holder: keyboard and mouse, a SpaceMouse (rate control), a 3D Systems Touch "
-    "(OpenHaptics), or a scripted hand (a demonstration).",
+    callback=station_device,
+    help="The needle holder: mouse (keyboard and mouse), spacemouse (a rate control), openhaptics (a 3D "
+    "Systems Touch), camera[:INDEX|URL|FILE] (a real needle holder with its printed marker cube, "
+    "tracked by a webcam), or scripted (a demonstration).",
 )
 @click.option(
     "--trials",

@@ -42,9 +42,10 @@ def film_scripted_pass(
     roll_deg: float = 0.0,
     distance_m: float = 0.32,
     body: MarkerBody = NEEDLE_HOLDER,
+    hidden: tuple[float, float] | None = None,
 ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
-    """Render the pass; returns (its duration in s, the camera matrix, the tip's path in the camera
-    frame at each frame (m))."""
+    """Render the pass (``hidden``: from and to when (s) a hand covers the cube); returns (its duration
+    in s, the camera matrix, the tip's path in the camera frame at each frame (m))."""
     device, duration, _ = open_device("scripted", SessionPlan("filmed", "filmed", task, 1), None, parameters)
     times = np.arange(0.0, duration, 1.0 / fps)
     samples = [device.read(t) for t in times]
@@ -57,5 +58,6 @@ def film_scripted_pass(
     tips = start + (positions - positions[0]) @ to_camera.T
     origins = tips - np.einsum("nij,j->ni", cubes, np.asarray(body.tip_offset_m))
     matrix = default_camera_matrix(size, focal_px=size[0] * 0.9)
-    write_instrument_video(path, cubes, origins, body, fps, size, matrix)
+    covered = None if hidden is None else (times >= hidden[0]) & (times < hidden[1])
+    write_instrument_video(path, cubes, origins, body, fps, size, matrix, occluded=covered)
     return float(duration), matrix, tips

@@ -104,6 +104,10 @@ class HudTracker:
                 f"the forceps pull hard on the edge: lift less (it tears at {_force(limits.edge_tear_n)})",
             )
 
+    def warn(self, now: float, text: str) -> None:
+        """Show ``text`` on the warning line for two seconds from ``now`` (said again, it stays)."""
+        self._warn(now, text)
+
     def _warn(self, now: float, text: str) -> None:
         self._warning, self._warning_until = text, now + 2.0
 

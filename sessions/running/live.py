@@ -58,4 +58,7 @@ class LiveView:
         if isinstance(device, MouseDevice):
             hand, channel = MouseHand(device.start, self.mapping), device.channel
         published = live_view_path(home, uid) if uid else None
-        return LiveWindow(tissue, facts, self.settings, hand, channel, self.latency_log, published)
+        window = LiveWindow(tissue, facts, self.settings, hand, channel, self.latency_log, published)
+        window.tracking_problem = getattr(device, "tracking_problem", None)  # a camera's: lost, late
+        window.toggle_grip = getattr(device, "toggle_grip", None)  # a camera-tracked holder's jaws
+        return window

@@ -44,6 +44,14 @@ DEVICE_CONTROLS = {
         "The Touch's stylus is the needle holder: you feel the wall. Its first button closes and opens "
         "the jaws; its second stops the trial.",
     ],
+    "camera": [
+        "Hold the needle holder with its marker cube towards the camera and suture over the table as "
+        "over the wall: a millimetre of your hand is a millimetre of the needle. G (or the foot pedal) "
+        "opens and closes the jaws: release the needle once it is through, grasp it again at its tip. "
+        "No force is felt: the gauge shows it.",
+        "If the camera loses the cube (your hand over it, turned away, out of view) the needle stays "
+        "put and the strip says so; show the cube again and the needle glides back to your hand.",
+    ],
     "scripted": ["A scripted hand places the stitch (a demonstration: no hand of yours is needed)."],
 }
 FORCEPS_CONTROLS = (

@@ -99,6 +99,8 @@ class LiveWindow:
         self.hand, self.channel = hand, channel
         self.simulation = None  # set by the runner: the display process reads the FEM snapshot from it
         self.tracker = HudTracker(facts.limits)
+        self.tracking_problem: Callable[[], str | None] | None = None  # a camera device's, per frame
+        self.toggle_grip: Callable[[], None] | None = None  # a camera device's jaws, on the G key
         self.latency_log = latency_log
         self.published = published  # a JPEG of the view, every LIVE_VIEW_EVERY frames, for the dashboard
         self._pixels = None
@@ -200,6 +202,9 @@ class LiveWindow:
             self.tracker.update(
                 now, fem.state, force, fem.needle_vertices[0], fem.local_stress, fem.grasp_force
             )
+        problem = self.tracking_problem() if self.tracking_problem is not None else None
+        if problem:  # said for as long as it lasts: the needle does not move while it does
+            self.tracker.warn(now, problem)
         if snapshot is not None:
             frame = self.scene.frame_of(snapshot)
             renderer.update(frame)
@@ -355,6 +360,8 @@ class LiveWindow:
             self._request_stop("stopped_by_trainee")
         elif key in GRIP_KEYS and self.hand is not None and not repeat:
             self.hand.toggle_grip()
+        elif key in GRIP_KEYS and self.toggle_grip is not None and not repeat:
+            self.toggle_grip()  # a camera-tracked holder's jaws: the G key, or a foot pedal sending G
 
     def _key_up(self, interactor, _event) -> None:
         self._held.discard(interactor.GetKeySym())

@@ -41,8 +41,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.devices.base import INPUT_ONLY_LIMITS, DeviceError, DeviceIdentity, DeviceLostError, DeviceSample
+from sim.runtime.osrt import try_realtime_priority
 from sim.tracking.camera import Camera
-from sim.tracking.channel import PoseEstimator, PosePredictor, SharedEstimate
+from sim.tracking.channel import STALE_FRAMES, PoseEstimator, PosePredictor, SharedEstimate
 from sim.tracking.markers import NEEDLE_HOLDER, MarkerBody
 from sim.tracking.pose import BodyTracker
 from sim.tracking.video import LiveCamera, VideoFile
@@ -55,6 +56,11 @@ ABOVE_TABLE = np.diag([1.0, -1.0, -1.0])
 the trainee's right, the image's down points at the trainee, the optical axis down to the table."""
 PLACEMENTS = {"facing": FACING_TRAINEE, "above": ABOVE_TABLE}
 ACQUIRE_TIMEOUT_S = 10.0
+TRACKING_PRIORITY = 20
+"""SCHED_FIFO priority of the tracking process where the runtime's threads have one (root, or
+CAP_SYS_NICE): below the haptic loop (50), the FEM (40) and graphics (30) threads, above everything in
+the normal class. Without it, on two cores, the real-time threads left the tracking process too little
+time while the needle was in the wall: a third of the haptic samples were predicted or held."""
 
 
 def camera_source(spec: str) -> int | str | Path:
@@ -81,8 +87,9 @@ class CameraDevice:
     """One instrument tracked by a camera, read by the haptic loop (see the module docstring).
 
     camera: the calibrated camera model; body: the instrument's markers and tip; clock: "realtime" or
-    "simulated"; filter_kind: "one-euro" or "kalman"; device_from_camera: 3x3 rotation (camera axes into
-    the device's); grip_closed: the jaws' state reported (the needle held) until a jaw signal exists.
+    "simulated"; filter_kind: "kalman" or "one-euro"; device_from_camera: 3x3 rotation (camera axes into
+    the device's); grip_closed: the jaws' state at the start (closed: the needle held); the jaws are
+    then closed and opened by :meth:`toggle_grip` (the station's G key or a foot pedal sending it).
     """
 
     limits = INPUT_ONLY_LIMITS
@@ -102,7 +109,7 @@ class CameraDevice:
         self.clock_kind = clock_kind
         self.identity = DeviceIdentity("camera", f"{body.name} tracked by camera {source}")
         self._axes = np.asarray(device_from_camera, dtype=np.float64)
-        self._buttons = 1 if grip_closed else 0
+        self._jaws = multiprocessing.get_context("fork").Value("b", 1 if grip_closed else 0, lock=False)
         self._estimator = PoseEstimator(filter_kind)
         self._fps = 30.0
         self.duration: float | None = None  # a video file's length from the first sighting (s)
@@ -181,6 +188,7 @@ class CameraDevice:
 
     def _track(self) -> None:
         """The tracking process: frames in, estimates out, until the source ends or the device closes."""
+        try_realtime_priority(TRACKING_PRIORITY)
         try:
             frames, opened = open_frames(self.source)
             self._shared.fps = float(getattr(opened, "fps", 30.0))
@@ -230,13 +238,42 @@ class CameraDevice:
             estimate = self._shared.get()
             if self._shared.ended and self._problem.value:
                 raise DeviceLostError(self._problem.value.decode())
-            # the estimate's time is on the perf_counter clock; this tick's is `time` on the session's
-            age = clock.perf_counter() - estimate.frame_time if self._go else 0.0
+            # the estimate's time is on the perf_counter clock; this tick's is `time` on the session's.
+            # A file's first estimate is re-stamped at the go: until it is, it counts as just taken
+            age = clock.perf_counter() - max(estimate.frame_time, self._go_at.value) if self._go else 0.0
         position, rotation, velocity, state = self._predictor.at(time, estimate, age)
         axes = self._axes
         return DeviceSample(
-            time, axes @ position, axes @ rotation, axes @ velocity, self._buttons, tracking=state
+            time, axes @ position, axes @ rotation, axes @ velocity, int(self._jaws.value), tracking=state
         )
+
+    def toggle_grip(self) -> None:
+        """Close or open the jaws (the station's G key, or a foot pedal set to send it; shared with the
+        haptic process, which reads it each tick)."""
+        self._jaws.value = 0 if self._jaws.value else 1
+
+    def tracking_problem(self) -> str | None:
+        """What the heads-up strip should say about the tracking now, or None when it is fine (any
+        process may ask: in real time the estimate is read from shared memory)."""
+        if self.clock_kind == "simulated":
+            estimate, age = self._estimator.estimate, 0.0
+        else:
+            estimate = self._shared.get()
+            age = (
+                clock.perf_counter() - estimate.frame_time
+                if estimate is not None and self._go_at.value
+                else 0.0
+            )
+        if estimate is None or not estimate.measured:
+            return (
+                f"the camera has lost the {self.body.name}: show it its marker cube (the needle stays put "
+                "until it sees it)"
+            )
+        if age > STALE_FRAMES / self._fps:
+            return (
+                "the camera's frames are late: the needle is predicted (free a processor core, or more light)"
+            )
+        return None
 
     def write_force(self, force: NDArray[np.float64]) -> None:
         """A camera feels nothing: the force is shown on the heads-up gauge, never felt."""

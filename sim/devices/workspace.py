@@ -48,6 +48,16 @@ class WorkspaceMapping:
         pose = Pose.unchecked(position, rotation)
         return DeviceSample(time, position, rotation, velocity, sample.buttons, pose, sample.tracking)
 
+    def tracking_problem(self) -> str | None:
+        """The device's own word on its tracking (a camera's: instrument lost, frames late), if any."""
+        ask = getattr(self.device, "tracking_problem", None)
+        return ask() if ask is not None else None
+
+    @property
+    def toggle_grip(self):
+        """The device's own jaw switch (a camera-tracked holder's, worked by a key), or None."""
+        return getattr(self.device, "toggle_grip", None)
+
     def write_force(self, force: NDArray[np.float64]) -> None:
         """The tissue's force (world) in the device's own frame."""
         self.device.write_force(self._to_world.T @ np.asarray(force, dtype=np.float64))

@@ -244,7 +244,7 @@ def _haptic_process(
     start = control.wait_for_start()
     step = 0
     now = 0.0
-    reported = 0
+    reported = tracked = 0
     try:
         while True:
             deadline = start + step * period
@@ -262,6 +262,9 @@ def _haptic_process(
             for when, kind, _detail in simulation.safety.events[reported:]:
                 events.add(when, kind)
             reported = len(simulation.safety.events)
+            for when, kind in simulation.tracking_events[tracked:]:
+                events.add(when, kind)
+            tracked = len(simulation.tracking_events)
             if simulation.stop_reason == "device_lost":
                 events.add(now, "device_lost")
                 control.haptic_state = ControlBlock.DEVICE_LOST
@@ -394,10 +397,8 @@ def _collect(
     ):
         log.append(float(t), p, bool(g), f)
     simulation.telemetry["haptic"] = _as_layer_telemetry("haptic", simulation, telemetry)
-    for when, kind in events.read():
-        simulation.events.append(
-            RuntimeEvent(kind, when, "haptic", child_error if kind == "layer_failed" else "")
-        )
+    for when, kind in events.read():  # recorded as well (the recorder hears them only here)
+        simulation._emit(RuntimeEvent(kind, when, "haptic", child_error if kind == "layer_failed" else ""))
     simulation.events.sort(key=lambda event: event.time)
     if control.haptic_state == ControlBlock.DEVICE_LOST:
         simulation.stop("device_lost", 0.0)

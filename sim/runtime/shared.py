@@ -264,6 +264,8 @@ EVENT_CODES = (
     "nonfinite_force",
     "device_lost",
     "layer_failed",
+    "tracking_lost",
+    "tracking_regained",
 )
 
 

@@ -118,6 +118,8 @@ class Simulation:
             warm_kernel_geometry(tissue.base)
         self._prefetcher: Prefetcher | None = None  # started for the length of a run (a worker process)
         self._previous_tip: NDArray[np.float64] | None = None  # at the last graphics frame
+        self._tracking = 0  # the needle hand's pose: measured (0) or held (2) at the last change
+        self.tracking_events: list[tuple[float, str]] = []
 
     # -- the four steps ----------------------------------------------------------------
     def haptic_step(self, now: float) -> None:
@@ -129,6 +131,8 @@ class Simulation:
             return
         pose = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
         grip = sample.pressed(GRIP_BUTTON)
+        if sample.tracking != self._tracking:  # a camera lost the instrument, or found it again
+            self._tracking_changed(now, sample.tracking)
         if sample.buttons >> STOP_BUTTON & 1:  # the trainee's stop, on the device itself
             self.stop("stopped_by_trainee", now)
         if self.force_path is not None:  # the same steps in one compiled call, the log included
@@ -154,6 +158,20 @@ class Simulation:
             self._read_subordinate(now)
         if self.on_sample is not None:
             self.on_sample(now, sample, force, self.fem.get())
+
+    def _tracking_changed(self, now: float, tracking: int) -> None:
+        """``tracking_lost`` when the pose becomes held (2), ``tracking_regained`` when it is measured (0)
+        again; a predicted pose (1) in between changes nothing."""
+        kind = None
+        if tracking == 2 and self._tracking != 2:
+            kind = "tracking_lost"
+        elif tracking == 0 and self._tracking == 2:
+            kind = "tracking_regained"
+        if kind is not None:
+            self.tracking_events.append((now, kind))  # the real-time loop passes these to the parent
+            self._emit(RuntimeEvent(kind, now, "haptic", "pose held" if tracking == 2 else "pose measured"))
+        if tracking in (0, 2):
+            self._tracking = tracking
 
     def _read_subordinate(self, now: float) -> None:
         """The subordinate hand's reading at the haptic rate (it is sent no force: the paper's

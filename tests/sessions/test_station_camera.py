@@ -1,0 +1,84 @@
+"""The station with a real needle holder tracked by a camera (issue 47), as a trainee uses it: a real
+window under Xvfb, the instruments' video played through ``camera:FILE`` on the real-time clock.
+
+The video is a scripted wall stitch filmed with a hand over the cube for half a second, so the trial
+shows the needle following the instrument, the strip saying the camera lost it, and the feedback."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from sessions.running.filmed import film_scripted_pass
+from sessions.synthetic import pass_parameters
+from sim.tracking.camera import Camera
+from tests.sessions.test_station import VASCSIM, Person, environment, events_of, only_uid, session_row
+
+pytestmark = pytest.mark.exclusive
+
+TASK = "wall-stitch"
+HIDDEN = (2.0, 2.6)
+
+
+@pytest.fixture
+def camera_home(tmp_path):
+    from sessions.catalog import Catalog
+    from sessions.catalog.store import CatalogStore
+    from sessions.config import database_url
+
+    home = tmp_path / "home"
+    home.mkdir()
+    catalog = Catalog(database_url(home))
+    store = CatalogStore(catalog)
+    store.create_study("Course")
+    store.add_participant("Course", "P1", "trainee", "trainee")
+    catalog.close()
+    video = home / "holder.mp4"
+    _, matrix, _ = film_scripted_pass(TASK, pass_parameters(0.9, 3), video, hidden=HIDDEN)
+    Camera(matrix, np.zeros(5), (1280, 720)).save(home / "camera.json")
+    return home, video
+
+
+def test_a_trainee_sutures_with_a_tracked_needle_holder_at_the_station(display, camera_home, tmp_path):
+    """Instructions naming the camera, space, the live view following the instrument, the strip saying
+    when the camera loses the cube, the feedback screen; the recording holds the tracking's labels and
+    its lost and regained events."""
+    home, video = camera_home
+    person = Person(display, tmp_path)
+    command = [VASCSIM, "station", "--study", "Course", "--participant", "P1", "--task", TASK]
+    station = subprocess.Popen(
+        [*command, "--device", f"camera:{video}", "--trials", "1"],
+        env=environment(display, home),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        instructions = person.window("vascsim: instructions", process=station)
+        time.sleep(0.5)
+        person.screenshot("1-instructions")
+        person.key(instructions, "space")
+        person.window(f"vascsim: {TASK}", process=station)
+        for k in range(16):  # the trial as it goes (the cube is hidden 2.0-2.6 s into the video)
+            time.sleep(0.4)
+            person.screenshot(f"2-live-{k:02d}")
+        feedback = person.window("vascsim: feedback", process=station)
+        time.sleep(0.5)
+        person.screenshot("4-feedback")
+        person.key(feedback, "q")
+        out, err = station.communicate(timeout=60)
+    finally:
+        if station.poll() is None:
+            station.kill()
+        station.communicate()
+    assert station.returncode == 0, err
+    assert "Traceback" not in err
+    uid = only_uid(home)
+    status, metrics = session_row(home, uid)
+    assert status == "complete" and metrics["task_time"] > 1.0
+    kinds = events_of(home, uid)
+    assert "tracking_lost" in kinds and "tracking_regained" in kinds, kinds
+    assert kinds.index("tracking_lost") < kinds.index("tracking_regained")
