@@ -16,8 +16,12 @@ from sessions.cli.base import (
 @click.argument("images", nargs=-1)
 @click.option("--live", is_flag=True, help="Calibrate from the camera's own frames, guided view by view.")
 @click.option(
+    "--table", is_flag=True,
+    help="Register the table: how the (calibrated) camera sits over it, from the board lying flat on it.",
+)  # fmt: skip
+@click.option(
     "--source", default="camera:0", show_default=True,
-    help="With --live: camera:INDEX, a stream URL, or a video file of the board.",
+    help="With --live or --table: camera:INDEX, a stream URL, or a video file of the board.",
 )  # fmt: skip
 @click.option(
     "-o", "--out", type=click.Path(dir_okay=False),
@@ -32,7 +36,7 @@ from sessions.cli.base import (
     help="With --live: give up after this many seconds.",
 )  # fmt: skip
 @user_errors
-def calibrate(images, live, source, out, squares, square_mm, marker_mm, dictionary, timeout) -> None:
+def calibrate(images, live, table, source, out, squares, square_mm, marker_mm, dictionary, timeout) -> None:
     """Calibrate a camera from views of a ChArUco board (square-on and tilted each way).
 
     From photos: IMAGES are 10-20 photos of the board; --out names the JSON to write
@@ -41,12 +45,26 @@ def calibrate(images, live, source, out, squares, square_mm, marker_mm, dictiona
     up, down); the fit is written as this station's calibration, which the camera
     device (`--device camera`) uses. Either way the reprojection error is reported
     (pixels), and a live fit over 1 px is refused.
+
+    Then --table: lay the board flat on the table where you will suture, its top
+    row away from you, and the camera's view is registered to it, so that moving
+    the instrument over the table moves the needle over the wall as the screen
+    shows it (without it the camera is taken to be on the monitor, facing you).
     """
     from pathlib import Path
 
     from sim.tracking.camera import BoardSpec
 
     board = BoardSpec(number_pair(squares, "--squares"), square_mm / 1e3, marker_mm / 1e3, dictionary)
+    if table:
+        from sessions.running.camera import register_table
+
+        _, home = open_catalog()
+        _, error, path = register_table(source, home, board)
+        click.echo(
+            f"table registered: {path} (the board's reprojection error {error:.2f} px; lower is better)"
+        )
+        return
     if live:
         if images:
             raise click.UsageError("give either board photos or --live, not both")

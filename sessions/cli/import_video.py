@@ -28,10 +28,14 @@ from sessions.cli.base import (
     "--tip-offset-mm", default="0,-60,-10", show_default=True,
     help="Instrument tip in the marker frame (x right, y up, z out of the marker), mm.",
 )  # fmt: skip
+@click.option(
+    "--instrument", type=click.Choice(["needle-holder", "forceps"]), default=None,
+    help="Track this instrument's marker cube (its registered tip) instead of one flat marker.",
+)  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print the session's metrics as JSON.")
 @user_errors
 def import_video(
-    video, camera_file, study, participant, marker_id, marker_mm, tip_offset_mm, as_json
+    video, camera_file, study, participant, marker_id, marker_mm, tip_offset_mm, instrument, as_json
 ) -> None:
     """Add a bench-model session from video: ArUco tracking of the needle holder.
 
@@ -45,8 +49,13 @@ def import_video(
     existing_path(video, "video")
     existing_path(camera_file, "camera calibration")
     offset = tuple(v / 1e3 for v in number_pair(tip_offset_mm, "--tip-offset-mm", float, 3))
-    marker = MarkerBody.flat(marker_id, marker_mm / 1e3, offset)
     catalog, home = open_catalog()
+    if instrument is not None:  # the cube the camera device tracks, the same detector and pose
+        from sessions.running.camera import instrument_body
+
+        marker = instrument_body(home, instrument)
+    else:
+        marker = MarkerBody.flat(marker_id, marker_mm / 1e3, offset)
     with progress_bar(transient=True) as progress:
         task = progress.add_task("tracking", total=None, last="")
         uid, values = import_bench_video(

@@ -4,6 +4,9 @@ Kept in the data directory so a course sets up once per station:
 
 - ``camera.json``: the camera's calibration (:class:`sim.tracking.camera.Camera`), written by the
   calibrate command (from photos, or live from the camera);
+- ``table.json``: how the camera sits over the table (the rotation from its axes into the device
+  frame), from the board lying on the table (``calibrate --table``); without it the camera is taken
+  to be on the monitor facing the trainee;
 - ``instruments.json``: each instrument's tip offset in its marker cube's frame (mm), with the
   pivot calibration's residual, written by ``instruments register``; an instrument never registered
   uses its nominal offset (:data:`sim.tracking.markers.INSTRUMENTS`).
@@ -23,14 +26,17 @@ import numpy as np
 
 from sessions.catalog import CatalogError
 from sim.devices.camera import PLACEMENTS, CameraDevice, camera_source, open_frames
+from sim.errors import TrackingError
 from sim.tracking.camera import BoardSpec, Camera
-from sim.tracking.guided import CalibrationViews
+from sim.tracking.guided import CalibrationViews, table_registration
 from sim.tracking.markers import INSTRUMENTS, MarkerBody
 from sim.tracking.pivot import PivotResult, pivot_calibration
 from sim.tracking.pose import BodyTracker
 
 CAMERA_FILE = "camera.json"
 INSTRUMENTS_FILE = "instruments.json"
+TABLE_FILE = "table.json"
+"""The camera's axes into the device frame, measured with the board lying on the table."""
 MAX_TIP_OFFSET_MM = 400.0
 """No instrument's tip lies further than this from its marker cube."""
 
@@ -105,29 +111,84 @@ def save_tip(home: Path, name: str, tip_offset_m, residual_m: float) -> Path:
         "residual_mm": round(float(residual_m) * 1e3, 4),
         "registered_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    path = home / INSTRUMENTS_FILE
-    home.mkdir(parents=True, exist_ok=True)
+    return _write_whole(home / INSTRUMENTS_FILE, data)
+
+
+def table_axes(home: Path):
+    """The registered rotation from the camera's axes into the device frame, or None (never registered)."""
+    path = home / TABLE_FILE
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        rotation = np.array(data["device_from_camera"], dtype=np.float64)
+        if set(data) != {"device_from_camera", "reprojection_px", "registered_at"} or rotation.shape != (
+            3,
+            3,
+        ):
+            raise ValueError("expected device_from_camera (3x3), reprojection_px and registered_at")
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise CatalogError(f"{path} is not readable: {error}; register the table again") from None
+    if not (np.all(np.isfinite(rotation)) and np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6)
+            and abs(np.linalg.det(rotation) - 1.0) < 1e-6):  # fmt: skip
+        raise CatalogError(f"{path}: device_from_camera is not a rotation; register the table again")
+    return rotation
+
+
+def save_table(home: Path, rotation, reprojection_px: float) -> Path:
+    data = {
+        "device_from_camera": np.asarray(rotation).round(9).tolist(),
+        "reprojection_px": round(float(reprojection_px), 4),
+        "registered_at": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    return _write_whole(home / TABLE_FILE, data)
+
+
+def _write_whole(path: Path, data: dict) -> Path:
+    """Write JSON to a new file, then rename it over the old: a crash leaves the old one whole."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(data, indent=2))
     partial.replace(path)
     return path
 
 
+def register_table(spec: str, home: Path, board: BoardSpec | None = None) -> tuple[np.ndarray, float, Path]:
+    """Register the table from the first frame of ``spec`` that shows the board lying on it."""
+    camera = camera_calibration(home)
+    frames, opened = open_frames(_source_of(spec))
+    problem = None
+    try:
+        for _, frame in frames:
+            try:
+                rotation, error = table_registration(frame, camera, board)
+            except TrackingError as refused:
+                problem = refused
+                continue
+            return rotation, error, save_table(home, rotation, error)
+    finally:
+        opened.close()
+    raise problem or CatalogError(f"camera source {spec} sent no frames")
+
+
 def open_camera_device(
-    spec: str, clock: str, home: Path, instrument: str = "needle-holder", placement: str = "facing"
+    spec: str, clock: str, home: Path, instrument: str = "needle-holder", placement: str | None = None
 ) -> tuple[CameraDevice, float | None]:
-    """The device ``camera[:INDEX|URL|FILE]`` names for ``instrument``, and a video file's length (s)."""
+    """The device ``camera[:INDEX|URL|FILE]`` names for ``instrument``, and a video file's length (s).
+    ``placement``: a named one (:data:`sim.devices.camera.PLACEMENTS`), else the registered table's, else
+    the camera on the monitor facing the trainee."""
     source = camera_source(spec.split(":", 1)[1] if ":" in spec else "0")
     if clock == "simulated" and not isinstance(source, Path):
         raise CatalogError(
             "a live camera runs in real time; a simulated clock replays a video file (camera:FILE)"
         )
-    if placement not in PLACEMENTS:
+    if placement is not None and placement not in PLACEMENTS:
         raise CatalogError(f"unknown camera placement {placement!r}; one of {', '.join(PLACEMENTS)}")
+    registered = table_axes(home) if placement is None else None
+    axes = registered if registered is not None else PLACEMENTS[placement or "facing"]
     device = CameraDevice(
-        source, camera_calibration(home), instrument_body(home, instrument), clock,
-        device_from_camera=PLACEMENTS[placement],
-    )  # fmt: skip
+        source, camera_calibration(home), instrument_body(home, instrument), clock, device_from_camera=axes
+    )
     return device, device.duration
 
 

@@ -95,3 +95,35 @@ def _kind(rotation: NDArray[np.float64]) -> str:
     if abs(left_right) >= abs(up_down):
         return "tilted right" if left_right > 0 else "tilted left"
     return "tilted down" if up_down > 0 else "tilted up"
+
+
+DEVICE_FROM_BOARD = np.diag([1.0, -1.0, -1.0])
+"""A board lying on the table, its first row away from the trainee: its x is the trainee's right, its y
+(down the rows) points at the trainee, its z into the table; the device frame's x is the right, y away
+from the trainee (up the screen), z up from the table (out of the screen)."""
+MIN_TABLE_CORNERS = 12
+
+
+def table_registration(frame: NDArray[np.uint8], camera: Camera, board: BoardSpec | None = None):
+    """The rotation from the camera's axes into the device frame (``device_from_camera``), from one
+    view of the board lying flat on the table, its first row away from the trainee; and the board's
+    reprojection error (px). Refuses a frame where too little of the board is seen."""
+    import cv2
+
+    board = board or BoardSpec()
+    charuco = board.board()
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(charuco).detectBoard(frame)
+    if ids is None or len(ids) < MIN_TABLE_CORNERS:
+        seen = 0 if ids is None else len(ids)
+        raise TrackingError(
+            f"the board was seen with {seen} corners (at least {MIN_TABLE_CORNERS} needed): lay it flat on "
+            "the table in the camera's view, in good light"
+        )
+    object_points, image_points = charuco.matchImagePoints(corners, ids)
+    ok, rotation, translation = cv2.solvePnP(object_points, image_points, camera.matrix, camera.distortion)
+    if not ok:
+        raise TrackingError("the board's pose could not be solved: show more of it to the camera")
+    projected, _ = cv2.projectPoints(object_points, rotation, translation, camera.matrix, camera.distortion)
+    error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - image_points.reshape(-1, 2)) ** 2, 1))))
+    camera_from_board = cv2.Rodrigues(rotation)[0]
+    return DEVICE_FROM_BOARD @ camera_from_board.T, error

@@ -184,6 +184,52 @@ def pivot_motion(
     return np.array(rotations), np.array(origins)
 
 
+def board_frame(
+    rotation: NDArray[np.float64],
+    centre: NDArray[np.float64],
+    board: BoardSpec | None = None,
+    size: tuple[int, int] = (1280, 720),
+    camera_matrix: NDArray[np.float64] | None = None,
+    seed: int = 5,
+) -> NDArray[np.uint8]:
+    """One grey frame of the board posed by ``rotation`` (camera <- board; board frame: origin at its
+    top-left corner, x along its rows, y down its columns, z into it) with its centre at ``centre`` (m)."""
+    board = board or BoardSpec()
+    camera_matrix = (
+        default_camera_matrix(size, focal_px=size[0] * 0.9) if camera_matrix is None else camera_matrix
+    )
+    columns, rows = board.squares
+    width_m, height_m = columns * board.square_m, rows * board.square_m
+    texture = board.board().generateImage((columns * 120, rows * 120), marginSize=0, borderBits=1)
+    corners = np.array([[0, 0, 0], [width_m, 0, 0], [width_m, height_m, 0], [0, height_m, 0]], dtype=float)
+    rng = np.random.default_rng(seed)
+    frame = background(size, rng)
+    draw_plane(
+        frame,
+        texture,
+        corners,
+        rotation,
+        centre - rotation @ np.array([width_m / 2, height_m / 2, 0]),
+        camera_matrix,
+    )
+    return np.clip(frame + rng.normal(0, 1.5, frame.shape), 0, 255).astype(np.uint8)
+
+
+def write_frames(path: str | Path, frames: list[NDArray[np.uint8]], fps: int = 10) -> None:
+    """Grey frames to a high-quality H.264 file."""
+    import av
+
+    with av.open(str(path), mode="w") as container:
+        stream = container.add_stream("libx264", rate=fps, options={"crf": "12", "preset": "veryfast"})
+        stream.height, stream.width = frames[0].shape
+        stream.pix_fmt = "yuv420p"
+        for frame in frames:
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="gray")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+
+
 def board_views_video(
     path: str | Path,
     board: BoardSpec | None = None,

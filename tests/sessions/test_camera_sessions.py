@@ -77,6 +77,22 @@ def test_a_filmed_pass_played_through_the_camera_scores_like_the_pass_that_made_
     assert "pierce" in set(recorded.events_frame()["kind"])
 
 
+def test_the_bench_importer_tracks_the_same_cube_with_the_same_detector(filmed, monkeypatch):
+    """`import-video --instrument needle-holder` reads the filmed pass with the camera device's detector
+    and pose (the cube, its tip): the bench session's path length matches the scripted pass's."""
+    home, catalog, scripted, video, _ = filmed
+    monkeypatch.setenv("VASCSIM_HOME", str(home))
+    monkeypatch.delenv("VASCSIM_DATABASE_URL", raising=False)
+    command = ["import-video", str(video), "--camera", str(home / "camera.json"), "--study", "S"]
+    result = CliRunner().invoke(
+        main, [*command, "--participant", "E1", "--instrument", "needle-holder", "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    bench = json.loads(result.output)["metrics"]
+    truth = metrics_of(from_recorded(_recorded(catalog, scripted)))
+    assert bench["path_length"] == pytest.approx(truth["path_length"], rel=0.05)
+
+
 @pytest.mark.exclusive
 def test_a_filmed_pass_plays_in_real_time_through_the_tracking_process(filmed):
     """camera:FILE on the real-time clock: the frames are tracked in a process of their own and read by
@@ -180,3 +196,33 @@ def test_an_edited_instruments_file_is_refused_naming_the_problem(tmp_path, cont
     (tmp_path / INSTRUMENTS_FILE).write_text(content)
     with pytest.raises(CatalogError, match=problem):
         registered_tips(tmp_path)
+
+
+def test_the_table_is_registered_from_the_board_lying_on_it(tmp_path, monkeypatch):
+    """A camera above and in front of the table, tilted 55 deg down: the registration recovers how its
+    axes turn into the device frame within half a degree, and an edited
+    table file that is not a rotation is refused."""
+    from sessions.running.camera import TABLE_FILE, table_axes
+    from sim.tracking.filters import rotation_vector
+    from sim.tracking.guided import DEVICE_FROM_BOARD
+    from sim.tracking.synthetic import board_frame, default_camera_matrix, rotation_xyz, write_frames
+
+    monkeypatch.setenv("VASCSIM_HOME", str(tmp_path))
+    matrix = default_camera_matrix((1280, 720), focal_px=1152.0)
+    Camera(matrix, np.zeros(5), (1280, 720)).save(tmp_path / "camera.json")
+    camera_from_board = rotation_xyz(np.array([np.radians(-55.0), 0.0, np.radians(8.0)]))
+    frame = board_frame(camera_from_board, np.array([0.0, 0.0, 0.5]), camera_matrix=matrix)
+    write_frames(tmp_path / "table.mp4", [np.full_like(frame, 128), frame, frame])
+    result = CliRunner().invoke(main, ["calibrate", "--table", "--source", str(tmp_path / "table.mp4")])
+    assert result.exit_code == 0, result.output
+    assert "table registered" in result.output
+    expected = DEVICE_FROM_BOARD @ camera_from_board.T
+    found = table_axes(tmp_path)
+    assert np.degrees(np.linalg.norm(rotation_vector(found @ expected.T))) < 0.5
+    (tmp_path / TABLE_FILE).write_text(json.dumps({"device_from_camera": np.eye(3).tolist(), "x": 1}))
+    with pytest.raises(CatalogError, match="register the table again"):
+        table_axes(tmp_path)
+    skewed = {"device_from_camera": (2 * np.eye(3)).tolist(), "reprojection_px": 0.1, "registered_at": "x"}
+    (tmp_path / TABLE_FILE).write_text(json.dumps(skewed))
+    with pytest.raises(CatalogError, match="not a rotation"):
+        table_axes(tmp_path)
