@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.devices.base import INPUT_ONLY_LIMITS, DeviceError, DeviceIdentity, DeviceLostError, DeviceSample
+from sim.errors import TrackingError
 from sim.runtime.osrt import try_realtime_priority
 from sim.tracking.camera import Camera
 from sim.tracking.channel import STALE_FRAMES, PoseEstimator, PosePredictor, SharedEstimate
@@ -220,6 +221,8 @@ class CameraDevice:
                 estimate = self._estimator.update(stamp, tracker.locate(frame))
                 if estimate is not None:
                     self._shared.put(replace(estimate, frame_time=due))
+        except TrackingError as error:  # says which camera already
+            self._problem.value = str(error).encode()[:399]
         except Exception as error:  # the parent reads why, and the haptic loop stops cleanly
             self._problem.value = f"camera {self.source}: {error}".encode()[:399]
         finally:

@@ -71,6 +71,9 @@ class LiveCamera:
     def __init__(self, source: int | str, size: tuple[int, int] | None = (1280, 720), fps: float = 60.0):
         import cv2
 
+        cv2.utils.logging.setLogLevel(
+            cv2.utils.logging.LOG_LEVEL_ERROR
+        )  # its own warnings say less than ours
         self.source = source
         self._capture = cv2.VideoCapture(source)
         if not self._capture.isOpened():
