@@ -225,6 +225,13 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
         if measured.sum() >= 4:
             tool = tracked_path(time, np.where(measured[:, None], tool, np.nan), CAMERA_SMOOTHING_HZ)
         metadata = dict(metadata, tool_measured_fraction=float(measured.mean()))
+    subordinate = columns("sub_dx", "sub_dy", "sub_dz") if two_handed else None
+    if subordinate is not None and str(header.get("sub_device", "")) == "camera":  # the same for the forceps
+        measured = column("sub_tracking") == 0
+        if measured.sum() >= 4:
+            subordinate = tracked_path(
+                time, np.where(measured[:, None], subordinate, np.nan), CAMERA_SMOOTHING_HZ
+            )
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),
         participant_id=participant_id or metadata.get("participant_id"),
@@ -236,7 +243,7 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
         needle_state=column("pierced").astype(np.int8),
         local_stress=None if np.all(np.isnan(stress)) else stress,
         stretch=None if np.all(np.isnan(stretch)) else stretch,
-        subordinate_displacement=columns("sub_dx", "sub_dy", "sub_dz") if two_handed else None,
+        subordinate_displacement=subordinate,
         grip=column("grip").astype(np.int8),
         forceps_jaw=column("sub_jaw").astype(np.float64) if two_handed else None,
         grasp_force=columns("grasp_fx", "grasp_fy", "grasp_fz") if two_handed else None,

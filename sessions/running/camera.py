@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from sessions.catalog import CatalogError
+from sessions.config import data_home
 from sim.devices.camera import PLACEMENTS, CameraDevice, camera_source, open_frames
 from sim.errors import TrackingError
 from sim.tracking.camera import BoardSpec, Camera
@@ -172,11 +173,18 @@ def register_table(spec: str, home: Path, board: BoardSpec | None = None) -> tup
 
 
 def open_camera_device(
-    spec: str, clock: str, home: Path, instrument: str = "needle-holder", placement: str | None = None
+    spec: str,
+    clock: str,
+    home: Path | None,
+    instrument: str = "needle-holder",
+    placement: str | None = None,
+    companions: tuple[str, ...] = (),
 ) -> tuple[CameraDevice, float | None]:
-    """The device ``camera[:INDEX|URL|FILE]`` names for ``instrument``, and a video file's length (s).
-    ``placement``: a named one (:data:`sim.devices.camera.PLACEMENTS`), else the registered table's, else
-    the camera on the monitor facing the trainee."""
+    """The device ``camera[:INDEX|URL|FILE]`` names for ``instrument`` (and ``companions``, other
+    instruments tracked in the same frames: :meth:`CameraDevice.companion`), and a video file's length
+    (s). ``placement``: a named one (:data:`sim.devices.camera.PLACEMENTS`), else the registered table's,
+    else the camera on the monitor facing the trainee."""
+    home = home or data_home()
     source = camera_source(spec.split(":", 1)[1] if ":" in spec else "0")
     if clock == "simulated" and not isinstance(source, Path):
         raise CatalogError(
@@ -187,8 +195,9 @@ def open_camera_device(
     registered = table_axes(home) if placement is None else None
     axes = registered if registered is not None else PLACEMENTS[placement or "facing"]
     device = CameraDevice(
-        source, camera_calibration(home), instrument_body(home, instrument), clock, device_from_camera=axes
-    )
+        source, camera_calibration(home), instrument_body(home, instrument), clock, device_from_camera=axes,
+        companions=tuple(instrument_body(home, name) for name in companions),
+    )  # fmt: skip
     return device, device.duration
 
 

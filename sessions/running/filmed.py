@@ -19,12 +19,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sessions.running.runner import SessionPlan, open_device
-from sessions.running.scene import task_camera
+from sessions.running.scene import access_direction, task_camera
 from sessions.tasks import task_spec
+from sim.devices.assisting import ScriptedHands
 from sim.devices.camera import PLACEMENTS
 from sim.devices.scripted import SuturingPassParameters
 from sim.devices.workspace import view_axes
-from sim.tracking.markers import NEEDLE_HOLDER, MarkerBody
+from sim.tracking.markers import FORCEPS, NEEDLE_HOLDER, MarkerBody
 from sim.tracking.synthetic import default_camera_matrix, rotation_xyz, write_instrument_video
 
 HOLDER_FROM_BODY = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -34,7 +35,7 @@ back end) along the holder's -z (the shaft), its z along the holder's y."""
 
 def film_scripted_pass(
     task: str,
-    parameters: SuturingPassParameters,
+    parameters: SuturingPassParameters | ScriptedHands,
     path: str | Path,
     size: tuple[int, int] = (1280, 720),
     fps: float = 30.0,
@@ -44,20 +45,41 @@ def film_scripted_pass(
     body: MarkerBody = NEEDLE_HOLDER,
     hidden: tuple[float, float] | None = None,
 ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
-    """Render the pass (``hidden``: from and to when (s) a hand covers the cube); returns (its duration
-    in s, the camera matrix, the tip's path in the camera frame at each frame (m))."""
-    device, duration, _ = open_device("scripted", SessionPlan("filmed", "filmed", task, 1), None, parameters)
+    """Render the pass (``hidden``: from and to when (s) a hand covers the cube; both hands' parameters
+    (:class:`ScriptedHands`): the forceps filmed too, 8 cm to the holder's left); returns (its duration
+    in s, the camera matrix, the holder's tip path in the camera frame at each frame (m))."""
+    plan = SessionPlan("filmed", "filmed", task, 1)
+    device, duration, assisting = open_device("scripted", plan, None, parameters)
     times = np.arange(0.0, duration, 1.0 / fps)
-    samples = [device.read(t) for t in times]
-    positions = np.array([s.position for s in samples])
-    rotations = np.array([s.rotation for s in samples])
     to_camera = PLACEMENTS[placement].T @ view_axes(*task_camera(task_spec(task))).T  # world -> camera
     mount = HOLDER_FROM_BODY @ rotation_xyz(np.array([0.0, np.radians(roll_deg), 0.0]))
-    cubes = np.array([to_camera @ r @ mount for r in rotations])
     start = np.array([0.0, 0.08, distance_m])  # the tip low in the image, the cube above it
-    tips = start + (positions - positions[0]) @ to_camera.T
-    origins = tips - np.einsum("nij,j->ni", cubes, np.asarray(body.tip_offset_m))
+    cubes, origins, tips = _filmed(device, times, to_camera, mount, start, body)
+    others = ()
+    if assisting is not None:  # the forceps' cube on their shaft, which comes in along the access
+        left = start + np.array([0.08, 0.0, 0.0])  # the trainee's left is the image's right
+        forceps = _filmed(
+            assisting, times, to_camera, _shaft_along(access_direction(task_spec(task))), left, FORCEPS
+        )
+        others = ((FORCEPS, forceps[0], forceps[1]),)
     matrix = default_camera_matrix(size, focal_px=size[0] * 0.9)
     covered = None if hidden is None else (times >= hidden[0]) & (times < hidden[1])
-    write_instrument_video(path, cubes, origins, body, fps, size, matrix, occluded=covered)
+    write_instrument_video(path, cubes, origins, body, fps, size, matrix, occluded=covered, others=others)
     return float(duration), matrix, tips
+
+
+def _shaft_along(direction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A cube mount whose y axis (the instrument's back end) points along ``direction`` (tool frame)."""
+    back = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
+    across = np.cross(back, [0.0, 0.0, 1.0] if abs(back[2]) < 0.9 else [1.0, 0.0, 0.0])
+    across /= np.linalg.norm(across)
+    return np.column_stack([across, back, np.cross(across, back)])
+
+
+def _filmed(device, times, to_camera, mount, start, body: MarkerBody):
+    """(cube rotations, cube origins, tips) in the camera frame of a scripted hand's instrument."""
+    samples = [device.read(t) for t in times]
+    positions = np.array([s.position for s in samples])
+    cubes = np.array([to_camera @ s.rotation @ mount for s in samples])
+    tips = start + (positions - positions[0]) @ to_camera.T
+    return cubes, tips - np.einsum("nij,j->ni", cubes, np.asarray(body.tip_offset_m)), tips

@@ -13,11 +13,13 @@ the first entry mark; its first button closes them.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from sessions.catalog import CatalogError
+from sessions.running.camera import open_camera_device
 from sessions.running.scene import access_direction, task_camera
 from sessions.tasks import TaskSpec, grasp_sites
 from sim.devices.openhaptics import OpenHapticsDevice
@@ -25,9 +27,10 @@ from sim.devices.spacemouse import SpaceMouse, find_spacemice
 from sim.devices.workspace import WorkspaceMapping, view_axes
 from sim.needle import Pose
 
-SUB_DEVICES = ("none", "spacemouse", "openhaptics")
-"""``--sub-device`` choices for a person's station: no second hand, the paper's SpaceMouse, or a second
-Touch (OpenHaptics). A scripted session's second hand is the scripted assisting hand."""
+SUB_DEVICES = ("none", "spacemouse", "openhaptics", "camera")
+"""``--sub-device`` choices for a person's station: no second hand, the paper's SpaceMouse, a second
+Touch (OpenHaptics), or real forceps with their marker cube tracked by the camera (the same camera as
+a camera-tracked needle holder's). A scripted session's second hand is the scripted assisting hand."""
 FORCEPS_START_HEIGHT_M = 0.3e-3
 """The open jaws start this far above the wound's edge, along the access direction: within the
 forceps' reach (0.5 mm), so closing them there takes the edge."""
@@ -73,10 +76,17 @@ def forceps_start(spec: TaskSpec) -> Pose:
     return Pose(sites[0] + FORCEPS_START_HEIGHT_M * access_direction(spec), np.eye(3))
 
 
-def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, taken: str = ""):
+def open_forceps_device(
+    name: str,
+    spec: TaskSpec,
+    left_handed: bool = False,
+    taken: str = "",
+    home: Path | None = None,
+    clock: str = "realtime",
+):
     """The subordinate hand's device ``name`` (a :data:`SUB_DEVICES` entry), mapped onto the task's
     scene from :func:`forceps_start`; ``taken``: the needle's device name (two SpaceMice: the second
-    one found holds the forceps)."""
+    one found holds the forceps); ``home``: the data directory (a camera's set-up)."""
     if name == "spacemouse":
         identity = None
         if taken == "spacemouse":
@@ -87,6 +97,8 @@ def open_forceps_device(name: str, spec: TaskSpec, left_handed: bool = False, ta
         device = SpaceMouse(identity)
     elif name == "openhaptics":
         device = OpenHapticsDevice()
+    elif name == "camera":  # the needle on another device: the forceps alone in the camera's view
+        device, _ = open_camera_device("camera", clock, home, instrument="forceps")
     else:
         raise CatalogError(f"unknown second device {name!r}; one of {', '.join(SUB_DEVICES[1:])}")
     return forceps_on(device, spec, left_handed)

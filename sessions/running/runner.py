@@ -31,9 +31,9 @@ from sessions.catalog.models import (
     MetricResult,
     StitchResult,
 )
-from sessions.config import cache_dir, data_home
+from sessions.config import cache_dir
 from sessions.running.camera import open_camera_device
-from sessions.running.hands import instruments, open_forceps_device
+from sessions.running.hands import forceps_on, instruments, open_forceps_device
 from sessions.running.live import LiveView
 from sessions.running.scene import LIVE_TIME_FACTOR, mapped_onto_task, start_pose, stop_when_done
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
@@ -111,10 +111,12 @@ def open_device(
     catalog: Catalog,
     parameters: SuturingPassParameters | ScriptedHands | None,
     home: Path | None = None,
+    companions: tuple[str, ...] = (),
 ) -> OpenedDevice:
     """The device named by ``--device`` (and, for a scripted session given both hands' parameters
     on a task with a wound edge, the subordinate hand's), and the session's duration. ``home``: the
-    data directory, where a camera's calibration and the instruments' registered tips are kept."""
+    data directory, where a camera's calibration and the instruments' registered tips are kept;
+    ``companions``: instruments a camera tracks beside the needle holder (the forceps)."""
     task = task_spec(plan.task)
     if spec == "scripted":
         hands = (
@@ -164,7 +166,7 @@ def open_device(
     if spec == "openhaptics":
         return OpenedDevice(OpenHapticsDevice(), None)
     if spec == "camera" or spec.startswith("camera:"):  # mapped onto the task's scene by run_session
-        device, length = open_camera_device(spec, plan.clock, home or data_home())
+        device, length = open_camera_device(spec, plan.clock, home, companions=companions)
         return OpenedDevice(device, length)
     raise CatalogError(
         f"unknown device {spec!r}; use scripted, mouse, spacemouse, openhaptics, camera[:INDEX|URL|FILE] "
@@ -221,13 +223,16 @@ def run_session(
     try:
         left = plan.handedness == "left" or (view is not None and view.mapping.handedness == "left")
         hands = instruments(plan.device, plan.sub_device, "left" if left else "right")
-        device, natural, subordinate = open_device(hands.needle, plan, catalog, parameters, home)
-        if (
-            hands.needle.split(":", 1)[0] in MAPPED_DEVICES
-        ):  # the hand's workspace onto the task's scene, as shown
+        both_on_camera = hands.forceps == "camera" and hands.needle.split(":", 1)[0] == "camera"
+        companions = ("forceps",) if both_on_camera else ()
+        device, natural, subordinate = open_device(hands.needle, plan, catalog, parameters, home, companions)
+        camera = device if both_on_camera else None
+        if hands.needle.split(":", 1)[0] in MAPPED_DEVICES:  # the hand's workspace onto the scene, as shown
             device = mapped_onto_task(device, spec, left_handed=left)
-        if hands.forceps is not None:  # a person's second hand: the forceps on their own device
-            subordinate = open_forceps_device(hands.forceps, spec, left, taken=hands.needle)
+        if camera is not None:  # the forceps in the same camera's frames
+            subordinate = forceps_on(camera.companion(), spec, left)
+        elif hands.forceps is not None:  # a person's second hand: the forceps on their own device
+            subordinate = open_forceps_device(hands.forceps, spec, left, hands.needle, home, plan.clock)
         if natural is not None and plan.device == SCRIPTED_DEVICE:  # a script's hand stops where it ends
             duration = natural if duration is None else min(duration, natural)
         duration = duration if duration is not None else natural
@@ -236,6 +241,8 @@ def run_session(
         window = None
         if view is not None and plan.clock == "realtime":
             window = view.window(spec, device, catalog, home, study_and_task_ids(catalog, uid), uid)
+            window.toggle_forceps = getattr(subordinate, "toggle_grip", None)  # camera-tracked forceps: F
+            window.forceps_problem = getattr(subordinate, "tracking_problem", None)
         options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
         if subordinate is not None:
             options["subordinate"] = subordinate

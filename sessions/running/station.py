@@ -61,6 +61,12 @@ FORCEPS_CONTROLS = (
     "gently: pulled too far, the edge tears out of the jaws."
 )
 FORCEPS_DEVICE_NAMES = {"spacemouse": "the SpaceMouse, a rate control", "openhaptics": "the second Touch"}
+CAMERA_FORCEPS_CONTROLS = (
+    "Your other hand holds real forceps with their marker cube, in the camera's view: they start open at "
+    "the wound's edge beside the first white dot. F (or a second pedal sending F) closes the jaws on the "
+    "edge; lift it towards you (evert it) so the needle goes in square to it; F again lets go once the "
+    "needle is through. Lift gently: pulled too far, the edge tears out of the jaws."
+)
 
 
 @dataclass(frozen=True)
@@ -104,6 +110,8 @@ def instruction_lines(
         lines += wrapped(text)
     if sub_device in FORCEPS_DEVICE_NAMES:
         lines += wrapped(FORCEPS_CONTROLS.format(device=FORCEPS_DEVICE_NAMES[sub_device]))
+    elif sub_device == "camera":
+        lines += wrapped(CAMERA_FORCEPS_CONTROLS)
     if standard_note:
         lines += wrapped(standard_note, "bad-small")
     lines.append(Line(""))

@@ -28,6 +28,8 @@ from sim.errors import VascsimError
 from sim.render import TissueRenderer
 from sim.runtime.display import DisplayScene
 
+FORCEPS_KEYS = ("f",)
+"""The key (or a second foot pedal sending it) that closes and opens camera-tracked forceps' jaws."""
 LIVE_VIEW_EVERY = 2
 """The window publishes every this many frames for the dashboard's live page (15 frames/s at 30)."""
 STEREO_MODES = ("anaglyph", "split", "crystal-eyes")
@@ -101,6 +103,8 @@ class LiveWindow:
         self.tracker = HudTracker(facts.limits)
         self.tracking_problem: Callable[[], str | None] | None = None  # a camera device's, per frame
         self.toggle_grip: Callable[[], None] | None = None  # a camera device's jaws, on the G key
+        self.toggle_forceps: Callable[[], None] | None = None  # camera-tracked forceps' jaws, on the F key
+        self.forceps_problem: Callable[[], str | None] | None = None
         self.latency_log = latency_log
         self.published = published  # a JPEG of the view, every LIVE_VIEW_EVERY frames, for the dashboard
         self._pixels = None
@@ -202,9 +206,10 @@ class LiveWindow:
             self.tracker.update(
                 now, fem.state, force, fem.needle_vertices[0], fem.local_stress, fem.grasp_force
             )
-        problem = self.tracking_problem() if self.tracking_problem is not None else None
-        if problem:  # said for as long as it lasts: the needle does not move while it does
-            self.tracker.warn(now, problem)
+        for ask in (self.tracking_problem, self.forceps_problem):
+            problem = ask() if ask is not None else None
+            if problem:  # said for as long as it lasts: the instrument does not move while it does
+                self.tracker.warn(now, problem)
         if snapshot is not None:
             frame = self.scene.frame_of(snapshot)
             renderer.update(frame)
@@ -362,6 +367,8 @@ class LiveWindow:
             self.hand.toggle_grip()
         elif key in GRIP_KEYS and self.toggle_grip is not None and not repeat:
             self.toggle_grip()  # a camera-tracked holder's jaws: the G key, or a foot pedal sending G
+        elif key in FORCEPS_KEYS and self.toggle_forceps is not None and not repeat:
+            self.toggle_forceps()
 
     def _key_up(self, interactor, _event) -> None:
         self._held.discard(interactor.GetKeySym())

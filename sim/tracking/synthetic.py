@@ -306,9 +306,11 @@ def write_instrument_video(
     noise: float = 2.0,
     blur_frames: NDArray[np.float64] | None = None,
     occluded: NDArray[np.bool_] | None = None,
+    others: tuple[tuple[MarkerBody, NDArray[np.float64], NDArray[np.float64]], ...] = (),
 ) -> None:
     """Render a body posed per frame by ``rotations`` (n, 3, 3) and ``positions`` (n, 3) (camera frame,
-    m) to a video file (high-quality H.264 at ``fps``).
+    m) to a video file (high-quality H.264 at ``fps``); ``others``: more bodies in the same frames, each
+    (body, rotations, positions), drawn sharp.
 
     ``blur_frames`` (n, 3, 3 + 3) optional: per frame the body's pose at the end of the exposure (rotation
     columns then position), blurred by averaging 4 renders along the way; ``occluded`` (n,) bool: frames
@@ -320,6 +322,7 @@ def write_instrument_video(
     )
     rng = np.random.default_rng(seed)
     textures = [face_texture(body, face) for face in body.faces]
+    other_textures = [[face_texture(b, face) for face in b.faces] for b, _, _ in others]
     bench = background(size, rng)
     with av.open(str(path), mode="w") as container:
         stream = container.add_stream(
@@ -340,6 +343,8 @@ def write_instrument_video(
                     draw_body(frame, textures, turn, (1 - s) * translation + s * end_position, camera_matrix)
                     renders.append(frame.astype(np.float32))
                 frame = np.mean(renders, axis=0).astype(np.uint8)
+            for faces, (_, turns, places) in zip(other_textures, others, strict=True):
+                draw_body(frame, faces, turns[k], places[k], camera_matrix)
             if occluded is not None and occluded[k]:
                 _cover(frame, body, rotation, translation, camera_matrix)
             frame = np.clip(frame + rng.normal(0, noise, frame.shape), 0, 255).astype(np.uint8)

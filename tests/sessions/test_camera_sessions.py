@@ -16,7 +16,7 @@ from sessions.cli import main
 from sessions.running.camera import INSTRUMENTS_FILE, instrument_body, registered_tips
 from sessions.running.filmed import film_scripted_pass
 from sessions.running.runner import SessionPlan, run_session
-from sessions.synthetic import pass_parameters
+from sessions.synthetic import pass_parameters, scripted_hands
 from sim.tracking.camera import Camera
 from sim.tracking.markers import NEEDLE_HOLDER
 from sim.tracking.synthetic import board_views_video, pivot_motion, write_instrument_video
@@ -91,6 +91,29 @@ def test_the_bench_importer_tracks_the_same_cube_with_the_same_detector(filmed, 
     bench = json.loads(result.output)["metrics"]
     truth = metrics_of(from_recorded(_recorded(catalog, scripted)))
     assert bench["path_length"] == pytest.approx(truth["path_length"], rel=0.05)
+
+
+def test_one_camera_tracks_the_forceps_beside_the_needle_holder(tmp_path):
+    """Both hands filmed (a scripted expert's holder and forceps, 960x540): with --sub-device camera the
+    forceps are a companion of the holder's camera device, tracked in the same frames; their recorded
+    displacement follows the scripted hand's (largest within 1 mm), every pose measured."""
+    home = tmp_path
+    catalog = _catalog(home)
+    hands = scripted_hands(0.95, 3)
+    scripted = run_session(catalog, home, SessionPlan("S", "E1", TASK, None), hands)
+    video = home / "hands.mp4"
+    _, matrix, _ = film_scripted_pass(TASK, hands, video, size=(960, 540))
+    Camera(matrix, np.zeros(5), (960, 540)).save(home / "camera.json")
+    plan = SessionPlan("S", "E1", TASK, None, device=f"camera:{video}", sub_device="camera")
+    filmed = run_session(catalog, home, plan, score=False)
+    moved = {}
+    for uid in (scripted, filmed):
+        samples = _recorded(catalog, uid).samples_frame()
+        moved[uid] = np.linalg.norm(samples[["sub_dx", "sub_dy", "sub_dz"]].to_numpy(), axis=1).max()
+    samples = _recorded(catalog, filmed).samples_frame()
+    assert set(samples["sub_tracking"]) == {0} and np.isfinite(samples["sub_x"]).all()
+    assert moved[filmed] == pytest.approx(moved[scripted], abs=1e-3)
+    assert moved[scripted] > 2e-3
 
 
 @pytest.mark.exclusive
