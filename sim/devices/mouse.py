@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from sim.devices.base import INPUT_ONLY_LIMITS, DeviceError, DeviceIdentity, DeviceSample
 from sim.geometry import circle_through
 from sim.needle import Pose, rotation_about
+from sim.runtime.shared import consistent_copy
 
 HANDEDNESS = ("right", "left")
 FORWARD_KEYS = ("d", "Right")
@@ -92,13 +93,8 @@ class PoseChannel:
 
     def get(self) -> tuple[int, float, Pose, bool] | None:
         """(sequence, time, pose, grip) of the newest write, or None before the first."""
-        slot = self._slot
-        for _ in range(1000):
-            before = slot[0]
-            copy = slot.copy()
-            if before == slot[0] and before % 2 == 0:
-                break
-        if copy[0] == 0:
+        copy = consistent_copy(self._slot)
+        if copy is None:
             return None
         pose = Pose.unchecked(copy[2:5].copy(), copy[5:14].reshape(3, 3).copy())
         return int(copy[0]), float(copy[1]), pose, bool(copy[14])

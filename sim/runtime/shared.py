@@ -93,7 +93,7 @@ FEM_LAYOUT = SlotLayout(
 _STATE_NAMES = {code: name for name, code in STATE_CODES.items()}
 
 
-def _consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
+def consistent_copy(slot: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """Seqlock read: a copy taken while no write was in progress (None before the first write)."""
     for _ in range(1000):
         before = slot[0]
@@ -131,7 +131,7 @@ class SharedHolder:
 
     def get(self):
 
-        copy = _consistent_copy(self._slot)
+        copy = consistent_copy(self._slot)
         if copy is None:
             return None
         at = HOLDER_LAYOUT.at
@@ -406,7 +406,7 @@ class SharedGraphics:
         slot[0] += 1
 
     def get(self):
-        copy = _consistent_copy(self._slot)
+        copy = consistent_copy(self._slot)
         if copy is None:
             return None
         n = int(copy[2])
@@ -466,7 +466,7 @@ class SharedFem:
         if os.getpid() == self._owner:
             return self._local
 
-        copy = _consistent_copy(self._slot)
+        copy = consistent_copy(self._slot)
         if copy is None:
             return None
         at = FEM_LAYOUT.at

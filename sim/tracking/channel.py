@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.runtime.shared import consistent_copy
 from sim.tracking.filters import (
     RotationFilter,
     RotationKalman,
@@ -263,14 +264,8 @@ class SharedEstimate:
 
     def get(self) -> Estimate | None:
         """The newest estimate, or None before the first."""
-        slot = self._slot
-        copy = slot.copy()
-        for _ in range(1000):
-            before = slot[0]
-            copy = slot.copy()
-            if before == slot[0] and before % 2 == 0:
-                break
-        if copy[0] == 0:
+        copy = consistent_copy(self._slot)
+        if copy is None:
             return None
         return Estimate(
             float(copy[1]), copy[2:5].copy(), copy[5:8].copy(), copy[8:17].reshape(3, 3).copy(),

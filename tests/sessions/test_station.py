@@ -87,6 +87,18 @@ def environment(display: str, home: Path) -> dict:
     return env
 
 
+def launch(command: list[str], display: str, home: Path, **options) -> subprocess.Popen:
+    """The command on ``display`` with the data in ``home``, its output captured as text."""
+    return subprocess.Popen(
+        command,
+        env=environment(display, home),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **options,
+    )
+
+
 class Person:
     """A trainee at the station: xdotool on ``display``, screenshots into ``folder``."""
 
@@ -208,13 +220,7 @@ def test_a_trainee_places_a_whole_stitch_with_keyboard_and_mouse(display, statio
     wrist with D until the needle is through, release with G, drag the jaws to the tip, grasp, turn
     on to pull it through: the task is done, the feedback screen gives the verdict, Q quits."""
     person, hand = Person(display, tmp_path), HandGeometry()
-    station = subprocess.Popen(
-        STATION,
-        env=environment(display, station_home),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    station = launch(STATION, display, station_home)
     try:
         instructions = person.window("vascsim: instructions", process=station)
         time.sleep(0.5)
@@ -268,13 +274,7 @@ def test_a_trainee_places_a_whole_stitch_with_keyboard_and_mouse(display, statio
 @pytest.mark.slow
 def test_escape_mid_session_keeps_a_complete_scored_session(display, station_home, tmp_path):
     person = Person(display, tmp_path)
-    station = subprocess.Popen(
-        STATION,
-        env=environment(display, station_home),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    station = launch(STATION, display, station_home)
     try:
         person.key(person.window("vascsim: instructions", process=station), "space")
         live = person.window(f"vascsim: {TASK}", process=station)
@@ -303,12 +303,10 @@ def test_ctrl_c_in_the_terminal_ends_the_run_complete_with_no_traceback(display,
     window; Ctrl-C (SIGINT to the terminal's process group) ends it complete and scored, and the
     terminal's last lines are the verdict and what to work on."""
     person = Person(display, station_home)
-    run = subprocess.Popen(
+    run = launch(
         [VASCSIM, "run", "--study", "Course", "--participant", "P1", "--task", TASK, "--device", "mouse"],
-        env=environment(display, station_home),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+        display,
+        station_home,
         start_new_session=True,  # its own process group, as a terminal's foreground job
     )
     try:

@@ -6,7 +6,6 @@ shows the needle following the instrument, the strip saying the camera lost it, 
 
 from __future__ import annotations
 
-import subprocess
 import time
 
 import numpy as np
@@ -15,7 +14,7 @@ import pytest
 from sessions.running.filmed import film_scripted_pass
 from sessions.synthetic import pass_parameters
 from sim.tracking.camera import Camera
-from tests.sessions.test_station import VASCSIM, Person, environment, events_of, only_uid, session_row
+from tests.sessions.test_station import VASCSIM, Person, events_of, launch, only_uid, session_row
 
 pytestmark = pytest.mark.exclusive
 
@@ -49,13 +48,7 @@ def test_a_trainee_sutures_with_a_tracked_needle_holder_at_the_station(display, 
     home, video = camera_home
     person = Person(display, tmp_path)
     command = [VASCSIM, "station", "--study", "Course", "--participant", "P1", "--task", TASK]
-    station = subprocess.Popen(
-        [*command, "--device", f"camera:{video}", "--trials", "1"],
-        env=environment(display, home),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    station = launch([*command, "--device", f"camera:{video}", "--trials", "1"], display, home)
     try:
         instructions = person.window("vascsim: instructions", process=station)
         time.sleep(0.5)
