@@ -125,5 +125,10 @@ def table_registration(frame: NDArray[np.uint8], camera: Camera, board: BoardSpe
         raise TrackingError("the board's pose could not be solved: show more of it to the camera")
     projected, _ = cv2.projectPoints(object_points, rotation, translation, camera.matrix, camera.distortion)
     error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - image_points.reshape(-1, 2)) ** 2, 1))))
+    if error > MAX_RMS_PX:
+        raise TrackingError(
+            f"the board on the table fits its pose to {error:.2f} px (at most {MAX_RMS_PX:.1f} px): lay it "
+            "flat and still, in focus, and check the camera's calibration"
+        )
     camera_from_board = cv2.Rodrigues(rotation)[0]
     return DEVICE_FROM_BOARD @ camera_from_board.T, error
