@@ -40,7 +40,9 @@ def wall_at(cell: float) -> BiphaseTissue:
     fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
     region = np.setdiff1d(stitch_region_nodes(refined, mesh), fixed)
     near = region[np.linalg.norm(mesh.points[region] - np.asarray(spec.entry), axis=1) <= 2.5e-3]
-    tissue = BiphaseTissue.build(mesh, fixed, task_preset("wall-stitch").biphase, contact_nodes=near)
+    tissue = BiphaseTissue.build(
+        mesh, fixed, task_preset(task_spec("wall-stitch")).biphase, contact_nodes=near
+    )
     tissue.precompute(use_cache=False)
     return tissue
 
@@ -58,7 +60,7 @@ def crossing(xs: list[float], stresses: list[float], limit: float) -> float:
 
 
 def press_depth(tissue: BiphaseTissue, limit: float) -> float:
-    spec, forces = task_spec("wall-stitch"), task_preset("wall-stitch").forces
+    spec, forces = task_spec("wall-stitch"), task_preset(task_spec("wall-stitch")).forces
     pressed = PressedNeedle(tissue, forces, spec.entry, spec.normal, step=1e-5)
     pressed.press_to(0.0, 0.004)
     depths, stresses = [], []
@@ -74,7 +76,7 @@ def press_depth(tissue: BiphaseTissue, limit: float) -> float:
 
 
 def lever_offset(tissue: BiphaseTissue, limit: float) -> float:
-    spec, forces = task_spec("wall-stitch"), task_preset("wall-stitch").forces
+    spec, forces = task_spec("wall-stitch"), task_preset(task_spec("wall-stitch")).forces
     needle = Needle.straight(0.01)
     interaction = NeedleInteraction(tissue, needle, forces=forces.with_(tear_force=None))
     normal = np.asarray(spec.normal, dtype=np.float64)
@@ -114,7 +116,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", default="0.5,0.35,0.25,0.18", help="stitch-region cell sizes in mm")
     cells = [float(c) * 1e-3 for c in parser.parse_args().cells.split(",")]
-    limit = task_preset("wall-stitch").forces.damage_stress
+    limit = task_preset(task_spec("wall-stitch")).forces.damage_stress
     rows = []
     for cell in cells:
         began = time.perf_counter()

@@ -70,7 +70,7 @@ def cost(repeats: int) -> None:
     from sim.devices.assisting import edge_grasp
 
     task = "interrupted-stitch"
-    tissue = tissue_for(task)
+    tissue = tissue_for(task_spec(task))
     print(f"{task}: {tissue.mesh.n_nodes} nodes; a scripted expert's whole stitch, simulated time")
     rows = {}
     for hands in ("needle hand alone", "both hands"):
@@ -81,7 +81,7 @@ def cost(repeats: int) -> None:
             given = both if hands == "both hands" else both.needle
             device, duration, subordinate = open_device("scripted", plan, None, given)
             options = {} if subordinate is None else {"subordinate": subordinate}
-            simulation = task_simulation(task, device, **options)
+            simulation = task_simulation(task_spec(task), device, **options)
             began = time.perf_counter()
             simulation.run_simulated(duration)
             walls.append(time.perf_counter() - began)
@@ -118,14 +118,14 @@ def realtime(repeats: int) -> None:
     sites solved before the clock, the prefetcher ahead of the jaws) and the layers' compute."""
     from sessions.running.runner import SessionPlan, open_device
     from sessions.synthetic import scripted_hands
-    from sessions.tasks import task_simulation
+    from sessions.tasks import task_simulation, task_spec
 
     task = "interrupted-stitch"
     grasps, fem50, fem99, haptic50 = [], [], [], []
     for seed in range(repeats):
         plan = SessionPlan("benchmark", "E", task, 1)
         device, duration, subordinate = open_device("scripted", plan, None, scripted_hands(0.95, seed))
-        simulation = task_simulation(task, device, subordinate=subordinate)
+        simulation = task_simulation(task_spec(task), device, subordinate=subordinate)
         result = simulation.run_realtime(duration)
         grasps += simulation.contact_latencies["grasp"]
         fem50.append(result.telemetry["fem"].compute_p50)

@@ -38,9 +38,9 @@ def start_display() -> subprocess.Popen:
 def scene_state_bytes() -> int:
     """One frame of the alternative: the wall's surface node positions and each surface triangle's
     stress as float32, plus the needle (what a vtk.js view would be sent each frame)."""
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
 
-    mesh = tissue_for(TASK).mesh
+    mesh = tissue_for(task_spec(TASK)).mesh
     surface_nodes = np.unique(mesh.surface_triangles)
     return 4 * (3 * len(surface_nodes) + len(mesh.surface_triangles) + 3 * 17)
 
@@ -53,7 +53,7 @@ def publish_cost(repeats: int = 30) -> float:
     from sessions.tasks import task_spec, tissue_for
 
     spec = task_spec(TASK)
-    tissue = tissue_for(TASK)
+    tissue = tissue_for(task_spec(TASK))
     target = Path(tempfile.mkdtemp()) / "view.jpg"
     window = LiveWindow(tissue, scene_facts(spec, tissue.mesh, HudLimits(60, 3)), published=target)
     window.prepare(lambda *_: None, time.perf_counter)

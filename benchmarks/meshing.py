@@ -100,7 +100,7 @@ def main() -> None:
         entry = np.array([(30.0 + 5.5) * np.cos(mid) - 30.0, 0.0, (30.0 + 5.5) * np.sin(mid)]) * 1e-3
         spec = add_mesh_task("bent-artery", mesh, entry, fixed=("end0", "end1"))
         started = time.perf_counter()
-        tissue = tissue_for(spec.name, Path(folder) / "cache")
+        tissue = tissue_for(spec, Path(folder) / "cache")
         needle = Needle.curved()
         forces = tissue_preset("porcine-artery").forces
         trajectory = lambda t: (Pose(np.array(spec.entry) + 0.01 * np.array(spec.normal), np.eye(3)), False)  # noqa: E731

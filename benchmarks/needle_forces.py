@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from sessions.tasks import task_preset, task_spec, tissue_for
+from sessions.tasks import forget_tissues, task_preset, task_spec, tissue_for
 from sim.calibration.presets import tissue_preset
 from sim.calibration.scenarios import scenario
 from sim.devices import ScriptedDevice, SuturingPass
@@ -211,9 +211,9 @@ def stitch_region_precompute() -> None:
     from pathlib import Path
 
     with tempfile.TemporaryDirectory() as cache:
-        tissue_for.cache_clear()
+        forget_tissues()
         started = time.perf_counter()
-        tissue = tissue_for("wall-stitch", Path(cache))
+        tissue = tissue_for(task_spec("wall-stitch"), Path(cache))
         seconds = time.perf_counter() - started
     print(
         f"wall_stitch_precompute_s={seconds:.2f} ({tissue.mesh.n_nodes} nodes, "
@@ -223,12 +223,15 @@ def stitch_region_precompute() -> None:
 
 
 def stitch_telemetry() -> None:
-    tissue = tissue_for("wall-stitch", None)
+    tissue = tissue_for(task_spec("wall-stitch"), None)
     spec = task_spec("wall-stitch")
     needle = Needle.curved()
     suturing = SuturingPass(needle, spec.entry, spec.normal, spec.bite_direction)
     simulation = Simulation(
-        tissue, needle, ScriptedDevice(suturing.pose_and_grip), forces=task_preset("wall-stitch").forces
+        tissue,
+        needle,
+        ScriptedDevice(suturing.pose_and_grip),
+        forces=task_preset(task_spec("wall-stitch")).forces,
     )
     result = simulation.run_simulated(suturing.duration)
     for layer in ("haptic", "fem"):

@@ -33,7 +33,7 @@ from recorder import SessionWriter, open_session  # noqa: E402
 from recorder.runtime import RuntimeRecorder  # noqa: E402
 from sessions.running.runner import SessionPlan, open_device  # noqa: E402
 from sessions.synthetic import pass_parameters  # noqa: E402
-from sessions.tasks import task_preset, task_simulation, task_spec, tissue_for  # noqa: E402
+from sessions.tasks import forget_tissues, task_preset, task_simulation, task_spec, tissue_for  # noqa: E402
 
 
 def median_us(function, repeats: int) -> float:
@@ -52,14 +52,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200)
     args = parser.parse_args()
     task = "arteriotomy-closure"
-    spec, forces = task_spec(task), task_preset(task).forces
+    spec, forces = task_spec(task), task_preset(task_spec(task)).forces
     with tempfile.TemporaryDirectory() as folder:
         plan = SessionPlan("b", "p", task, 1)
         device, duration, _ = open_device("scripted", plan, None, pass_parameters(0.5, 3))
         header = {"session_id": "bench", "task": task, "placement": spec.placement,
                   "needle_forces": forces.as_dict()}  # fmt: skip
         writer = SessionWriter(Path(folder) / "s", header, flush_interval=0.1)
-        RuntimeRecorder(writer).attach(task_simulation(task, device)).run_simulated(duration)
+        RuntimeRecorder(writer).attach(task_simulation(task_spec(task), device)).run_simulated(duration)
         writer.close()
         recorded = from_recorded(open_session(Path(folder) / "s"))
     wall = fresh_tissue(task)  # no columns cached: what scoring in a new process meets
@@ -85,8 +85,8 @@ def main() -> None:
 
 def fresh_tissue(task: str):
     """The task's model as a new process loads it (from the disk cache, no columns solved yet)."""
-    tissue_for.cache_clear()
-    return tissue_for(task, None)
+    forget_tissues()
+    return tissue_for(task_spec(task), None)
 
 
 if __name__ == "__main__":

@@ -76,12 +76,16 @@ def station_run(size: tuple[int, int] | None, seconds: float, delay_frames: int)
     from sim.needle import Needle
 
     spec = task_spec(TASK)
-    tissue = tissue_for(TASK, cache_dir(data_home()))
+    tissue = tissue_for(task_spec(TASK), cache_dir(data_home()))
     row = task_spec("arteriotomy-closure").bites()  # three bites on the same vessel patch
     passes = [SuturingPass(Needle.curved(), *bite) for bite in row + row]
     trajectory, total = sequence_of_passes(passes)
     limits = HudLimits(
-        spec.time_budget_s, spec.stitch_count, (0.8, 1.1), 3.3, task_preset(TASK).forces.damage_stress
+        spec.time_budget_s,
+        spec.stitch_count,
+        (0.8, 1.1),
+        3.3,
+        task_preset(task_spec(TASK)).forces.damage_stress,
     )
     log = Path(tempfile.mkdtemp()) / "latency.npy"
     window = None
@@ -90,7 +94,11 @@ def station_run(size: tuple[int, int] | None, seconds: float, delay_frames: int)
         window = LiveWindow(tissue, facts, ViewSettings(size=size), latency_log=log)
     settings = replace(LIVE_SETTINGS, display_delay_frames=delay_frames)  # as the station runs
     simulation = task_simulation(
-        TASK, ScriptedDevice(trajectory), cache_dir(data_home()), renderer=window, settings=settings
+        task_spec(TASK),
+        ScriptedDevice(trajectory),
+        cache_dir(data_home()),
+        renderer=window,
+        settings=settings,
     )
     if window is not None:
         window.simulation = simulation
@@ -168,9 +176,9 @@ def report(label: str, f: dict, bare: float | None) -> None:
 def one(size_text: str, delay: int, seconds: float) -> None:
     """One configuration in this (fresh) process: its caches start cold, as a station's first trial."""
     from sessions.config import cache_dir, data_home
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
 
-    mesh = tissue_for(TASK, cache_dir(data_home())).mesh
+    mesh = tissue_for(task_spec(TASK), cache_dir(data_home())).mesh
     if size_text == "none":
         report("no window", station_run(None, seconds, delay), None)
         return
@@ -199,9 +207,9 @@ def main() -> None:
             one(size_text, int(delay), args.seconds)
             return
         from sessions.config import cache_dir, data_home
-        from sessions.tasks import tissue_for
+        from sessions.tasks import task_spec, tissue_for
 
-        mesh = tissue_for(TASK, cache_dir(data_home())).mesh  # built (and cached on disk) once
+        mesh = tissue_for(task_spec(TASK), cache_dir(data_home())).mesh  # built (and cached on disk) once
         triangles = len(mesh.surface_triangles)
         print(f"{TASK}: {mesh.n_nodes} nodes, {triangles} surface triangles; DISPLAY {os.environ['DISPLAY']}")
         for run in args.runs.split(","):

@@ -27,7 +27,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 
 from sessions.running.runner import SessionPlan, open_device  # noqa: E402
 from sessions.synthetic import pass_parameters  # noqa: E402
-from sessions.tasks import TASKS, region_forces, task_preset, tissue_for  # noqa: E402
+from sessions.tasks import TASKS, forget_tissues, region_forces, task_preset, task_spec, tissue_for  # noqa: E402
 from sim.needle import Needle  # noqa: E402
 from sim.runtime import Simulation  # noqa: E402
 
@@ -36,7 +36,7 @@ def simulation_for(task: str, tissue, seed: int) -> tuple[Simulation, float]:
     """The whole task (every bite) as a scripted expert makes it, through the runner's device."""
     plan = SessionPlan("benchmark", "E", task, 1)
     device, duration, _ = open_device("scripted", plan, None, pass_parameters(1.0, seed))
-    forces, by_region = task_preset(task).forces, region_forces(task, tissue.mesh)
+    forces, by_region = task_preset(task_spec(task)).forces, region_forces(task_spec(task), tissue.mesh)
     return Simulation(tissue, Needle.curved(), device, forces=forces, region_forces=by_region), duration
 
 
@@ -50,8 +50,8 @@ def convergence(task: str = "interrupted-stitch") -> None:
     from sim.calibration.indentation import kernel_indentation_curve
     from sim.fem import BiphaseTissue
 
-    base, preset = task_spec(task), task_preset(task)
-    regions = region_presets(task)
+    base, preset = task_spec(task), task_preset(task_spec(task))
+    regions = region_presets(task_spec(task))
     entry, normal, _ = base.more_bites[0] if regions else base.bites()[0]
     forces = next(iter(regions.values())).forces if regions else preset.forces
     for divisions in ([30, 5, 34], [40, 7, 45], [52, 9, 58]):
@@ -92,13 +92,13 @@ def main() -> None:
     for task in TASKS:
         with tempfile.TemporaryDirectory() as folder:
             cache = Path(folder)
-            tissue_for.cache_clear()
+            forget_tissues()
             started = time.perf_counter()
-            tissue = tissue_for(task, cache)
+            tissue = tissue_for(task_spec(task), cache)
             precompute = time.perf_counter() - started
-            tissue_for.cache_clear()
+            forget_tissues()
             started = time.perf_counter()
-            loaded = tissue_for(task, cache)
+            loaded = tissue_for(task_spec(task), cache)
             simulation, _ = simulation_for(task, loaded, 1)
             simulation.haptic_step(0.0)
             first_tick = time.perf_counter() - started

@@ -42,7 +42,7 @@ def stitch(tissue, parameters):
         tissue,
         Needle.curved(),
         ScriptedDevice(suturing.pose_and_grip),
-        forces=task_preset("wall-stitch").forces,
+        forces=task_preset(task_spec("wall-stitch")).forces,
     )
     rows = []
     simulation.on_sample = lambda now, sample, force, fem: rows.append(
@@ -56,7 +56,7 @@ def stitch(tissue, parameters):
 
 
 def main() -> None:
-    tissue = tissue_for("wall-stitch", None)
+    tissue = tissue_for(task_spec("wall-stitch"), None)
     figure, (left, right, speeds) = plt.subplots(1, 3, figsize=(15, 4.2), dpi=110)
     time, depth, force, state = stitch(tissue, PROFILES["expert"])
     inserting = (
@@ -97,7 +97,7 @@ def main() -> None:
     right.set_ylabel("needle force (mN)")
     right.set_title("force against time, four profiles")
     right.legend(fontsize=8)
-    spec, forces = task_spec("wall-stitch"), task_preset("wall-stitch").forces
+    spec, forces = task_spec("wall-stitch"), task_preset(task_spec("wall-stitch")).forces
     for speed in (0.001, 0.01, 0.1, 0.5):
         cycle = load_cycle(tissue, forces, spec.entry, spec.normal, 1e-3, speed, speed)
         line = speeds.plot(

@@ -248,7 +248,7 @@ def run_demo(
             spec = task_spec(name)
             catalog.task(orm, spec.name, spec.scenario, spec.parameters)
     for name in {task for _, task, *_ in plans}:
-        tissue_for(name, cache_dir(home))  # precomputed once, on disk, before the workers load it
+        tissue_for(task_spec(name), cache_dir(home))  # precomputed once, on disk, before the workers load it
     runs = [
         (SessionPlan(DEMO_STUDY, code, task, trial, phase), skills, seed * 100_000 + index)
         for index, (code, task, trial, phase, skills) in enumerate(plans)

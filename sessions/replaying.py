@@ -12,7 +12,7 @@ from sessions.catalog.models import Session
 from sessions.config import cache_dir
 from sessions.scoring.review import experts_on_task
 from sessions.status import SCORABLE
-from sessions.tasks import known_task, tissue_for
+from sessions.tasks import known_task, task_spec, tissue_for
 
 REPLAYABLE = SCORABLE
 
@@ -67,7 +67,7 @@ def replay_inputs(
                     f"no complete sessions of group {versus_group!r} on task {task!r} in this session's study"
                 )
             expert_dirs += [r.directory for r in rows]
-    tissue = tissue_for(task, cache_dir(home))
+    tissue = tissue_for(task_spec(task), cache_dir(home))
     return open_session(directory), tissue, [open_session(d) for d in expert_dirs]
 
 

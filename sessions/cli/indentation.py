@@ -102,7 +102,7 @@ def indentation(
 
     spec, chosen = task_spec("wall-stitch"), tissue_preset(preset)
     with console.status(f"precomputing the wall-stitch patch ({preset}) and pressing the needle..."):
-        base = tissue_for("wall-stitch", cache_dir())
+        base = tissue_for(task_spec("wall-stitch"), cache_dir())
         tissue = base
         if chosen.biphase != base.parameters:
             tissue = BiphaseTissue.build(

@@ -50,9 +50,9 @@ class LiveView:
             stitches=spec.stitch_count,
             expert_force_n=None if band is None else (band["expert_q1"], band["expert_q3"]),
             device_max_n=device.limits.max_force,
-            damage_stress_pa=task_preset(spec.name).forces.damage_stress,
+            damage_stress_pa=task_preset(spec).forces.damage_stress,
         )
-        tissue = tissue_for(spec.name, cache_dir(home))
+        tissue = tissue_for(spec, cache_dir(home))
         facts = scene_facts(spec, tissue.mesh, limits)
         hand = channel = None
         if isinstance(device, MouseDevice):

@@ -70,6 +70,7 @@ class SessionPlan:
 
 
 def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool) -> dict:
+    spec = task_spec(plan.task)
     return {
         "session_id": uid,
         "participant_id": code,
@@ -81,11 +82,11 @@ def _header(plan: SessionPlan, uid: str, code: str, label: str, synthetic: bool)
         "device": plan.device,
         "sub_device": plan.sub_device or "none",
         "clock": plan.clock,
-        "tissue_preset": task_preset(plan.task).name,
-        "needle_forces": task_preset(plan.task).forces.as_dict(),
-        "region_tissue": {region: preset.name for region, preset in region_presets(plan.task).items()},
+        "tissue_preset": task_preset(spec).name,
+        "needle_forces": task_preset(spec).forces.as_dict(),
+        "region_tissue": {region: preset.name for region, preset in region_presets(spec).items()},
         "haptic_scale": 1.0,  # the device is sent the tissue's force, clamped to its rating
-        "placement": task_spec(plan.task).placement,  # the wound edge and targets bites are scored against
+        "placement": spec.placement,  # the wound edge and targets bites are scored against
     }
 
 
@@ -246,7 +247,7 @@ def run_session(
         options = {} if window is None else {"renderer": window, "settings": LIVE_SETTINGS}
         if subordinate is not None:
             options["subordinate"] = subordinate
-        simulated = task_simulation(plan.task, device, cache_dir(home), **options)
+        simulated = task_simulation(spec, device, cache_dir(home), **options)
     except BaseException:  # nothing was recorded: no row, journal or ring is left behind
         close_devices(device, subordinate)
         with catalog.session() as orm:

@@ -7,6 +7,7 @@ lookup by name), `build` (what a task becomes to run: mesh, tissue, grasp sites,
 
 from sessions.tasks.build import (
     edge_grasps,
+    forget_tissues,
     grasp_sites,
     region_forces,
     region_presets,
@@ -44,6 +45,7 @@ __all__ = [
     "all_tasks",
     "check_task_mesh",
     "edge_grasps",
+    "forget_tissues",
     "grasp_sites",
     "known_task",
     "region_forces",

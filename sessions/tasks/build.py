@@ -3,7 +3,7 @@ the subordinate hand's grasp sites and the simulation."""
 
 from __future__ import annotations
 
-from functools import cache
+import json
 from pathlib import Path
 
 import numpy as np
@@ -28,42 +28,57 @@ def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
     return kind_of(spec).stitch_region_nodes(spec, mesh)
 
 
-def task_preset(task: str):
+def task_preset(spec: TaskSpec):
     """The task's tissue preset (:mod:`sim.calibration.presets`): biphase parameters and needle forces."""
 
-    return tissue_preset(task_spec(task).parameters.get("tissue", "paper"))
+    return tissue_preset(spec.parameters.get("tissue", "paper"))
 
 
-def region_presets(task: str) -> dict:
+def region_presets(spec: TaskSpec) -> dict:
     """Mesh region name -> tissue preset for the task's regions that differ from its wall (e.g. a
     calcified plaque); empty for a uniform wall."""
 
-    return {
-        region: tissue_preset(name)
-        for region, name in task_spec(task).parameters.get("region_tissue", {}).items()
-    }
+    return {region: tissue_preset(name) for region, name in spec.parameters.get("region_tissue", {}).items()}
 
 
-def region_forces(task: str, mesh) -> dict:
+def region_forces(spec: TaskSpec, mesh) -> dict:
     """Mesh region id -> the needle forces of that region's preset (see :func:`region_presets`)."""
     ids = {name: rid for rid, name in mesh.region_names.items()}
-    return {ids[region]: preset.forces for region, preset in region_presets(task).items()}
+    return {ids[region]: preset.forces for region, preset in region_presets(spec).items()}
 
 
-@cache
-def tissue_for(task: str, cache_dir: Path | None = None):
+_TISSUES: dict[tuple[str, str, str], object] = {}
+"""Tissue models built in this process, by the task's name, what it is made of and the cache folder
+(a task edited in place is a different key, so it is built again)."""
+
+
+def tissue_for(spec: TaskSpec, cache_dir: Path | None = None):
     """The task's precomputed tissue model (built once per process, cached on disk): the preset's
     biphase wall on the task mesh, its condensed inverse over the stitch region's surface nodes."""
+    key = (
+        spec.name,
+        json.dumps([spec.scenario, spec.parameters], sort_keys=True, default=str),
+        str(cache_dir),
+    )
+    if key not in _TISSUES:
+        _TISSUES[key] = _built_tissue(spec, cache_dir)
+    return _TISSUES[key]
 
-    spec = task_spec(task)
+
+def forget_tissues() -> None:
+    """Drop the tissue models built in this process (a benchmark timing a build from the disk cache)."""
+    _TISSUES.clear()
+
+
+def _built_tissue(spec: TaskSpec, cache_dir: Path | None):
     kind = kind_of(spec)
     mesh = kind.mesh(spec)
     kind.check(spec, mesh)  # a stored task's mesh file can be edited by hand after `tasks add`
     fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
     candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
-    regions = {region: preset.biphase for region, preset in region_presets(task).items()}
+    regions = {region: preset.biphase for region, preset in region_presets(spec).items()}
     tissue = BiphaseTissue.build(
-        mesh, fixed, task_preset(task).biphase, region_parameters=regions, contact_nodes=candidates
+        mesh, fixed, task_preset(spec).biphase, region_parameters=regions, contact_nodes=candidates
     )
     tissue.precompute(cache_dir=cache_dir)
     return tissue
@@ -73,7 +88,7 @@ def session_tissue(streams, cache_dir: Path | None = None):
     """The tissue model a recorded session ran on (from its header's ``task``), or None for
     sessions of other origins (imported data, unknown tasks)."""
     task = streams.attributes.get("task")
-    return tissue_for(task, cache_dir) if task is not None and known_task(task) else None
+    return tissue_for(task_spec(task), cache_dir) if task is not None and known_task(task) else None
 
 
 def edge_grasps(spec: TaskSpec) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -93,19 +108,19 @@ def grasp_sites(spec: TaskSpec) -> np.ndarray:
     return np.asarray([rim for rim, _ in edge_grasps(spec)], dtype=np.float64).reshape(-1, 3)
 
 
-def task_simulation(task: str, device, cache_dir: Path | None = None, **options):
-    """A :class:`sim.runtime.Simulation` of ``task`` driven by ``device``: the task's tissue, the
+def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **options):
+    """A :class:`sim.runtime.Simulation` of the task driven by ``device``: the task's tissue, the
     curved needle, its preset's needle forces and its regions' own (a calcified plaque pierces at
     its own threshold). ``options`` go to the Simulation (e.g. ``settings``)."""
 
-    tissue = tissue_for(task, cache_dir)
+    tissue = tissue_for(spec, cache_dir)
     if options.get("subordinate") is not None and "grasp_sites" not in options:
-        options["grasp_sites"] = grasp_sites(task_spec(task))
+        options["grasp_sites"] = grasp_sites(spec)
     return Simulation(
         tissue,
         Needle.curved(),
         device,
-        forces=task_preset(task).forces,
-        region_forces=region_forces(task, tissue.mesh),
+        forces=task_preset(spec).forces,
+        region_forces=region_forces(spec, tissue.mesh),
         **options,
     )

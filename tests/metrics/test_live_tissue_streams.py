@@ -16,7 +16,7 @@ from sim.needle import Needle
 from sim.needle.forces import NeedleForces
 from sim.runtime import Simulation
 
-FORCES = task_preset("wall-stitch").forces
+FORCES = task_preset(task_spec("wall-stitch")).forces
 
 
 def record(folder, tissue, parameters, forces=FORCES):
@@ -39,7 +39,7 @@ def record(folder, tissue, parameters, forces=FORCES):
 
 @pytest.fixture(scope="module")
 def wall():
-    return tissue_for("wall-stitch", None)
+    return tissue_for(task_spec("wall-stitch"), None)
 
 
 @pytest.mark.parametrize(
@@ -113,14 +113,14 @@ def test_the_wound_edge_stress_is_live_and_a_levered_bite_near_the_edge_raises_e
     from metrics.signals.passage import WoundEdgeStress
     from sessions.tasks import task_simulation
 
-    replay = WoundEdgeStress(tissue_for("interrupted-stitch", None))
+    replay = WoundEdgeStress(tissue_for(task_spec("interrupted-stitch"), None))
     results = {}
     for name, parameters, nearer in (
         ("expert", SuturingPassParameters(), 0.0),
         ("levered near the edge", SuturingPassParameters(wrist_rotation=0.4), 0.9e-3),
     ):
         suturing = _bite("interrupted-stitch", parameters, nearer)
-        simulation = task_simulation("interrupted-stitch", ScriptedDevice(suturing.pose_and_grip))
+        simulation = task_simulation(task_spec("interrupted-stitch"), ScriptedDevice(suturing.pose_and_grip))
         interaction = simulation.interaction
         checked, peaks = [], []
         fem_step = interaction.fem_step

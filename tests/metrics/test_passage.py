@@ -108,9 +108,9 @@ def test_a_second_hole_for_one_mark_is_an_extra_puncture():
 @pytest.fixture(scope="module")
 def wound_patch():
     """The interrupted stitch's artery patch with its arteriotomy (the task library's tissue)."""
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
 
-    return tissue_for("interrupted-stitch", None)
+    return tissue_for(task_spec("interrupted-stitch"), None)
 
 
 def test_wound_edge_stress_is_the_full_replay_at_the_cut_faces_and_grows_nearer_the_edge(wound_patch):

@@ -157,10 +157,10 @@ def test_recorded_stitches_expert_on_target_trainee_off(tmp_path):
     its marks and through the intima; a first-day trainee's levering pass lands further off."""
     from metrics.signals.tissue import with_tissue_fields
     from sessions.synthetic import pass_parameters
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
     from tests.metrics.test_live_tissue_streams import record
 
-    wall = tissue_for("wall-stitch", None)
+    wall = tissue_for(task_spec("wall-stitch"), None)
     values = {}
     for name, skill in (("expert", 1.0), ("trainee", 0.2)):
         streams = with_tissue_fields(record(tmp_path / name, wall, pass_parameters(skill, seed=2)), wall)
@@ -184,13 +184,13 @@ def recorded_task(task: str, skill: float, seed: int, folder):
     from sessions.synthetic import pass_parameters
     from sessions.tasks import task_preset, task_simulation, task_spec
 
-    spec, forces = task_spec(task), task_preset(task).forces
+    spec, forces = task_spec(task), task_preset(task_spec(task)).forces
     device, duration, _ = open_device(
         "scripted", SessionPlan("s", "p", task, 1), None, pass_parameters(skill, seed)
     )
     header = {"session_id": "s", "task": task, "placement": spec.placement, "needle_forces": forces.as_dict()}
     writer = SessionWriter(folder, header, flush_interval=0.1)
-    simulation = RuntimeRecorder(writer).attach(task_simulation(task, device))
+    simulation = RuntimeRecorder(writer).attach(task_simulation(task_spec(task), device))
     simulation.run_simulated(duration)
     writer.close()
     return with_tissue_fields(from_recorded(open_session(folder)), simulation.interaction.tissue)
@@ -201,9 +201,9 @@ def test_the_interrupted_stitch_on_an_artery_scores_where_each_bite_went(tmp_pat
     """Issue 22's first vessel task: a bite through an arteriotomy's edge on a curved artery wall.
     The expert's lands within 0.35 mm of its marks and through the intima, at a credible puncture
     force; a clumsier hand's lands further off."""
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
 
-    wall = tissue_for("interrupted-stitch", None)
+    wall = tissue_for(task_spec("interrupted-stitch"), None)
     assert "wound_a" in wall.mesh.node_sets and wall.mesh.n_nodes > 5000  # a real vessel wall with its wound
     values = {
         skill: metrics_of(recorded_task("interrupted-stitch", skill, 1, tmp_path / str(skill)))
@@ -267,7 +267,7 @@ def test_the_diseased_wall_pierces_its_plaque_at_the_calcified_threshold(tmp_pat
 
     mesh = task_mesh(task_spec("diseased-wall"))
     assert "calcified" in mesh.region_names.values()
-    wall = tissue_for("diseased-wall", None)
+    wall = tissue_for(task_spec("diseased-wall"), None)
     assert wall.stiff.inverse_source is not None
     streams = recorded_task("diseased-wall", 1.0, 2, tmp_path)
     pierces = streams.events[streams.events.kind == "pierce"]

@@ -20,13 +20,13 @@ from recorder.runtime import RuntimeRecorder
 from recorder.scene import read_scene
 from sessions.running.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
-from sessions.tasks import task_preset, tissue_for
+from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.fem.fields import TissueFieldReplay
 from sim.needle import Needle
 from sim.render import compare_images, write_image
 from sim.runtime import Simulation
 
-FORCES = task_preset("wall-stitch").forces  # the calibrated needle the runner uses
+FORCES = task_preset(task_spec("wall-stitch")).forces  # the calibrated needle the runner uses
 
 GOLDEN = Path(__file__).parents[1] / "data" / "golden"
 
@@ -54,7 +54,7 @@ def record_pass(folder: Path, tissue, skill: float, seed: int, participant: str,
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     root = tmp_path_factory.mktemp("replay")
-    tissue = tissue_for("wall-stitch", root / "cache")
+    tissue = tissue_for(task_spec("wall-stitch"), root / "cache")
     trainee = record_pass(root / "trainee", tissue, 0.2, 11, "T01", "trainee")
     experts = [record_pass(root / f"expert{k}", tissue, 1.0, 20 + k, f"E0{k}", "expert") for k in (1, 2)]
     return tissue, open_session(trainee), [open_session(e) for e in experts]

@@ -16,7 +16,7 @@ from recorder import SessionWriter, open_session
 from recorder.runtime import RuntimeRecorder
 from sessions.running.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
-from sessions.tasks import task_preset, tissue_for
+from sessions.tasks import task_preset, task_spec, tissue_for
 from sim.fem.fields import IndentationStress
 from sim.needle import Needle
 from sim.needle.forces import NeedleForces
@@ -30,7 +30,7 @@ THICKNESS = 0.0015
 @pytest.fixture(scope="module")
 def wall(tmp_path_factory):
     """The wall-stitch task's biphase patch (12 x 10 x 1.5 mm, held on three sides)."""
-    return tissue_for("wall-stitch", tmp_path_factory.mktemp("cache"))
+    return tissue_for(task_spec("wall-stitch"), tmp_path_factory.mktemp("cache"))
 
 
 def _top_triangle(tissue, near=(0.006, 0.005)):
@@ -162,7 +162,7 @@ def test_stretch_statistic_of_a_press_and_its_metrics(wall):
     depths = np.linspace(0.0, 0.0006, 1001)
     pressing = _pressing(wall, depths)
     kernel = dataclasses.replace(
-        pressing, attributes={"needle_forces": task_preset("wall-stitch").forces.as_dict()}
+        pressing, attributes={"needle_forces": task_preset(task_spec("wall-stitch")).forces.as_dict()}
     )
     derived = with_tissue_fields(kernel, wall)
     stretch = derived.stretch

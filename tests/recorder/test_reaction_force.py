@@ -35,11 +35,11 @@ def record(folder, settings=None, wrist_rotation=0.3):
     device = ScriptedDevice(suturing.pose_and_grip, limits=TOUCH_LIMITS)
     writer = SessionWriter(folder, {"session_id": folder.name, "task": "wall-stitch"}, flush_interval=0.1)
     simulation = Simulation(
-        tissue_for("wall-stitch", None),
+        tissue_for(task_spec("wall-stitch"), None),
         Needle.curved(),
         device,
         settings,
-        forces=task_preset("wall-stitch").forces,
+        forces=task_preset(task_spec("wall-stitch")).forces,
     )
     RuntimeRecorder(writer).attach(simulation).run_simulated(suturing.duration)
     writer.close()

@@ -56,8 +56,8 @@ def test_calibrated_indentation_is_the_runtime_kernel_and_pierces_in_the_publish
     assert 0.7e-3 <= data["pierce_depth"] <= 1.1e-3
     spec = task_spec("wall-stitch")
     again = kernel_indentation_curve(
-        tissue_for("wall-stitch", None),
-        task_preset("wall-stitch").forces,
+        tissue_for(task_spec("wall-stitch"), None),
+        task_preset(task_spec("wall-stitch")).forces,
         spec.entry,
         spec.normal,
         np.linspace(0, 1.2e-3, 13),
@@ -93,8 +93,8 @@ def test_indentation_at_a_speed_with_its_unloading_branch_and_work(tmp_path):
     assert 0 < cycle["work_out"] <= cycle["work_in"]
     spec = task_spec("wall-stitch")
     again = load_cycle(
-        tissue_for("wall-stitch", None),
-        task_preset("wall-stitch").forces,
+        tissue_for(task_spec("wall-stitch"), None),
+        task_preset(task_spec("wall-stitch")).forces,
         spec.entry,
         spec.normal,
         0.6e-3,

@@ -48,7 +48,9 @@ def test_the_jaws_start_open_within_reach_of_the_wound_edge(task):
     """Closing the jaws where they start takes the edge: the wall is within the forceps' reach there."""
     spec = task_spec(task)
     start = forceps_start(spec)
-    found = closest_surface_point(CollisionMesh(tissue_for(task).mesh), start.position, Forceps().grasp_reach)
+    found = closest_surface_point(
+        CollisionMesh(tissue_for(task_spec(task)).mesh), start.position, Forceps().grasp_reach
+    )
     assert found is not None
 
 

@@ -396,7 +396,7 @@ def test_spacemouse_reports_drive_the_needle_in_the_window(display, course, tmp_
         window = LiveView().window(spec, device, catalog, course, (1, 1))
     finally:
         catalog.close()
-    simulation = task_simulation(TASK, device, cache_dir(course), renderer=window)
+    simulation = task_simulation(task_spec(TASK), device, cache_dir(course), renderer=window)
     window.simulation = simulation
     person = Person(display, tmp_path)
     shots: dict[str, np.ndarray] = {}
@@ -459,7 +459,7 @@ def test_spacemouse_reports_drive_the_forceps_that_lift_the_wound_edge():
     spec = task_spec(TASK)
     forceps = forceps_on(SpaceMouse(source=RecordedReports(reports)), spec)  # as the station maps it
     needle = MouseDevice(start_pose(spec))  # the needle hand waits above the first mark
-    simulation = task_simulation(TASK, needle, subordinate=forceps)
+    simulation = task_simulation(task_spec(TASK), needle, subordinate=forceps)
     held = []
     simulation.on_graphics = lambda now, fem: held.append((now, fem.grasp_force, fem.grasp_displacement))
     result = simulation.run_realtime(3.4)
@@ -485,7 +485,7 @@ from sessions.running.scene import scene_facts
 from sessions.running.window import LiveWindow, ViewSettings
 from sessions.tasks import task_spec, tissue_for
 
-tissue = tissue_for("interrupted-stitch")
+tissue = tissue_for(task_spec("interrupted-stitch"))
 facts = scene_facts(task_spec("interrupted-stitch"), tissue.mesh, HudLimits(60, 1))
 drawn = {}
 for mode in (None, sys.argv[1]):

@@ -47,13 +47,13 @@ def test_the_scene_stream_keeps_the_grasp_and_the_replay_draws_the_wall_where_th
     from metrics.replay.export import SceneReplay
     from metrics.streams import from_recorded as streams_of
     from recorder.scene import read_scene
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
 
     scene = read_scene(two_handed)
     closed = np.array([c == 1 for c in scene.column("jaws_closed").to_pylist()])
     held = np.array([len(n) > 0 for n in scene.column("grasp_nodes").to_pylist()])
     assert closed.any() and held.any() and not (held & ~closed).any()
-    tissue = tissue_for("interrupted-stitch")
+    tissue = tissue_for(task_spec("interrupted-stitch"))
     replay = SceneReplay(two_handed, tissue, streams_of(two_handed), fps=30)
     track = replay.track
     checked = 0
@@ -76,9 +76,9 @@ def test_a_two_handed_session_re_simulated_holds_the_edge_as_recorded(two_handed
     comes back on the same nodes the recorded scene has."""
     from metrics.replay.track import replay_track
     from recorder.scene import read_scene
-    from sessions.tasks import tissue_for
+    from sessions.tasks import task_spec, tissue_for
 
-    track = replay_track(two_handed, tissue_for("interrupted-stitch"), fps=30)
+    track = replay_track(two_handed, tissue_for(task_spec("interrupted-stitch")), fps=30)
     again = {tuple(g[0].tolist()) for g in track.grasps if g is not None}
     recorded = {tuple(n) for n in read_scene(two_handed).column("grasp_nodes").to_pylist() if n}
     assert again and again == recorded
@@ -147,11 +147,11 @@ def test_a_real_time_grasp_waits_for_no_column_solve():
     """The grasp's nodes are solved before the clock (the task's grasp sites) or ahead of the jaws (the
     prefetcher), so the FEM step that closes the jaws solves nothing on the spot; the display gets the
     jaws and the grasp's loads."""
-    from sessions.tasks import task_simulation
+    from sessions.tasks import task_simulation, task_spec
 
     plan = SessionPlan("S", "E1", "interrupted-stitch", 1)
     device, duration, subordinate = open_device("scripted", plan, None, scripted_hands(0.95, 5))
-    simulation = task_simulation("interrupted-stitch", device, subordinate=subordinate)
+    simulation = task_simulation(task_spec("interrupted-stitch"), device, subordinate=subordinate)
     assert len(simulation.grasp_sites) == 1
     already = len(simulation.forceps.model.spot_solved)  # earlier runs in this process solved some
     seen = []  # each graphics frame: the FEM step's grasp, and what the display process reads

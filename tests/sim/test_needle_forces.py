@@ -170,7 +170,7 @@ def test_needle_force_parameters_are_checked(changes):
 
 @pytest.fixture(scope="module")
 def wall_stitch():
-    return tissue_for("wall-stitch", None)
+    return tissue_for(task_spec("wall-stitch"), None)
 
 
 def stitch_forces(tissue, parameters):
@@ -181,7 +181,7 @@ def stitch_forces(tissue, parameters):
         tissue,
         Needle.curved(),
         ScriptedDevice(suturing.pose_and_grip),
-        forces=task_preset("wall-stitch").forces,
+        forces=task_preset(task_spec("wall-stitch")).forces,
     )
     rows = []
 
@@ -245,7 +245,7 @@ def test_levering_trainees_load_the_wall_more_than_the_expert(wall_stitch, train
     assert force[state == "exited"].max() > 2.0 * expert[expert_state == "exited"].max()
     assert "overstress" in events and "tear" in events
     assert "overstress" not in expert_events and "tear" not in expert_events
-    assert force.max() <= task_preset("wall-stitch").forces.tear_force * 1.001
+    assert force.max() <= task_preset(task_spec("wall-stitch")).forces.tear_force * 1.001
 
 
 def test_a_steep_entry_skids_before_it_pierces(wall_stitch):
@@ -254,6 +254,6 @@ def test_a_steep_entry_skids_before_it_pierces(wall_stitch):
     friction cone (before, the tip was glued sideways and the total overshot: 3.77 N at 0.84 N normal)."""
     _, force, state, events = stitch_forces(wall_stitch, SuturingPassParameters(entry_angle_deg=25.0))
     assert "pierce" in events
-    forces = task_preset("wall-stitch").forces
+    forces = task_preset(task_spec("wall-stitch")).forces
     cone = math.sqrt(1.0 + forces.friction_coefficient**2) * forces.puncture_force
     assert force[state == "contact"].max() <= cone * 1.01

@@ -15,13 +15,13 @@ from sim.calibration.indentation import PressedNeedle, load_cycle
 
 @pytest.fixture(scope="module")
 def wall_stitch():
-    return tissue_for("wall-stitch", None)
+    return tissue_for(task_spec("wall-stitch"), None)
 
 
 @pytest.fixture(scope="module")
 def setting(wall_stitch):
     spec = task_spec("wall-stitch")
-    return wall_stitch, task_preset("wall-stitch").forces, spec.entry, spec.normal
+    return wall_stitch, task_preset(task_spec("wall-stitch")).forces, spec.entry, spec.normal
 
 
 def test_slow_in_fast_out_returns_no_more_work_than_it_took(setting):

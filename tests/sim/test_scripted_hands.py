@@ -13,13 +13,13 @@ import pytest
 
 from sessions.running.runner import SessionPlan, open_device
 from sessions.synthetic import pass_parameters
-from sessions.tasks import TASKS, task_simulation
+from sessions.tasks import TASKS, task_simulation, task_spec
 
 
 def run(task: str, skill: float, trial: int, cache: Path | None):
     plan = SessionPlan(study="s", participant="p", task=task, device="scripted", trial=trial)
     device, duration, _ = open_device("scripted", plan, None, pass_parameters(skill, seed=trial))
-    simulation = task_simulation(task, device, cache)
+    simulation = task_simulation(task_spec(task), device, cache)
     stretch = []
     simulation.on_sample = lambda now, sample, force, fem: stretch.append(fem.stretch) if fem else None
     result = simulation.run_simulated(duration)

@@ -23,7 +23,7 @@ EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 
 @pytest.fixture(scope="module")
 def wall():
-    return tissue_for("wall-stitch", None)
+    return tissue_for(task_spec("wall-stitch"), None)
 
 
 def edge_stretch(mesh, elements, points):
@@ -45,7 +45,7 @@ def test_stretch_equals_the_shown_walls_edge_stretch_around_the_contact(wall, pa
         wall,
         Needle.curved(),
         ScriptedDevice(suturing.pose_and_grip),
-        forces=task_preset("wall-stitch").forces,
+        forces=task_preset(task_spec("wall-stitch")).forces,
     )
     seen = {"contact": [], "pierced": [], "exited": []}
 

@@ -131,7 +131,7 @@ def drive(interaction, tip_at, duration, fem_dt=FEM_DT):
 
 @pytest.fixture(scope="module")
 def wall_stitch():
-    return tissue_for("wall-stitch", None)
+    return tissue_for(task_spec("wall-stitch"), None)
 
 
 @pytest.mark.parametrize("speed", [0.005, 0.05, 0.5])
@@ -141,7 +141,7 @@ def test_a_fast_needle_is_felt_from_where_it_met_the_wall_and_pierces(wall_stitc
     reached since (no jump from a late detection), the needle pierces at a felt force, and it is never
     free with its tip in the wall."""
     spec = task_spec("wall-stitch")
-    forces = task_preset("wall-stitch").forces
+    forces = task_preset(task_spec("wall-stitch")).forces
     entry, top = np.asarray(spec.entry), spec.entry[2]
     interaction = NeedleInteraction(wall_stitch, Needle.straight(0.01), forces=forces)
     start = top + 1.3e-3
