@@ -32,6 +32,8 @@ EVENT_NAMES: dict[str, str] = {
     "nonfinite_force": "invalid force withheld from the device",
     "device_lost": "device disconnected",
     "layer_failed": "a simulator layer failed",
+    "tracking_lost": "the camera lost the instrument (held still until seen again)",
+    "tracking_regained": "the camera saw the instrument again",
     "stopped": "session stopped",
     "queue_overflow": "recorder queue overflowed",
     "marker": "marker",
