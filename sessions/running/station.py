@@ -141,7 +141,13 @@ def feedback_lines(review: SessionReview) -> list[Line]:
             for line in wrapped(bench["line"], indent="  "):
                 lines.append(Line(line.text, style if style == "body" else style + "-small"))
     lines.append(Line("What to work on", "heading"))
-    for item in review.work_on or [{"kind": "", "line": "Nothing worse than the experts' middle half."}]:
+    nothing = (
+        "Nothing worse than the experts' middle half."
+        if review.has_band
+        else "Nothing to compare with yet: the experts' band appears once an expert of this study has "
+        "recorded this task."
+    )
+    for item in review.work_on or [{"kind": "", "line": nothing}]:
         lines += wrapped((f"{item['kind']}: " if item["kind"] else "") + item["line"], indent="  ")
     if review.strengths:
         lines.append(Line("What you did well", "heading"))

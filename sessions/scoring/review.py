@@ -86,6 +86,8 @@ class SessionReview:
     benchmarks: list[dict]
     work_on: list[dict]
     strengths: list[dict]
+    has_band: bool = True
+    """Whether an expert of the study has a scored session of the task (else nothing to compare with)."""
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -103,8 +105,9 @@ def review_session(catalog: Catalog, uid: str, rows: list[dict] | None = None) -
     rows = session_against_experts(catalog, uid) if rows is None else rows
     verdict, standard, benchmarks, marks = _against_standard(catalog, study, task, uid, rows)
     feedback = session_feedback(rows, benchmarks=marks)
+    has_band = any(row["expert_q1"] is not None for row in rows)
     return SessionReview(
-        uid, task, trial, verdict, standard, benchmarks, feedback["work_on"], feedback["strengths"]
+        uid, task, trial, verdict, standard, benchmarks, feedback["work_on"], feedback["strengths"], has_band
     )
 
 

@@ -1,6 +1,8 @@
 """What the station says, checked without a display: the heads-up strip, the instruction and feedback
 screens' words, the terminal's closing lines, the live scene's camera and start pose."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -100,6 +102,18 @@ def test_the_feedback_screen_leads_with_the_verdict_then_the_standard_then_what_
     assert any("entry_to_target 0.6 mm: not met" in t for t in texts)
     assert feedback_lines(review("pass"))[0].style == "good"
     assert "no standard" in feedback_lines(review("no standard"))[0].text
+
+
+def test_with_no_expert_yet_the_feedback_does_not_compare_with_a_band_that_does_not_exist():
+    """A study whose experts have not recorded the task: 'nothing worse than the experts' middle half'
+    read as praise against nothing; the screen says there is nothing to compare with yet."""
+    alone = dataclasses.replace(review("no standard"), work_on=[], benchmarks=[], has_band=False)
+    texts = " ".join(line.text for line in feedback_lines(alone))
+    assert "Nothing to compare with yet" in texts and "middle half" not in texts
+    banded = dataclasses.replace(alone, has_band=True)
+    assert "Nothing worse than the experts' middle half." in " ".join(
+        line.text for line in feedback_lines(banded)
+    )
 
 
 def test_the_terminal_ends_with_the_verdict_and_three_things_to_work_on():
