@@ -298,7 +298,7 @@ class CameraDevice:
         estimate, age = self._estimate_and_age(index, None)
         name = self.bodies[index].name
         if estimate is None or not estimate.measured:
-            return f"the camera has lost the {name}: show it its marker cube (it stays put until it sees it)"
+            return f"the camera has lost the {name}: show it the cube (the {name} stays put until then)"
         if age > STALE_FRAMES / self._fps:
             return f"the camera's frames are late: the {name} is predicted (tracking needs a processor core)"
         return None
