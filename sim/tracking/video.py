@@ -109,14 +109,21 @@ class LiveCamera:
         self._capture.release()
 
 
-def list_cameras(limit: int = 8) -> list[tuple[str, str]]:
-    """Video capture devices on this machine: (``camera:N``, what it is), from /dev/video* on Linux."""
+def list_cameras(
+    limit: int = 8, devices: Path = Path("/dev"), sysfs: Path = Path("/sys/class/video4linux")
+) -> list[tuple[str, str]]:
+    """Video capture devices on this machine: (``camera:N``, what it is), from /dev/video* and the
+    names video4linux gives them (in index order; a UVC webcam also lists its metadata node, which
+    says so in its name)."""
     found = []
-    for path in sorted(Path("/dev").glob("video*")):
+    for path in sorted(devices.glob("video*"), key=lambda p: (len(p.name), p.name)):
         index = path.name.removeprefix("video")
         if not index.isdigit() or int(index) >= limit:
             continue
-        name_file = Path("/sys/class/video4linux") / path.name / "name"
-        name = name_file.read_text().strip() if name_file.exists() else path.name
-        found.append((f"camera:{index}", name))
+        name_file = sysfs / path.name / "name"
+        try:
+            name = name_file.read_text().strip() or path.name
+        except OSError:
+            name = path.name
+        found.append((f"camera:{index}", name[:80]))
     return found

@@ -310,3 +310,26 @@ def test_an_edited_calibration_that_is_not_a_camera_is_refused(tmp_path, change,
     path.write_text("[1, 2]")
     with pytest.raises(TrackingError, match="expected an object"):
         Camera.load(path)
+
+
+def test_cameras_are_listed_by_index_with_the_names_video4linux_gives_them(tmp_path):
+    """/dev/video* as the kernel makes them (video10 after video2), each named from sysfs; a node with
+    no readable name is listed by its node; indices from ``limit`` on, and other files, are left out."""
+    from sim.tracking.video import list_cameras
+
+    devices, sysfs = tmp_path / "dev", tmp_path / "sys"
+    for node, name in (("video0", "HD Pro Webcam C920\n"), ("video2", ""), ("video10", "Capture card")):
+        (devices / node).parent.mkdir(parents=True, exist_ok=True)
+        (devices / node).touch()
+        (sysfs / node).mkdir(parents=True)
+        (sysfs / node / "name").write_text(name)
+    (devices / "video-extra").touch()
+    (devices / "video3").touch()  # no sysfs entry
+    found = list_cameras(limit=12, devices=devices, sysfs=sysfs)
+    assert found == [
+        ("camera:0", "HD Pro Webcam C920"),
+        ("camera:2", "video2"),
+        ("camera:3", "video3"),
+        ("camera:10", "Capture card"),
+    ]
+    assert [c for c, _ in list_cameras(limit=3, devices=devices, sysfs=sysfs)] == ["camera:0", "camera:2"]
