@@ -20,7 +20,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from metrics.errors import MetricsError
-from metrics.signals.tracked import CAMERA_SMOOTHING_HZ, tracked_path
+from metrics.signals.tracked import measured_path
 from recorder.scene import read_scene
 
 EVENT_COLUMNS = ("time", "kind", "entry_angle_deg", "tip_speed", "triangle")
@@ -221,17 +221,11 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     time = column("time").astype(np.float64)
     tool = columns("tool_x", "tool_y", "tool_z")
     if str(header.get("device", "")).startswith("camera"):  # measured poses only, smoothed
-        measured = column("tool_tracking") == 0
-        if measured.sum() >= 4:
-            tool = tracked_path(time, np.where(measured[:, None], tool, np.nan), CAMERA_SMOOTHING_HZ)
-        metadata = dict(metadata, tool_measured_fraction=float(measured.mean()))
+        tool = measured_path(time, tool, column("tool_tracking"))
+        metadata = dict(metadata, tool_measured_fraction=float(np.mean(column("tool_tracking") == 0)))
     subordinate = columns("sub_dx", "sub_dy", "sub_dz") if two_handed else None
     if subordinate is not None and str(header.get("sub_device", "")) == "camera":  # the same for the forceps
-        measured = column("sub_tracking") == 0
-        if measured.sum() >= 4:
-            subordinate = tracked_path(
-                time, np.where(measured[:, None], subordinate, np.nan), CAMERA_SMOOTHING_HZ
-            )
+        subordinate = measured_path(time, subordinate, column("sub_tracking"))
     return SessionStreams(
         session_id=str(header.get("session_id", session.path.name)),
         participant_id=participant_id or metadata.get("participant_id"),

@@ -50,3 +50,17 @@ def tracked_path(
     filled = bridged(time, raw)
     rate = 1.0 / float(np.median(np.diff(time)))
     return smooth(filled, rate, cutoff_hz)
+
+
+def measured_path(
+    time: NDArray[np.float64],
+    values: NDArray[np.float64],
+    labels: NDArray,
+    cutoff_hz: float = CAMERA_SMOOTHING_HZ,
+) -> NDArray[np.float64]:
+    """A camera-tracked path as the metrics read it: the samples labelled measured (0) bridged and
+    smoothed (:func:`tracked_path`); the path as recorded when fewer than four were measured."""
+    measured = np.asarray(labels) == 0
+    if measured.sum() < 4:
+        return values
+    return tracked_path(time, np.where(measured[:, None], values, np.nan), cutoff_hz)

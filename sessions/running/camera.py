@@ -157,7 +157,7 @@ def _write_whole(path: Path, data: dict) -> Path:
 def register_table(spec: str, home: Path, board: BoardSpec | None = None) -> tuple[np.ndarray, float, Path]:
     """Register the table from the first frame of ``spec`` that shows the board lying on it."""
     camera = camera_calibration(home)
-    frames, opened = open_frames(_source_of(spec))
+    frames, opened = open_frames(camera_source(spec))
     problem = None
     try:
         for _, frame in frames:
@@ -185,7 +185,7 @@ def open_camera_device(
     (s). ``placement``: a named one (:data:`sim.devices.camera.PLACEMENTS`), else the registered table's,
     else the camera on the monitor facing the trainee."""
     home = home or data_home()
-    source = camera_source(spec.split(":", 1)[1] if ":" in spec else "0")
+    source = camera_source(spec)
     if clock == "simulated" and not isinstance(source, Path):
         raise CatalogError(
             "a live camera runs in real time; a simulated clock replays a video file (camera:FILE)"
@@ -201,11 +201,6 @@ def open_camera_device(
     return device, device.duration
 
 
-def _source_of(spec: str):
-    """A camera index, URL or video file from ``camera:SPEC`` or ``SPEC``."""
-    return camera_source(spec.split(":", 1)[1] if spec.startswith("camera:") else spec)
-
-
 def calibrate_live(
     spec: str,
     home: Path,
@@ -218,7 +213,7 @@ def calibrate_live(
     guided view by view (``progress(kind kept or None, kinds missing)`` after each frame); writes the
     station's calibration (``out``, default the data directory's) only when the fit is good."""
     views = CalibrationViews(board)
-    frames, opened = open_frames(_source_of(spec))
+    frames, opened = open_frames(camera_source(spec))
     start = None
     try:
         for stamp, frame in frames:
@@ -251,7 +246,7 @@ def register_instrument(
         raise CatalogError(f"unknown instrument {name!r}; one of {', '.join(INSTRUMENTS)}")
     tracker = BodyTracker(camera_calibration(home), body)
     rotations, translations = [], []
-    frames, opened = open_frames(_source_of(spec))
+    frames, opened = open_frames(camera_source(spec))
     start = None
     try:
         for stamp, frame in frames:

@@ -65,7 +65,9 @@ time while the needle was in the wall: a third of the haptic samples were predic
 
 
 def camera_source(spec: str) -> int | str | Path:
-    """What ``camera:SPEC`` names: a camera index, a stream URL, or a video file (which must exist)."""
+    """What ``camera``, ``camera:SPEC`` or ``SPEC`` names: a camera index (``camera`` alone: 0), a stream
+    URL, or a video file (which must exist)."""
+    spec = "0" if spec == "camera" else spec.removeprefix("camera:")
     if spec.isdigit():
         return int(spec)
     if "://" in spec:
@@ -76,6 +78,11 @@ def camera_source(spec: str) -> int | str | Path:
             f"camera source {spec!r} is neither a camera index (0, 1, ...), a stream URL nor a video file"
         )
     return path
+
+
+def _played_from(video: VideoFile, origin: float) -> float | None:
+    """How long (s) ``video`` plays from ``origin`` (s into it); None when its length is not known."""
+    return None if not video.frame_count else max(video.frame_count / video.fps - origin, 0.0)
 
 
 def open_frames(source: int | str | Path) -> tuple[Iterator[tuple[float, NDArray[np.uint8]]], object]:
@@ -150,8 +157,7 @@ class CameraDevice:
                 break
             if self._track_frame(stamp, frame):
                 self._origin = stamp
-                known = video.frame_count / video.fps if video.frame_count else None
-                self.duration = None if known is None else max(known - stamp, 0.0)
+                self.duration = _played_from(video, stamp)
                 return
         raise DeviceError(self._not_seen(timeout_s))
 
@@ -196,9 +202,8 @@ class CameraDevice:
                 self._fps = first.fps or 30.0
                 if isinstance(self.source, Path):  # the video's length from its first sighting
                     video = VideoFile(self.source)
-                    length = video.frame_count / video.fps if video.frame_count else None
+                    self.duration = _played_from(video, first.origin)
                     video.close()
-                    self.duration = None if length is None else max(length - first.origin, 0.0)
                 return
             if first.ended:
                 break

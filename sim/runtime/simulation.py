@@ -131,7 +131,7 @@ class Simulation:
             return
         pose = sample.pose if sample.pose is not None else Pose(sample.position, sample.rotation)
         grip = sample.pressed(GRIP_BUTTON)
-        if sample.tracking != self._tracking:  # a camera lost the instrument, or found it again
+        if sample.tracking != self._tracking and sample.tracking != 1:  # a camera lost or found it
             self._tracking_changed(now, sample.tracking)
         if sample.buttons >> STOP_BUTTON & 1:  # the trainee's stop, on the device itself
             self.stop("stopped_by_trainee", now)
@@ -161,17 +161,11 @@ class Simulation:
 
     def _tracking_changed(self, now: float, tracking: int) -> None:
         """``tracking_lost`` when the pose becomes held (2), ``tracking_regained`` when it is measured (0)
-        again; a predicted pose (1) in between changes nothing."""
-        kind = None
-        if tracking == 2 and self._tracking != 2:
-            kind = "tracking_lost"
-        elif tracking == 0 and self._tracking == 2:
-            kind = "tracking_regained"
-        if kind is not None:
-            self.tracking_events.append((now, kind))  # the real-time loop passes these to the parent
-            self._emit(RuntimeEvent(kind, now, "haptic", "pose held" if tracking == 2 else "pose measured"))
-        if tracking in (0, 2):
-            self._tracking = tracking
+        again (a predicted pose, 1, in between changes nothing and is not passed here)."""
+        kind = "tracking_lost" if tracking == 2 else "tracking_regained"
+        self.tracking_events.append((now, kind))  # the real-time loop passes these to the parent
+        self._emit(RuntimeEvent(kind, now, "haptic", "pose held" if tracking == 2 else "pose measured"))
+        self._tracking = tracking
 
     def _read_subordinate(self, now: float) -> None:
         """The subordinate hand's reading at the haptic rate (it is sent no force: the paper's
