@@ -21,6 +21,7 @@ from dashboard.streams.signals import inside, replay_video, session_file
 from metrics.reading.report import write_report
 from metrics.reading.tables import validity_download
 from recorder.layout import SAMPLES_JOURNAL
+from recorder.remote.views import view_path
 from sessions.catalog import accounts
 from sessions.catalog.store import STAFF, UserRecord
 from sessions.exchange.progress import progress_table, write_progress
@@ -398,12 +399,7 @@ def live_session_view(request: Request, uid: str, viewer: Watcher) -> Response:
     _recording(request, uid, viewer)
     home = _state(request).settings.home
     path = inside(home, live_view_path(home, uid))
-    try:  # read whole: the window replaces the file many times a second (a streamed file could change size)
-        frame = path.read_bytes()
-    except FileNotFoundError:
-        missing = f"3-D view of session {uid} (its station shows no window, or has not drawn yet)"
-        raise not_found(missing) from None
-    return Response(frame, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+    return _jpeg(path, f"3-D view of session {uid} (its station shows no window, or has not drawn yet)")
 
 
 @router.get(
@@ -412,13 +408,42 @@ def live_session_view(request: Request, uid: str, viewer: Watcher) -> Response:
     summary="Server-sent events of a remote station's session",
 )
 def live_station(request: Request, station: str, session_id: str, viewer: Watcher) -> StreamingResponse:
+    directory = _streaming(request, station, session_id)
+    return _event_stream(request, directory, lambda: (directory / SAMPLES_JOURNAL).exists())
+
+
+def _streaming(request: Request, station: str, session_id: str) -> Path:
+    """The folder of a remote station's session that is streaming now; 404 otherwise."""
     root = _state(request).settings.ingest_root
     if not all(part.replace("-", "").replace("_", "").isalnum() for part in (station, session_id)):
         raise not_found(f"station session {station}/{session_id}")
     directory = inside(_state(request).settings.home, root / station / session_id)
     if not (directory / SAMPLES_JOURNAL).exists():
         raise not_found(f"station session {station}/{session_id}")
-    return _event_stream(request, directory, lambda: (directory / SAMPLES_JOURNAL).exists())
+    return directory
+
+
+@router.get(
+    "/live/stations/{station}/{session_id}/view.jpg",
+    response_class=Response,
+    summary="The 3-D view a remote station's window drew last, as it sent it to the ingest (JPEG)",
+)
+def live_station_view(request: Request, station: str, session_id: str, viewer: Watcher) -> Response:
+    _streaming(request, station, session_id)
+    settings = _state(request).settings
+    path = inside(settings.home, view_path(settings.ingest_root, station, session_id))
+    missing = f"3-D view of station session {station}/{session_id} (it sends none, or none yet)"
+    return _jpeg(path, missing)
+
+
+def _jpeg(path: Path, missing: str) -> Response:
+    """A view read whole (the station replaces it many times a second: a streamed file could change
+    size), never cached; 404 naming ``missing`` when there is none."""
+    try:
+        frame = path.read_bytes()
+    except FileNotFoundError:
+        raise not_found(missing) from None
+    return Response(frame, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
 
 # -- administration (the catalog store's; docs/architecture.md) -------------------------

@@ -209,9 +209,8 @@ def live_session_page(request: Request, uid: str, viewer: Watcher) -> Response:
 @router.get("/live/stations/{station}/{session_id}", response_class=HTMLResponse)
 def live_station_page(request: Request, station: str, session_id: str, viewer: Watcher) -> Response:
     source = f"/api/live/stations/{quote(station)}/{quote(session_id)}"
-    return render(
-        request, "live_view.html", viewer, {"source": source}, title=f"station {station} / {session_id}"
-    )
+    data = {"source": source, "scene": f"{source}/view.jpg"}
+    return render(request, "live_view.html", viewer, data, title=f"station {station} / {session_id}")
 
 
 # -- administration -----------------------------------------------------------------------

@@ -36,6 +36,7 @@ from recorder.remote.protocol import (
     float_values,
     stream_schema,
 )
+from recorder.remote.views import checked_view, keep_view, view_path
 from recorder.schema import SCHEMA_VERSION
 from recorder.writer import finalize
 
@@ -245,6 +246,19 @@ class IngestStore:
             write_json_atomically(session.directory / HEADER_FILE, stored)
         return {"header": True}
 
+    def set_view(self, station: str, session_id: str, body: bytes) -> dict[str, Any]:
+        """Keep ``body`` as the newest 3-D view of an open session (recorder.remote.views): checked
+        completely first; refused (409) before the session's first header or batch and after its close."""
+        width, height = checked_view(body)
+        session = self.opened(station, session_id)
+        if session is None:
+            raise RemoteError(409, f"session {session_id} is not open here; send its header first")
+        with session.lock:
+            if session.closed_counts is not None:
+                raise RemoteError(409, f"session {session_id} is closed; its view is no longer shown")
+            keep_view(view_path(self.root, station, session_id), body)
+        return {"view": True, "width": width, "height": height}
+
     def close_session(self, station: str, session_id: str, request: Any) -> dict[str, Any]:
         """Finish a session once every batch the station sent is stored: journals -> verified Parquet."""
         if not isinstance(request, dict) or not isinstance(request.get("batches"), dict):
@@ -274,6 +288,7 @@ class IngestStore:
                 )
                 raise RemoteError(409, f"session {session_id} cannot close yet ({detail})")
             session.close_files()
+            view_path(self.root, station, session_id).unlink(missing_ok=True)
             session.closed_digests = {stream: journal.digests for stream, journal in session.journals.items()}
             _write_digests(session.directory / BATCH_DIGESTS, session.closed_digests)
             header = finalize(session.directory, status, {"remote": {"batches": counts}})

@@ -15,7 +15,9 @@ HTTP
     ``POST /api/sessions/{session}/{stream}/{sequence}`` (batch bytes: sequence and checksum
     in the batch's custom metadata, see ``encode_batch``),
     ``POST /api/sessions/{session}/close`` (JSON ``{"batches": {"samples": n,
-    "events": m}, "status": "complete"}``). Answers are JSON: ``{"ack": ...}``
+    "events": m}, "status": "complete"}``), and, not part of the recording,
+    ``PUT /api/sessions/{session}/view`` (the station window's newest frame, a JPEG:
+    :mod:`recorder.remote.views`). Answers are JSON: ``{"ack": ...}``
     or ``{"error": "..."}`` with 401, 404, 409, 413 or 422.
 WebSocket
     ``/api/sessions/{session}/ws``: binary frames ``stream code (1 byte) |

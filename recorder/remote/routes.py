@@ -30,6 +30,7 @@ from recorder.remote.protocol import (
     stream_schema,
     unpack_frame,
 )
+from recorder.remote.views import MAX_VIEW_BYTES
 
 UNKNOWN_STATION = "missing or unknown station token"
 
@@ -40,6 +41,7 @@ def create_app(store: IngestStore) -> Starlette:
         routes=[
             Route("/api/sessions/{session_id}/header", header, methods=["PUT"]),
             Route("/api/sessions/{session_id}/close", close, methods=["POST"]),
+            Route("/api/sessions/{session_id}/view", view, methods=["PUT"]),
             Route("/api/sessions/{session_id}/{stream}/{sequence}", batches, methods=["POST"]),
             WebSocketRoute("/api/sessions/{session_id}/ws", websocket_stream),
         ],
@@ -136,6 +138,18 @@ async def header(request: Request) -> JSONResponse:
 async def close(request: Request) -> JSONResponse:
     """POST the session's end: its journals become verified Parquet."""
     return await _with_json_body(request, _store(request).close_session)
+
+
+async def view(request: Request) -> JSONResponse:
+    """PUT the station window's newest frame (a JPEG; recorder.remote.views), checked and kept in a
+    worker thread (decoding is file-sized work)."""
+    store = _store(request)
+
+    async def work(station: str) -> dict[str, Any]:
+        body = await read_body(request, MAX_VIEW_BYTES)
+        return await run_in_threadpool(store.set_view, station, request.path_params["session_id"], body)
+
+    return await answer(request, work)
 
 
 async def _with_json_body(

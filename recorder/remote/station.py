@@ -284,3 +284,59 @@ class StationUploader:
             self._http.close()
             self._http = None
         self._drop_socket()
+
+
+class ViewSender:
+    """Sends a station window's newest frame (a JPEG file its window replaces in place) to the central
+    recorder's ``PUT /api/sessions/{session}/view``, on its own thread and connection: only the newest
+    frame is ever sent, a refused or lost one is dropped, and the recording never waits for a view."""
+
+    def __init__(
+        self, url: str, token: str, session_id: str, frame: str | Path, interval: float = 0.1
+    ) -> None:
+        """frame: the JPEG the station's window publishes (sessions.running.live.live_view_path);
+        interval: how often it is looked at (s)."""
+        self.url, self.token, self.session_id = url.rstrip("/"), token, session_id
+        self.frame, self.interval = Path(frame), interval
+        self.sent = self.refused = 0
+        self.last_error = ""
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="vascsim-view-sender", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+
+    def _run(self) -> None:
+        import httpx
+
+        address = f"{self.url}/api/sessions/{self.session_id}/view"
+        headers = {"Authorization": f"Bearer {self.token}", "Content-Type": "image/jpeg"}
+        seen = None
+        with httpx.Client(timeout=2.0) as client:
+            while not self._stop.wait(self.interval):
+                try:
+                    facts = self.frame.stat()
+                    version = (facts.st_mtime_ns, facts.st_size)
+                    if version == seen:
+                        continue
+                    body = self.frame.read_bytes()
+                except FileNotFoundError:
+                    continue  # no window, or not drawn yet
+                seen = version
+                try:
+                    response = client.put(address, content=body, headers=headers)
+                except httpx.HTTPError as error:
+                    self.refused, self.last_error = self.refused + 1, str(error)
+                    continue
+                if response.status_code == 200:
+                    self.sent += 1
+                else:
+                    self.refused += 1
+                    self.last_error = f"{response.status_code} {response.text}"

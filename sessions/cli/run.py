@@ -11,7 +11,7 @@ from sessions.cli.base import (
     user_errors,
 )
 from sessions.cli.lrs import push_after_scoring
-from sessions.cli.station import is_live, sub_device_option, view_options
+from sessions.cli.station import is_live, stream_option, sub_device_option, view_options
 
 
 @click.command()
@@ -55,9 +55,22 @@ from sessions.cli.station import is_live, sub_device_option, view_options
 )
 @sub_device_option
 @view_options
+@stream_option
 @user_errors
 def run(
-    study, participant, task, device, skill, phase, duration, realtime, as_json, sub_device, view, handedness
+    study,
+    participant,
+    task,
+    device,
+    skill,
+    phase,
+    duration,
+    realtime,
+    as_json,
+    sub_device,
+    view,
+    handedness,
+    stream,
 ) -> None:
     """Run one session: device + simulator + recorder + catalog entry, then scoring.
 
@@ -90,9 +103,8 @@ def run(
     plan = SessionPlan(study, participant, task, None, phase, device, clock, sub_device, handedness)
     parameters = (lambda trial: scripted_hands(skill, seed=trial)) if device == "scripted" else None
     with stderr_console().status(f"running {participant} on {device}..."):
-        uid = run_session(
-            catalog, home, plan, parameters, duration, view=view if clock == "realtime" else None
-        )
+        live_view = view if clock == "realtime" else None
+        uid = run_session(catalog, home, plan, parameters, duration, view=live_view, stream=stream)
     facts = CatalogStore(catalog).session_facts(uid)
     review = review_session(catalog, uid)
     if as_json:

@@ -106,6 +106,40 @@ def sub_device_option(command: Callable[..., Any]) -> Callable[..., Any]:
     )(command)
 
 
+def stream_option(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``--stream-to URL``: the central recorder that receives each session as it is recorded (and the
+    window's view, for the dashboard's live page), turned into one ``stream`` argument (a
+    :class:`sessions.running.streaming.StreamTarget`, or None)."""
+
+    @click.option(
+        "--stream-to",
+        default=None,
+        metavar="URL",
+        help="Stream each session, as it is recorded, to a central recorder (the dashboard's ingest, "
+        "e.g. http://central:8000/ingest) with this station's token from VASCSIM_STATION_TOKEN; "
+        "supervisors watch it on the dashboard's live page with the trainee's 3-D view. The local "
+        "recording is kept whatever happens to the link; what the central recorder has not taken is "
+        "sent by the next streamed session.",
+    )
+    @wraps(command)
+    def wrapper(*args: Any, stream_to: str | None, **kwargs: Any) -> Any:
+        from sessions.catalog.errors import CatalogError
+        from sessions.config import data_home
+        from sessions.running.streaming import StreamTarget, send_leftovers
+
+        stream = None
+        if stream_to is not None:
+            try:
+                stream = StreamTarget.from_environment(stream_to)
+            except CatalogError as error:
+                raise click.UsageError(str(error)) from None
+            for line in send_leftovers(stream, data_home()):
+                click.echo(f"note: left from an earlier session: {line}", err=True)
+        return command(*args, stream=stream, **kwargs)
+
+    return wrapper
+
+
 @click.command()
 @click.option("--study", required=True, help="Study (course) the trials belong to.")
 @click.option("--participant", required=True, help="The trainee's participant code.")
@@ -132,8 +166,9 @@ def sub_device_option(command: Callable[..., Any]) -> Callable[..., Any]:
 )
 @sub_device_option
 @view_options
+@stream_option
 @user_errors
-def station(study, participant, task, device, trials, skill, sub_device, view, handedness) -> None:
+def station(study, participant, task, device, trials, skill, sub_device, view, handedness, stream) -> None:
     """Run a course station: instructions, a trial with the live view, feedback, the next trial.
 
     The instruction screen says what the task asks, what the marks mean, the time budget and the
@@ -161,7 +196,7 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
 
     def run_trial() -> str:
         plan = SessionPlan(study, participant, task, None, "practice", device, clock, sub_device, handedness)
-        return run_session(catalog, home, plan, parameters, None, view=view)
+        return run_session(catalog, home, plan, parameters, None, view=view, stream=stream)
 
     uids = run_station(
         catalog,

@@ -36,6 +36,8 @@ from sessions.running.camera import open_camera_device
 from sessions.running.hands import forceps_on, instruments, open_forceps_device
 from sessions.running.live import LiveView
 from sessions.running.scene import LIVE_TIME_FACTOR, mapped_onto_task, start_pose, stop_when_done
+from sessions.running.streaming import StreamedSession, StreamTarget
+from sessions.running.streaming import log as streaming_log
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
 from sessions.synthetic import bite_parameters, in_restricted_access
 from sessions.tasks import (
@@ -183,6 +185,7 @@ def run_session(
     duration: float | None = None,
     score: bool = True,
     view: LiveView | None = None,
+    stream: StreamTarget | None = None,
 ) -> str:
     """Run, record and catalogue one session; returns its uid.
 
@@ -193,7 +196,9 @@ def run_session(
     A live device with no ``duration`` runs until the task is done, the trainee stops it, or
     :data:`sessions.running.scene.LIVE_TIME_FACTOR` times the task's budget. ``view``: a real-time
     session's window on the station's display (:class:`LiveView`); stopping it early (Escape,
-    Ctrl-C) ends the session complete, scored up to where it stopped."""
+    Ctrl-C) ends the session complete, scored up to where it stopped. ``stream``: a central recorder
+    that receives the recording as it is made, and the window's view (sessions.running.streaming); the
+    local recording stays the session of record whatever happens to the link."""
     spec = task_spec(plan.task)
     uid = new_uid()
     directory = home / "sessions" / uid
@@ -254,7 +259,12 @@ def run_session(
             orm.delete(catalog.recorded_session(orm, uid))
         raise
     synthetic = synthetic or plan.device == SCRIPTED_DEVICE  # a script, not this person's hand
-    writer = SessionWriter(directory, _header(plan, uid, code, label, synthetic), flush_interval=0.1)
+    header = _header(plan, uid, code, label, synthetic)
+    streamed = None if stream is None else StreamedSession(stream, home, uid, header)
+    mirror = None if streamed is None else streamed.submit
+    writer = SessionWriter(directory, header, flush_interval=0.1, mirror=mirror)
+    if streamed is not None:
+        streamed.start()
     simulation = RuntimeRecorder(writer).attach(simulated)
     if window is not None:
         window.simulation = simulation
@@ -267,14 +277,26 @@ def run_session(
     except BaseException as error:
         writer.close()
         _finish(catalog, uid, directory, "failed", f"{type(error).__name__}: {error}".strip())
+        _end_stream(streamed, "failed")
         raise
     finally:
         close_devices(device, subordinate)
     writer.close()
     _finish(catalog, uid, directory, "complete")
+    _end_stream(streamed, "complete")
     if score:
         score_session(catalog, uid, home)
     return uid
+
+
+def _end_stream(streamed: StreamedSession | None, status: str) -> None:
+    """Close a streamed session's stream; what the central recorder did not take is said (a warning:
+    the trial is recorded here either way) and stays in the spool for the next streamed session."""
+    if streamed is not None:
+        left = streamed.finish(status)
+        if left is not None:
+            said = "%s; kept in %s and sent by the next streamed session"
+            streaming_log.warning(said, left, streamed.spool)
 
 
 def close_devices(*devices) -> None:
