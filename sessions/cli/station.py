@@ -140,6 +140,15 @@ def stream_option(command: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
+def start_device(device: str) -> Callable[[], object] | None:
+    """Opens the needle holder's device for the instruction screen (its buttons start the trial), where
+    it has buttons to press."""
+    from sim.devices.openhaptics import OpenHapticsDevice
+    from sim.devices.spacemouse import SpaceMouse
+
+    return {"spacemouse": SpaceMouse, "openhaptics": OpenHapticsDevice}.get(device)
+
+
 @click.command()
 @click.option("--study", required=True, help="Study (course) the trials belong to.")
 @click.option("--participant", required=True, help="The trainee's participant code.")
@@ -172,9 +181,10 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
     """Run a course station: instructions, a trial with the live view, feedback, the next trial.
 
     The instruction screen says what the task asks, what the marks mean, the time budget and the
-    controls; SPACE starts the trial after a 3-second countdown. The trial ends when every stitch is
-    pulled through, when the trainee presses Esc (the trial is kept, complete and scored up to
-    there), on Ctrl-C in this terminal (the same), or at twice the task's time budget. The feedback
+    controls; SPACE (or a button of the SpaceMouse or Touch holding the needle) starts the trial
+    after a 3-second countdown. The trial ends when every stitch is pulled through, when the trainee
+    presses Esc or the device's second button (the trial is kept, complete and scored up to there),
+    on Ctrl-C in this terminal (the same), or at twice the task's time budget. The feedback
     screen gives the verdict against the study's standard, each benchmark, what to work on and
     strengths; N starts the next trial, R renders a replay against the experts, Q quits. Trials
     count on as `vascsim run` counts them.
@@ -206,6 +216,7 @@ def station(study, participant, task, device, trials, skill, sub_device, view, h
         run_trial,
         replay=lambda uid: str(replay_against_experts(catalog, home, uid)),
         trials=trials,
+        start_device=start_device(hands.needle),
     )
     click.echo(
         f"station closed: {len(uids)} trial(s) recorded and scored" + (f": {', '.join(uids)}" if uids else "")

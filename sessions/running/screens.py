@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import textwrap
 import time as clock
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from sessions.running.window import ViewSettings
@@ -97,13 +98,22 @@ class Screen:
         self.plotter.renderer.AddViewProp(actor)
         self._actors.append(actor)
 
-    def wait_for(self, keys: dict[str, str], timeout: float | None = None) -> str:
+    def wait_for(
+        self,
+        keys: dict[str, str],
+        timeout: float | None = None,
+        poll: Callable[[], str | None] | None = None,
+    ) -> str:
         """Block until one of ``keys`` (key name -> choice) is pressed, the window is closed
-        (``"quit"``) or ``timeout`` seconds pass (``"timeout"``); returns the choice."""
+        (``"quit"``), ``poll()`` (asked every 20 ms: a device's buttons) returns a choice, or
+        ``timeout`` seconds pass (``"timeout"``); returns the choice."""
         self._pressed.clear()
         deadline = None if timeout is None else clock.monotonic() + timeout
         while True:
             self._interactor.ProcessEvents()
+            chosen = poll() if poll is not None else None
+            if chosen is not None:
+                return chosen
             for key in self._pressed:
                 if key == "closed":
                     return "quit"

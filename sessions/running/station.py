@@ -21,6 +21,7 @@ from sessions.running.live import LiveView
 from sessions.running.screens import Line, Screen, wrapped
 from sessions.scoring.review import SessionReview, experts_on_task, review_session
 from sessions.tasks import TaskSpec, task_spec
+from sim.devices.base import DeviceError
 
 COUNTDOWN_S = 3
 START_KEYS = {"space": "start", "q": "quit", "Q": "quit", "Escape": "quit"}
@@ -54,6 +55,8 @@ DEVICE_CONTROLS = {
     ],
     "scripted": ["A scripted hand places the stitch (a demonstration: no hand of yours is needed)."],
 }
+BUTTON_DEVICES = ("spacemouse", "openhaptics")
+"""Needle-holder devices with buttons: one pressed and released starts the trial (:class:`ButtonStart`)."""
 FORCEPS_CONTROLS = (
     "Your other hand holds the forceps ({device}): they start open at the wound's edge beside the first "
     "white dot. Its first button closes the jaws on the edge; move it towards you to lift (evert) the "
@@ -115,10 +118,9 @@ def instruction_lines(
     if standard_note:
         lines += wrapped(standard_note, "bad-small")
     lines.append(Line(""))
+    start = "SPACE or a button: start" if device in BUTTON_DEVICES else "SPACE: start"
     lines.append(
-        Line(
-            "SPACE: start (3-second countdown)    Esc in the trial: stop (kept and scored)    Q: quit", "keys"
-        )
+        Line(f"{start} (3-second countdown)    Esc in the trial: stop (kept and scored)    Q: quit", "keys")
     )
     return lines
 
@@ -158,6 +160,29 @@ def feedback_lines(review: SessionReview) -> list[Line]:
     return lines
 
 
+class ButtonStart:
+    """The instruction screen's start on the device itself: any of its buttons pressed, then released
+    (a button still held would reach the trial, where the second one stops it). A device that stops
+    answering leaves the space bar."""
+
+    def __init__(self, device) -> None:
+        self.device: object | None = device
+        self._pressed = False
+
+    def __call__(self) -> str | None:
+        if self.device is None:
+            return None
+        try:
+            buttons = self.device.read(clock.perf_counter()).buttons
+        except DeviceError:
+            self.device = None
+            return None
+        if buttons:
+            self._pressed = True
+            return None
+        return "start" if self._pressed else None
+
+
 def run_station(
     catalog: Catalog,
     home: Path,
@@ -166,10 +191,14 @@ def run_station(
     run_trial: Callable[[], str],
     replay: Callable[[str], str] | None = None,
     trials: int | None = None,
+    start_device: Callable[[], object] | None = None,
 ) -> list[str]:
     """The station's loop (see the module docstring); ``run_trial()`` runs one session and returns its
-    uid, ``replay(uid)`` renders it against the experts and returns where; ``trials`` bounds the loop.
-    Returns the uids of the trials run."""
+    uid, ``replay(uid)`` renders it against the experts and returns where; ``trials`` bounds the loop;
+    ``start_device()`` opens the needle holder's device for the instruction screen, so its button
+    starts the trial as the space bar does (it is closed again before the trial opens it; a device
+    that cannot be opened leaves the space bar, and the trial says why). Returns the uids of the
+    trials run."""
 
     spec = task_spec(plan.task)
     uids: list[str] = []
@@ -182,7 +211,7 @@ def run_station(
                 else "No expert has recorded this task in this study yet: your trials are scored, not judged."
             )
             screen.show(instruction_lines(spec, plan.device, plan.participant, note, plan.sub_device))
-            if screen.wait_for(START_KEYS) != "start":
+            if _wait_to_start(screen, start_device) != "start":
                 break
             _countdown(screen)
             screen.close()
@@ -206,6 +235,21 @@ def run_station(
         if screen is not None:
             screen.close()
     return uids
+
+
+def _wait_to_start(screen: Screen, start_device: Callable[[], object] | None) -> str:
+    """SPACE, or the device's button where there is one to open."""
+    device = None
+    if start_device is not None:
+        try:
+            device = start_device()
+        except DeviceError:
+            device = None
+    try:
+        return screen.wait_for(START_KEYS, poll=ButtonStart(device) if device is not None else None)
+    finally:
+        if device is not None:
+            device.close()
 
 
 def _countdown(screen: Screen) -> None:

@@ -348,6 +348,45 @@ class RecordedReports:
         """Nothing to close."""
 
 
+def test_the_spacemouse_button_starts_the_trial_once_released(display, monkeypatch):
+    """The instruction screen's start on the device in hand: SpaceMouse report bytes (a button pressed
+    at 0.3 s, released at 0.9 s) through the live decoder, read while the screen's event loop runs; it
+    starts on the release (a held second button would stop the trial it started) and lets go of the
+    device before the trial opens it again. A device that cannot be opened leaves the space bar."""
+    from sessions.running.screens import Screen
+    from sessions.running.station import _wait_to_start, instruction_lines
+    from sessions.running.window import ViewSettings
+    from sim.devices.base import DeviceError
+    from sim.devices.spacemouse import SpaceMouse
+
+    monkeypatch.setenv("DISPLAY", display)
+    monkeypatch.delenv("VTK_DEFAULT_OPENGL_WINDOW", raising=False)
+    reports = [
+        (0.3, bytes([3]) + (2).to_bytes(4, "little")),  # the right button down
+        (0.9, bytes([3]) + (0).to_bytes(4, "little")),  # up
+    ]
+    handle = RecordedReports(reports)
+    closed = []
+    handle.close = lambda: closed.append(True)
+    screen = Screen(ViewSettings(), "instructions")
+    try:
+        screen.show(instruction_lines(task_spec(TASK), "spacemouse", "P1"))
+        began = time.perf_counter()
+        assert _wait_to_start(screen, lambda: SpaceMouse(source=handle)) == "start"
+        assert time.perf_counter() - began >= 0.85 and closed == [True]  # on the release, then let go
+
+        def unplugged():
+            raise DeviceError("no SpaceMouse found")
+
+        window = "$(xdotool search --onlyvisible --name vascsim | head -1)"
+        pressing = f"sleep 1; xdotool key --window {window} space"
+        presser = subprocess.Popen(["sh", "-c", pressing], env=dict(os.environ))
+        assert _wait_to_start(screen, unplugged) == "start"  # the space bar, as without a device
+        presser.wait(10)
+    finally:
+        screen.close()
+
+
 def test_a_display_nobody_serves_is_named_in_one_line_not_a_crash(station_home):
     """DISPLAY names an X display with no server behind it (as after a remote session ended): the
     station says which display it could not reach and exits 2; the window library is never asked

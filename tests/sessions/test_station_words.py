@@ -77,8 +77,9 @@ def test_with_a_second_device_the_instructions_say_how_the_forceps_hold_the_edge
     )
     assert "forceps (the SpaceMouse, a rate control)" in text
     assert "closes the jaws on the edge" in text and "lift (evert) the edge" in text and "tears" in text
-    spacemouse = " ".join(line.text for line in instruction_lines(spec, "spacemouse", "T07"))
-    assert "rate control" in spacemouse
+    spacemouse = [line.text for line in instruction_lines(spec, "spacemouse", "T07")]
+    assert "rate control" in " ".join(spacemouse)
+    assert spacemouse[-1].startswith("SPACE or a button: start")  # the device in hand starts it
 
 
 def review(verdict: str) -> SessionReview:
