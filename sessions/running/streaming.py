@@ -82,7 +82,12 @@ class StreamedSession:
             self.uploader.finish(status)
             self.uploader.stop(timeout=self.target.drain_timeout_s)
         except RecorderError as error:
-            return f"central recorder {self.target.url}: {error}"
+            if self.uploader.error is not None:  # refused: the refusal names what and why
+                return str(error)
+            return (
+                f"central recorder {self.target.url} did not take {self.uploader.pending} item(s) of "
+                f"session {self.uid} within {self.target.drain_timeout_s:g} s"
+            )
         finally:
             self.uploader.close()
         shutil.rmtree(self.spool, ignore_errors=True)

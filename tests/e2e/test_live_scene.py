@@ -172,7 +172,7 @@ def test_a_supervisor_sees_a_remote_station_scene_streamed_to_the_ingest(display
             page.goto(f"{base}/live")
             page.click(f"a[href='/live/stations/bay-3/{uid}']")
             scene_updates(page, tmp_path / "live-station-page.png")
-        err = stop(run)
+            err = stop(run)  # while the central recorder still runs
     finally:
         kill(run)
         catalog.close()

@@ -5,6 +5,7 @@ take is sent by the next streamed session (issue 42's remote stations)."""
 from __future__ import annotations
 
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -87,6 +88,7 @@ def test_a_central_recorder_down_costs_no_trial_and_the_next_session_sends_what_
             assert row.status == "complete"  # the trial is kept, scored, here
         spool = home / "spool" / uid
         assert spool.is_dir() and f"kept in {spool}" in caplog.text
+        assert re.search(rf"did not take \d+ item\(s\) of session {uid} within 0.5 s", caplog.text)
         server = start_server(tmp_path / "central", port)
         try:
             assert send_leftovers(target, home) == []
