@@ -35,9 +35,9 @@ from sim.needle.interaction import NeedleInteraction  # noqa: E402
 
 def wall_at(cell: float) -> BiphaseTissue:
     spec = task_spec("wall-stitch")
-    refined = dataclasses.replace(spec, parameters={**spec.parameters, "stitch_cell_m": cell})
+    refined = dataclasses.replace(spec, parameters=dataclasses.replace(spec.parameters, stitch_cell_m=cell))
     mesh = task_mesh(refined)
-    fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
+    fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters.fixed])
     region = np.setdiff1d(stitch_region_nodes(refined, mesh), fixed)
     near = region[np.linalg.norm(mesh.points[region] - np.asarray(spec.entry), axis=1) <= 2.5e-3]
     tissue = BiphaseTissue.build(

@@ -55,13 +55,15 @@ def convergence(task: str = "interrupted-stitch") -> None:
     entry, normal, _ = base.more_bites[0] if regions else base.bites()[0]
     forces = next(iter(regions.values())).forces if regions else preset.forces
     for divisions in ([30, 5, 34], [40, 7, 45], [52, 9, 58]):
-        wound = {**base.parameters["wound"], "gap_m": 1e-4}
-        refined = {**base.parameters, "divisions": divisions, "wound": wound}
-        if "calcification" in refined:  # the plaque through the whole wall at every refinement
-            refined["calcification"] = {**refined["calcification"], "layers": list(range(divisions[1]))}
+        wound = dataclasses.replace(base.parameters.wound, gap_m=1e-4)
+        refined = dataclasses.replace(base.parameters, divisions=tuple(divisions), wound=wound)
+        plaque = refined.calcification
+        if plaque is not None:  # the plaque through the whole wall at every refinement
+            plaque = dataclasses.replace(plaque, layers=tuple(range(divisions[1])))
+            refined = dataclasses.replace(refined, calcification=plaque)
         spec = dataclasses.replace(base, parameters=refined)
         mesh = task_mesh(spec)
-        fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
+        fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters.fixed])
         candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
         by_region = {name: p.biphase for name, p in regions.items()}
         tissue = BiphaseTissue.build(

@@ -16,7 +16,7 @@ from pydantic import BaseModel, Field
 from dashboard import queries
 from dashboard.auth import COOKIE, LoginRateLimiter, Viewer, current_viewer, require, sign_in_keys
 from dashboard.errors import CONFLICT, ERROR_RESPONSES, DashboardError, not_found
-from dashboard.streams.live import live_stream
+from dashboard.streams.live import live_stream, newest_view
 from dashboard.streams.signals import inside, replay_video, session_file
 from metrics.reading.report import write_report
 from metrics.reading.tables import validity_download
@@ -399,7 +399,7 @@ def live_session_view(request: Request, uid: str, viewer: Watcher) -> Response:
     _recording(request, uid, viewer)
     home = _state(request).settings.home
     path = inside(home, live_view_path(home, uid))
-    return _jpeg(path, f"3-D view of session {uid} (its station shows no window, or has not drawn yet)")
+    return newest_view(path, f"3-D view of session {uid} (its station shows no window, or has not drawn yet)")
 
 
 @router.get(
@@ -433,17 +433,7 @@ def live_station_view(request: Request, station: str, session_id: str, viewer: W
     settings = _state(request).settings
     path = inside(settings.home, view_path(settings.ingest_root, station, session_id))
     missing = f"3-D view of station session {station}/{session_id} (it sends none, or none yet)"
-    return _jpeg(path, missing)
-
-
-def _jpeg(path: Path, missing: str) -> Response:
-    """A view read whole (the station replaces it many times a second: a streamed file could change
-    size), never cached; 404 naming ``missing`` when there is none."""
-    try:
-        frame = path.read_bytes()
-    except FileNotFoundError:
-        raise not_found(missing) from None
-    return Response(frame, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+    return newest_view(path, missing)
 
 
 # -- administration (the catalog store's; docs/architecture.md) -------------------------

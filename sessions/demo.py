@@ -246,7 +246,7 @@ def run_demo(
                     plans.append((code, TASK, sessions + 1, "retention", retained))
         for name in {task for _, task, *_ in plans}:  # the rows the workers' sessions point at
             spec = task_spec(name)
-            catalog.task(orm, spec.name, spec.scenario, spec.parameters)
+            catalog.task(orm, spec.name, spec.scenario, spec.parameters.as_dict())
     for name in {task for _, task, *_ in plans}:
         tissue_for(task_spec(name), cache_dir(home))  # precomputed once, on disk, before the workers load it
     runs = [

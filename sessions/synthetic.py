@@ -231,7 +231,7 @@ def seed_metrics_study(
     started = now()
     with catalog.session() as orm:
         study = catalog.study(orm, study_name, create=True, description="Synthetic metrics-only study")
-        task_row = catalog.task(orm, spec.name, spec.scenario, spec.parameters)
+        task_row = catalog.task(orm, spec.name, spec.scenario, spec.parameters.as_dict())
         people = [("expert", k) for k in range(1, experts + 1)]
         people += [("trainee", k) for k in range(1, trainees + 1)]
         session_rows, progress = [], []

@@ -18,7 +18,9 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
+from fastapi import Response
 
+from dashboard.errors import not_found
 from recorder.writer import EVENTS_JOURNAL, SAMPLES_JOURNAL
 
 KEEPALIVE_S = 15.0
@@ -136,3 +138,13 @@ async def live_stream(
                 yield _sse("end", {"reason": "the session is no longer recording"})
                 return
         await asyncio.sleep(poll_s)
+
+
+def newest_view(path: Path, missing: str) -> Response:
+    """A station's newest 3-D view, read whole (the station replaces it many times a second: a streamed
+    file could change size), never cached; 404 naming ``missing`` when there is none."""
+    try:
+        frame = path.read_bytes()
+    except FileNotFoundError:
+        raise not_found(missing) from None
+    return Response(frame, media_type="image/jpeg", headers={"Cache-Control": "no-store"})

@@ -24,7 +24,7 @@ def tasks_list(as_json: bool) -> None:
     rows = [
         {
             "task": t.name,
-            "tissue": t.parameters.get("tissue", ""),
+            "tissue": t.parameters.tissue,
             "stitches": t.stitch_count,
             "time_budget_s": t.time_budget_s,
             "description": t.description,
@@ -57,11 +57,11 @@ def tasks_show(name: str, as_json: bool) -> None:
         return
     text = f"{spec.name}: {spec.description}"
     click.echo(click.wrap_text(text, 78, initial_indent="task         ", subsequent_indent=" " * 13))
-    click.echo(f"tissue       {spec.parameters.get('tissue', '')} ({spec.parameters.get('model', '')} model)")
+    click.echo(f"tissue       {spec.parameters.tissue} ({spec.parameters.model} model)")
     geometry = kind_of(spec).geometry(spec)
     if geometry:
         click.echo(click.wrap_text(geometry, 78, initial_indent="geometry     ", subsequent_indent=" " * 13))
-    for region, preset in spec.parameters.get("region_tissue", {}).items():
+    for region, preset in spec.parameters.region_tissue.items():
         click.echo(f"region       {region}: {preset} preset (its moduli, puncture, passage)")
     if spec.access is not None:
         tilt = spec.access["tilt_deg"]

@@ -207,7 +207,9 @@ def run_session(
         participant = catalog.participant(orm, study, plan.participant)
         participant_id = participant.id
         code, label, synthetic = participant.code, participant.group_label, participant.synthetic
-    task_id = catalog.ensure_task(spec.name, spec.scenario, spec.parameters)  # first runs of a task race
+    task_id = catalog.ensure_task(
+        spec.name, spec.scenario, spec.parameters.as_dict()
+    )  # first runs of a task race
     fields = {"participant_id": participant_id, "task_id": task_id}
     row = catalog.add_session(
         dict(

@@ -31,14 +31,14 @@ def stitch_region_nodes(spec: TaskSpec, mesh) -> np.ndarray:
 def task_preset(spec: TaskSpec):
     """The task's tissue preset (:mod:`sim.calibration.presets`): biphase parameters and needle forces."""
 
-    return tissue_preset(spec.parameters.get("tissue", "paper"))
+    return tissue_preset(spec.parameters.tissue)
 
 
 def region_presets(spec: TaskSpec) -> dict:
     """Mesh region name -> tissue preset for the task's regions that differ from its wall (e.g. a
     calcified plaque); empty for a uniform wall."""
 
-    return {region: tissue_preset(name) for region, name in spec.parameters.get("region_tissue", {}).items()}
+    return {region: tissue_preset(name) for region, name in spec.parameters.region_tissue.items()}
 
 
 def region_forces(spec: TaskSpec, mesh) -> dict:
@@ -57,7 +57,7 @@ def tissue_for(spec: TaskSpec, cache_dir: Path | None = None):
     biphase wall on the task mesh, its condensed inverse over the stitch region's surface nodes."""
     key = (
         spec.name,
-        json.dumps([spec.scenario, spec.parameters], sort_keys=True, default=str),
+        json.dumps([spec.scenario, spec.parameters.as_dict()], sort_keys=True, default=str),
         str(cache_dir),
     )
     if key not in _TISSUES:
@@ -74,7 +74,7 @@ def _built_tissue(spec: TaskSpec, cache_dir: Path | None):
     kind = kind_of(spec)
     mesh = kind.mesh(spec)
     kind.check(spec, mesh)  # a stored task's mesh file can be edited by hand after `tasks add`
-    fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters["fixed"]])
+    fixed = np.concatenate([mesh.node_sets[k] for k in spec.parameters.fixed])
     candidates = np.setdiff1d(stitch_region_nodes(spec, mesh), fixed)
     regions = {region: preset.biphase for region, preset in region_presets(spec).items()}
     tissue = BiphaseTissue.build(

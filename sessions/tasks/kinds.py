@@ -54,8 +54,8 @@ class WallPatch(TaskKind):
 
     def mesh(self, spec: TaskSpec):
         p = spec.parameters
-        (length, width, thickness), coarse, fine = p["size_m"], p["cell_m"], p["stitch_cell_m"]
-        (x0, x1), (y0, y1) = p["stitch_region_m"]
+        (length, width, thickness), coarse, fine = p.size_m, p.cell_m, p.stitch_cell_m
+        (x0, x1), (y0, y1) = p.stitch_region_m
         return grid_box_mesh(
             refined_coordinates(length, coarse, fine, x0, x1),
             refined_coordinates(width, coarse, fine, y0, y1),
@@ -64,13 +64,13 @@ class WallPatch(TaskKind):
 
     def stitch_region_nodes(self, spec: TaskSpec, mesh) -> NDArray[np.int64]:
         points = mesh.points[mesh.surface_nodes]
-        (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
+        (x0, x1), (y0, y1) = spec.parameters.stitch_region_m
         inside = (points[:, 0] >= x0 - 1e-9) & (points[:, 0] <= x1 + 1e-9)
         inside &= (points[:, 1] >= y0 - 1e-9) & (points[:, 1] <= y1 + 1e-9)
         return mesh.surface_nodes[inside]
 
     def geometry(self, spec: TaskSpec) -> str:
-        size = " x ".join(f"{1e3 * v:g}" for v in spec.parameters["size_m"])
+        size = " x ".join(f"{1e3 * v:g}" for v in spec.parameters.size_m)
         return f"{size} mm patch, held on {_held(spec)}"
 
 
@@ -82,26 +82,26 @@ class VesselPatch(TaskKind):
 
     def mesh(self, spec: TaskSpec):
         p = spec.parameters
-        wound, plaque = p["wound"], p.get("calcification")
+        wound, plaque = p.wound, p.calcification
         return vessel_mesh(
-            inner_radius=p["inner_radius_m"],
-            wall_thickness=p["wall_m"],
-            length=p["length_m"],
-            arc_deg=p["arc_deg"],
-            circumferential_divisions=p["divisions"][0],
-            radial_divisions=p["divisions"][1],
-            axial_divisions=p["divisions"][2],
-            wound=Wound(wound["angle_deg"], *wound["z_m"], gap=wound["gap_m"]),
+            inner_radius=p.inner_radius_m,
+            wall_thickness=p.wall_m,
+            length=p.length_m,
+            arc_deg=p.arc_deg,
+            circumferential_divisions=p.divisions[0],
+            radial_divisions=p.divisions[1],
+            axial_divisions=p.divisions[2],
+            wound=Wound(wound.angle_deg, *wound.z_m, gap=wound.gap_m),
             calcification=None
             if plaque is None
-            else Calcification(tuple(plaque["angle_deg"]), tuple(plaque["z_m"]), tuple(plaque["layers"])),
+            else Calcification(tuple(plaque.angle_deg), tuple(plaque.z_m), tuple(plaque.layers)),
         )
 
     def stitch_region_nodes(self, spec: TaskSpec, mesh) -> NDArray[np.int64]:
         points = mesh.points[mesh.surface_nodes]
-        region = spec.parameters["stitch_region"]
+        region = spec.parameters.stitch_region
         angle = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
-        (a0, a1), (z0, z1) = region["angle_deg"], region["z_m"]
+        (a0, a1), (z0, z1) = region.angle_deg, region.z_m
         inside = (angle >= a0) & (angle <= a1) & (points[:, 2] >= z0 - 1e-9) & (points[:, 2] <= z1 + 1e-9)
         outer = np.isin(mesh.surface_nodes, mesh.node_sets["outer"])
         return mesh.surface_nodes[inside & outer]
@@ -109,8 +109,8 @@ class VesselPatch(TaskKind):
     def geometry(self, spec: TaskSpec) -> str:
         p = spec.parameters
         return (
-            f"artery r {1e3 * p['inner_radius_m']:g} mm, wall {1e3 * p['wall_m']:g} mm, "
-            f"{1e3 * p['length_m']:g} mm long, {p['arc_deg']:g} deg patch, held on {_held(spec)}"
+            f"artery r {1e3 * p.inner_radius_m:g} mm, wall {1e3 * p.wall_m:g} mm, "
+            f"{1e3 * p.length_m:g} mm long, {p.arc_deg:g} deg patch, held on {_held(spec)}"
         )
 
 
@@ -121,20 +121,20 @@ class MeshFile(TaskKind):
     scenario = "mesh_file"
 
     def mesh(self, spec: TaskSpec):
-        return load_mesh(user_tasks_dir() / spec.name / spec.parameters["mesh_file"])
+        return load_mesh(user_tasks_dir() / spec.name / spec.parameters.mesh_file)
 
     def stitch_region_nodes(self, spec: TaskSpec, mesh) -> NDArray[np.int64]:
         outer = mesh.node_sets.get("outer", mesh.surface_nodes)
         distance = np.linalg.norm(mesh.points[outer] - np.asarray(spec.entry), axis=1)
-        return np.asarray(outer)[distance <= spec.parameters["stitch_radius_m"]]
+        return np.asarray(outer)[distance <= spec.parameters.stitch_radius_m]
 
     def geometry(self, spec: TaskSpec) -> str:
-        where = f"{spec.parameters['mesh_file']} in the task's folder"
+        where = f"{spec.parameters.mesh_file} in the task's folder"
         return f"a meshed vessel wall ({where}), held on {_held(spec)}"
 
     def check(self, spec: TaskSpec, mesh) -> None:
         p = spec.parameters
-        check_task_mesh(mesh, p["fixed"], spec.entry, p["stitch_radius_m"])
+        check_task_mesh(mesh, p.fixed, spec.entry, p.stitch_radius_m)
 
 
 KINDS: dict[str, TaskKind] = {kind.scenario: kind for kind in (WallPatch(), VesselPatch(), MeshFile())}
@@ -153,4 +153,4 @@ def kind_of(spec: TaskSpec) -> TaskKind:
 
 
 def _held(spec: TaskSpec) -> str:
-    return ", ".join(spec.parameters.get("fixed", []))
+    return ", ".join(spec.parameters.fixed)

@@ -3,8 +3,17 @@ row, a diseased wall, restricted access)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from sessions.tasks.parameters import (
+    ArcRegion,
+    Plaque,
+    VesselPatchParameters,
+    WallPatchParameters,
+    WoundCut,
+)
 from sessions.tasks.spec import TaskSpec
 
 TASKS = {
@@ -16,15 +25,14 @@ TASKS = {
         (0.0105, 0.0051, 0.0015),
         (0.0, 0.0, 1.0),
         (1.0, 0.0, 0.0),
-        {
-            "size_m": [0.012, 0.01, 0.0015],
-            "cell_m": 0.001,
-            "stitch_cell_m": 0.0003,
-            "stitch_region_m": [[0.0085, 0.012], [0.0031, 0.0071]],
-            "fixed": ["x0", "y0", "y1"],
-            "model": "biphase",
-            "tissue": "porcine-artery",
-        },
+        WallPatchParameters(
+            fixed=("x0", "y0", "y1"),
+            tissue="porcine-artery",
+            size_m=(0.012, 0.01, 0.0015),
+            cell_m=0.001,
+            stitch_cell_m=0.0003,
+            stitch_region_m=((0.0085, 0.012), (0.0031, 0.0071)),
+        ),
         placement={
             # the free x1 edge is the wound: its plane x = 12 mm, normal pointing into the gap
             "wound_point": [0.012, 0.0, 0.0015],
@@ -67,18 +75,17 @@ def _interrupted_stitch() -> TaskSpec:
         tuple(entry),
         radial,
         towards_wound,
-        {
-            "inner_radius_m": _VESSEL["inner"],
-            "wall_m": _VESSEL["wall"],
-            "length_m": _VESSEL["length"],
-            "arc_deg": _VESSEL["arc_deg"],
-            "divisions": [30, 5, 34],  # circumferential, radial, axial: <= 0.3 mm cells
-            "wound": {"angle_deg": 0.0, "z_m": [0.002, 0.008], "gap_m": _VESSEL["gap"]},
-            "stitch_region": {"angle_deg": [0.0, 35.0], "z_m": [0.003, 0.007]},
-            "fixed": ["end0", "end1", "side0", "side1"],
-            "model": "biphase",
-            "tissue": "porcine-artery",
-        },
+        VesselPatchParameters(
+            fixed=("end0", "end1", "side0", "side1"),
+            tissue="porcine-artery",
+            inner_radius_m=_VESSEL["inner"],
+            wall_m=_VESSEL["wall"],
+            length_m=_VESSEL["length"],
+            arc_deg=_VESSEL["arc_deg"],
+            divisions=(30, 5, 34),  # circumferential, radial, axial: <= 0.3 mm cells
+            wound=WoundCut(0.0, (0.002, 0.008), _VESSEL["gap"]),
+            stitch_region=ArcRegion((0.0, 35.0), (0.003, 0.007)),
+        ),
         placement={
             # the b edge's plane through the axis; its normal points from the tissue into the gap
             "wound_point": _on_cylinder(_OUTER, _EDGE, z),
@@ -112,7 +119,7 @@ def _closure_row(spacing: float = 0.0015, count: int = 3) -> TaskSpec:
         "porcine artery (the interrupted stitch's vessel): each bite in 1.5 mm from the edge and out "
         "through the intima; spacing and its regularity are scored.",
         *bites[0],
-        dict(single.parameters),
+        single.parameters,
         placement={
             **single.placement,
             "entry_targets": entries,
@@ -133,11 +140,11 @@ def _diseased_wall() -> TaskSpec:
     row's second and third bites (angles 3-35 deg, z 4.25-7.25 mm), four times stiffer with a
     puncture at the band's top (the ``calcified`` preset); the first bite is through healthy wall."""
     row = _closure_row()
-    parameters = {
-        **row.parameters,
-        "calcification": {"angle_deg": [3.0, 35.0], "z_m": [0.00425, 0.00725], "layers": [0, 1, 2, 3, 4]},
-        "region_tissue": {"calcified": "calcified"},
-    }
+    parameters = dataclasses.replace(
+        row.parameters,
+        calcification=Plaque((3.0, 35.0), (0.00425, 0.00725), (0, 1, 2, 3, 4)),
+        region_tissue={"calcified": "calcified"},
+    )
     return TaskSpec(
         "diseased-wall",
         "vessel_patch",
@@ -174,7 +181,7 @@ def _restricted_access(tilt_deg: float = 45.0) -> TaskSpec:
         single.entry,
         single.normal,
         single.bite_direction,
-        dict(single.parameters),
+        single.parameters,
         placement=single.placement,
         access={"approach": [float(x) for x in approach], "tilt_deg": tilt_deg},
         time_budget_s=90.0,

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sessions.tasks.parameters import TaskParameters
+
 
 @dataclass(frozen=True)
 class TaskSpec:
@@ -13,7 +15,9 @@ class TaskSpec:
     entry: tuple[float, float, float]
     normal: tuple[float, float, float]
     bite_direction: tuple[float, float, float]
-    parameters: dict
+    parameters: TaskParameters
+    """What the task's kind builds it from (:mod:`sessions.tasks.parameters`); stored as
+    ``parameters.as_dict()``."""
     placement: dict | None = None
     """The wound edge and target marks placement metrics score against (SI units; see
     :class:`metrics.signals.placement.PlacementTargets`); recorded in each session's header."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from numpy.typing import NDArray
 
 from sessions.config import data_home
 from sessions.tasks.library import TASKS
+from sessions.tasks.parameters import MeshFileParameters, parameters_from
 from sessions.tasks.spec import TaskSpec
 from sim.calibration.presets import tissue_preset
 from sim.errors import VascsimError
@@ -29,20 +31,70 @@ def user_tasks_dir() -> Path:
 
 
 def _read_user_task(path: Path) -> TaskSpec:
+    """The task stored at ``path`` (``tasks/NAME/task.json``: a file anyone with the data folder can
+    edit), every field checked before it is used: VascsimError naming the file and the field."""
     try:
         data = json.loads(path.read_text())
-        return TaskSpec(
-            **{
-                **data,
-                "entry": tuple(data["entry"]),
-                "normal": tuple(data["normal"]),
-                "bite_direction": tuple(data["bite_direction"]),
-            }
-        )
-    except (OSError, ValueError, TypeError, KeyError) as error:
+        return _user_task(data, path.parent.name)
+    except (OSError, ValueError) as error:
         raise VascsimError(
             f"task file {path} cannot be read ({error}); remove its folder or fix it"
         ) from error
+    except VascsimError as error:
+        raise VascsimError(f"task file {path}: {error}; remove its folder or fix it") from error
+
+
+_USER_TASK_FIELDS = frozenset(
+    {"name", "scenario", "description", "entry", "normal", "bite_direction", "parameters"}
+    | {"placement", "more_bites", "access", "time_budget_s"}
+)
+
+
+def _user_task(data, folder: str) -> TaskSpec:
+    """A task added from a mesh, from its stored form: the mesh-file kind's fields only, each checked."""
+    if not isinstance(data, dict):
+        raise VascsimError("the task must be a JSON object")
+    unknown = sorted(set(data) - _USER_TASK_FIELDS)
+    if unknown:
+        raise VascsimError(f"fields it cannot use: {', '.join(map(repr, unknown))}")
+    if data.get("name") != folder:
+        raise VascsimError(f"name {data.get('name')!r} is not its folder's, {folder!r}")
+    if data.get("scenario") != MeshFileParameters.scenario:
+        raise VascsimError(f"scenario {data.get('scenario')!r}: a task added from a mesh is 'mesh_file'")
+    if data.get("placement") is not None or data.get("access") is not None or data.get("more_bites"):
+        raise VascsimError("a task added from a mesh has one bite and no placement marks or access")
+    description = data.get("description", "")
+    budget = data.get("time_budget_s", 60.0)
+    if not isinstance(description, str):
+        raise VascsimError("description must be text")
+    if isinstance(budget, bool) or not isinstance(budget, (int, float)) or not 1.0 <= budget <= 7200.0:
+        raise VascsimError(f"time_budget_s {budget!r} must be a number of seconds from 1 to 7200")
+    return TaskSpec(
+        folder,
+        MeshFileParameters.scenario,
+        description,
+        _vector(data.get("entry"), "entry", 1.0),
+        _unit(data.get("normal"), "normal"),
+        _unit(data.get("bite_direction"), "bite_direction"),
+        parameters_from(MeshFileParameters.scenario, data.get("parameters"), "parameters"),
+        time_budget_s=float(budget),
+    )
+
+
+def _vector(value, name: str, bound: float) -> tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise VascsimError(f"{name} must be a list of 3 numbers, not {value!r}")
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > bound:
+            raise VascsimError(f"{name} must hold 3 finite numbers within {bound:g}, not {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _unit(value, name: str) -> tuple[float, float, float]:
+    vector = _vector(value, name, 1.0 + 1e-6)
+    if abs(math.hypot(*vector) - 1.0) > 1e-6:
+        raise VascsimError(f"{name} must be a unit vector, not {list(vector)!r}")
+    return vector
 
 
 def user_tasks() -> dict[str, TaskSpec]:
@@ -114,17 +166,17 @@ def add_mesh_task(
         tuple(float(v) for v in point),
         tuple(float(-v) for v in normal),  # the task's normal points out of the wall, as the built-ins'
         tuple(float(v) for v in bite),
-        {
-            "mesh_file": USER_MESH_FILE,
-            "fixed": list(fixed),
-            "stitch_radius_m": float(stitch_radius),
-            "model": "biphase",
-            "tissue": tissue,
-            **({"region_tissue": dict(region_tissue)} if region_tissue else {}),
-        },
+        MeshFileParameters(
+            fixed=tuple(fixed),
+            tissue=tissue,
+            region_tissue=dict(region_tissue or {}),
+            mesh_file=USER_MESH_FILE,
+            stitch_radius_m=float(stitch_radius),
+        ),
         time_budget_s=time_budget_s,
     )
-    (folder / USER_TASK_FILE).write_text(json.dumps(dataclasses.asdict(spec), indent=1))
+    stored = {**dataclasses.asdict(spec), "parameters": spec.parameters.as_dict()}
+    (folder / USER_TASK_FILE).write_text(json.dumps(stored, indent=1))
     return spec
 
 

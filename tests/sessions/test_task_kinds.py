@@ -27,7 +27,7 @@ def test_every_built_in_task_is_of_a_kind_and_says_its_geometry_in_millimetres()
 def test_a_wall_patch_builds_its_graded_mesh_and_finds_its_stitch_region():
     spec = TASKS["wall-stitch"]
     mesh = task_mesh(spec)
-    (x0, x1), (y0, y1) = spec.parameters["stitch_region_m"]
+    (x0, x1), (y0, y1) = spec.parameters.stitch_region_m
     nodes = stitch_region_nodes(spec, mesh)
     points = mesh.points[nodes]
     assert len(nodes) > 0 and np.isin(nodes, mesh.surface_nodes).all()
@@ -36,8 +36,8 @@ def test_a_wall_patch_builds_its_graded_mesh_and_finds_its_stitch_region():
     # the stitch region is graded finer than the rest of the patch
     xs = np.unique(np.round(mesh.points[:, 0], 9))
     steps = np.diff(xs)
-    assert steps.min() == pytest.approx(spec.parameters["stitch_cell_m"], rel=0.05)
-    assert steps.max() > 1.5 * spec.parameters["stitch_cell_m"]
+    assert steps.min() == pytest.approx(spec.parameters.stitch_cell_m, rel=0.05)
+    assert steps.max() > 1.5 * spec.parameters.stitch_cell_m
 
 
 def test_a_task_of_an_unknown_kind_is_refused_naming_it_and_the_kinds():
