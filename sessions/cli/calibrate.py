@@ -35,14 +35,23 @@ from sessions.cli.base import (
     "--timeout", default=180.0, show_default=True, type=click.FloatRange(min=5.0),
     help="With --live: give up after this many seconds.",
 )  # fmt: skip
+@click.option(
+    "--view", type=click.Choice(["window", "none"]), default=None,
+    help="With --live: show the camera's picture, the views still to take and which way to turn the "
+    "board next in a window [default: window where a display exists, else none: the terminal says it].",
+)  # fmt: skip
 @user_errors
-def calibrate(images, live, table, source, out, squares, square_mm, marker_mm, dictionary, timeout) -> None:
+def calibrate(
+    images, live, table, source, out, squares, square_mm, marker_mm, dictionary, timeout, view
+) -> None:
     """Calibrate a camera from views of a ChArUco board (square-on and tilted each way).
 
     From photos: IMAGES are 10-20 photos of the board; --out names the JSON to write
     (for `vascsim import-video --camera`). Live (--live): hold the board in front of
-    the camera and turn it as the progress line asks (square-on, tilted left, right,
-    up, down); the fit is written as this station's calibration, which the camera
+    the camera and turn it as the window (or, with no display, the progress line) asks
+    (square-on, tilted left, right, up, down): the window shows the camera's picture with
+    the board's corners, the views taken of each kind and which way to turn the board
+    next, and Esc there gives up; the fit is written as this station's calibration, which the camera
     device (`--device camera`) uses. Either way the reprojection error is reported
     (pixels), and a live fit over 1 px is refused.
 
@@ -68,7 +77,7 @@ def calibrate(images, live, table, source, out, squares, square_mm, marker_mm, d
     if live:
         if images:
             raise click.UsageError("give either board photos or --live, not both")
-        _calibrate_live(source, board, Path(out) if out else None, timeout)
+        _calibrate_live(source, board, Path(out) if out else None, timeout, view)
         return
     if not images or not out:
         raise click.UsageError("give board photos and --out, or calibrate from the camera with --live")
@@ -91,8 +100,20 @@ def calibrate(images, live, table, source, out, squares, square_mm, marker_mm, d
     )
 
 
-def _calibrate_live(source: str, board, out, timeout: float) -> None:
+def _calibrate_live(source: str, board, out, timeout: float, view: str | None) -> None:
     from sessions.running.camera import calibrate_live
+    from sessions.running.live import default_view
+    from sim.devices.discovery import display_problem
+
+    if (view or default_view()) == "window":
+        problem = display_problem()
+        if problem is not None:
+            raise click.UsageError(f"--view window needs a display: {problem}")
+        from sessions.running.calibration_window import CalibrationWindow
+
+        window = CalibrationWindow()
+    else:
+        window = None
 
     _, home = open_catalog()
     shown = {"last": None}
@@ -105,7 +126,11 @@ def _calibrate_live(source: str, board, out, timeout: float) -> None:
             click.echo(line, err=True)
             shown["last"] = line
 
-    camera, path = calibrate_live(source, home, board, out, progress, timeout)
+    try:
+        camera, path = calibrate_live(source, home, board, out, progress, timeout, window)
+    finally:
+        if window is not None:
+            window.close()
     click.echo(
         f"calibration: {path} (reprojection error {camera.rms:.3f} px, focal {camera.matrix[0, 0]:.1f} px, "
         f"{camera.size[0]}x{camera.size[1]})"

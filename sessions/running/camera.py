@@ -208,10 +208,13 @@ def calibrate_live(
     out: Path | None = None,
     progress: Callable[[str | None, list[str]], None] | None = None,
     timeout_s: float = 180.0,
+    window=None,
 ) -> tuple[Camera, Path]:
     """Calibrate the camera ``spec`` (index, URL or a video of the board) from the frames it sends,
-    guided view by view (``progress(kind kept or None, kinds missing)`` after each frame); writes the
-    station's calibration (``out``, default the data directory's) only when the fit is good."""
+    guided view by view (``progress(kind kept or None, kinds missing)`` after each frame, and on
+    ``window``, a :class:`sessions.running.calibration_window.CalibrationWindow`, the picture, the
+    checklist and which way to turn the board next); writes the station's calibration (``out``,
+    default the data directory's) only when the fit is good."""
     views = CalibrationViews(board)
     frames, opened = open_frames(camera_source(spec))
     start = None
@@ -221,6 +224,8 @@ def calibrate_live(
             kept = views.offer(stamp, frame)
             if progress is not None:
                 progress(kept, views.missing())
+            if window is not None:
+                window.show(frame, views.counts(), views.last_corners)
             if not views.missing() or stamp - start > timeout_s:
                 break
     finally:

@@ -40,6 +40,7 @@ class CalibrationViews:
         self._detector = cv2.aruco.CharucoDetector(self._charuco)
         self.views: dict[str, list[tuple[float, int, NDArray[np.uint8]]]] = {kind: [] for kind in KINDS}
         self.size: tuple[int, int] | None = None
+        self.last_corners: NDArray[np.float32] | None = None  # (n, 1, 2) px: the board in the last frame
 
     def offer(self, time: float, frame: NDArray[np.uint8]) -> str | None:
         """Look at one frame (grey); returns the kind of view it was kept as, or None."""
@@ -47,6 +48,7 @@ class CalibrationViews:
 
         self.size = (frame.shape[1], frame.shape[0])
         corners, ids, _, _ = self._detector.detectBoard(frame)
+        self.last_corners = corners if ids is not None else None
         if ids is None or len(ids) < MIN_CORNERS:
             return None
         object_points, image_points = self._charuco.matchImagePoints(corners, ids)
@@ -63,6 +65,10 @@ class CalibrationViews:
         kept.sort(key=lambda view: -view[1])  # the views with most corners first
         del kept[VIEWS_PER_KIND:]
         return kind
+
+    def counts(self) -> dict[str, int]:
+        """Views kept so far, by kind."""
+        return {kind: len(kept) for kind, kept in self.views.items()}
 
     def missing(self) -> list[str]:
         """The kinds of view that still need more (each needs :data:`VIEWS_PER_KIND`)."""

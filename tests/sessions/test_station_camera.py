@@ -6,6 +6,7 @@ shows the needle following the instrument, the strip saying the camera lost it, 
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
@@ -75,3 +76,50 @@ def test_a_trainee_sutures_with_a_tracked_needle_holder_at_the_station(display, 
     kinds = events_of(home, uid)
     assert "tracking_lost" in kinds and "tracking_regained" in kinds, kinds
     assert kinds.index("tracking_lost") < kinds.index("tracking_regained")
+
+
+@pytest.fixture(scope="module")
+def board_video(tmp_path_factory):
+    """A video of the ChArUco board shown square-on and tilted each way, as a course calibrating live
+    shows it (sim.tracking.synthetic)."""
+    from sim.tracking.synthetic import board_views_video
+
+    video = tmp_path_factory.mktemp("board") / "board.mp4"
+    board_views_video(video, size=(960, 540))
+    return video
+
+
+def test_live_calibration_guides_on_screen_until_every_view_is_taken(display, board_video, tmp_path):
+    """`vascsim calibrate --live` on a display opens a window: the camera's picture with the board's
+    corners, the checklist of views and which way to turn the board next; the instruction changes as
+    views are kept, and the calibration is written when they are all taken."""
+    from sim.tracking.guided import KINDS
+
+    home = tmp_path / "home"
+    person = Person(display, tmp_path)
+    command = [VASCSIM, "calibrate", "--live", "--source", f"camera:{board_video}", "--view", "window"]
+    run = launch(command, display, home)
+    person.window("camera calibration", process=run)
+    shown = []
+    while run.poll() is None and len(shown) < 60:
+        shown.append(person.screenshot(f"calibration-{len(shown)}"))
+        time.sleep(0.25)
+    out, err = run.communicate(timeout=120)
+    assert run.returncode == 0, err
+    assert "reprojection error" in out and (home / "camera.json").exists()
+    pictures = [s for s in shown if s.std() > 20]  # the camera's picture drawn, not an empty window
+    changes = [np.abs(a.astype(int) - b).mean() for a, b in itertools.pairwise(pictures)]
+    assert len(pictures) >= 3 and max(changes) > 2  # the picture moves as the board turns
+    assert all(kind in err for kind in KINDS)  # the terminal said it too
+
+
+def test_escape_in_the_calibration_window_gives_up_and_writes_nothing(display, board_video, tmp_path):
+    home = tmp_path / "home"
+    person = Person(display, tmp_path)
+    command = [VASCSIM, "calibrate", "--live", "--source", f"camera:{board_video}", "--view", "window"]
+    run = launch(command, display, home)
+    window = person.window("camera calibration", process=run)
+    person.key(window, "Escape")
+    out, err = run.communicate(timeout=120)
+    assert run.returncode == 1 and "given up in its window; nothing was written" in err, err
+    assert "Traceback" not in err and not (home / "camera.json").exists()

@@ -137,3 +137,17 @@ def test_the_needle_starts_square_above_the_first_mark_and_the_camera_looks_down
     looking = (position - focal) / np.linalg.norm(position - focal)
     assert np.dot(looking, approach) > 0.7  # from the side the hand comes from, within 45 deg
     assert abs(np.dot(up, looking)) < 1e-12
+
+
+def test_the_calibration_window_says_the_next_turn_and_the_views_taken():
+    from sessions.running.calibration_window import guidance_lines
+    from sim.tracking.guided import KINDS
+
+    lines = guidance_lines({"square-on": 3, "tilted left": 1}, 24)
+    texts = [text for text, _ in lines]
+    assert texts[0] == "Turn the board's left edge away from you (about 25 deg)"
+    assert "square-on: done" in texts and "tilted left: 1 of 3" in texts and "tilted down: 0 of 3" in texts
+    assert "board: 24 corners found" in texts
+    every = guidance_lines(dict.fromkeys(KINDS, 3), 0)
+    assert every[0][0] == "Every view is taken: calibrating"
+    assert ("board: not found in the picture", "warn") in every
