@@ -117,21 +117,9 @@ def main() -> None:
     from dashboard.settings import DashboardSettings
     from recorder.layout import SAMPLES_JOURNAL
     from recorder.remote.views import view_path
-    from sessions.catalog import Catalog
-    from sessions.catalog.accounts import create_user
-    from sessions.catalog.store import CatalogStore
-    from sessions.config import database_url
-    from tests.dashboard.conftest import PASSWORD, running_server
+    from tests.dashboard.conftest import running_server
     from tests.e2e.browser import chromium
-
-    def course(home: Path) -> tuple[Catalog, CatalogStore]:
-        catalog = Catalog(database_url(home))
-        store = CatalogStore(catalog)
-        store.create_study("Course")
-        store.add_participant("Course", "P1", "trainee", "trainee")
-        with catalog.session() as orm:
-            create_user(orm, "supervisor", PASSWORD, "supervisor")
-        return catalog, store
+    from tests.e2e.test_live_scene import course, signed_in_supervisor
 
     home = Path(tempfile.mkdtemp()) / "home"
     catalog, store = course(home)
@@ -168,12 +156,7 @@ def main() -> None:
                         address = f"/live/stations/bay-1/{uid}"
                         received = view_path(settings.ingest_root, "bay-1", uid)
                 time.sleep(0.1)
-            page = browser.new_page(viewport={"width": 1366, "height": 768})
-            page.goto(f"{base}/login")
-            page.fill("input[name=username]", "supervisor")
-            page.fill("input[name=password]", PASSWORD)
-            page.click("#sign-in")
-            page.wait_for_load_state("networkidle")
+            page = signed_in_supervisor(browser, base)
             frames, seconds, views = watched(page, base, address, run, args.seconds, received)
             run.wait(120)
     finally:

@@ -50,6 +50,8 @@ def finalize(
             scan = scan_journal(directory / journal, schema, required)
             batches = scan.batches + ([salvaged] if key == "samples" and salvaged is not None else [])
             table = pa.Table.from_batches(batches, schema=schema)
+            if key == "events":  # recorded as they arrived (a layer in another process reports late)
+                table = table.sort_by([("time", "ascending")])  # stable: one time keeps its order
             temporary = directory / (target + ".tmp")
             staged.append((temporary, directory / target))
             pq.write_table(table, temporary, compression="zstd")

@@ -193,8 +193,12 @@ class IngestStore:
                 raise RemoteError(
                     409, f"{stream} batch {sequence} arrived, expected {journal.last_sequence + 1}"
                 )
-            times = float_values(batch.column(0))  # time order across batches, events as samples
-            if times.size and (np.any(np.diff(times) < 0) or times[0] < journal.last_time):
+            # samples in time order across batches; events as they arrive (a real-time session's
+            # haptic process reports its events at the end, with the times they happened), put in
+            # time order when the session is finished (recorder.finalize)
+            times = float_values(batch.column(0))
+            ordered = stream == "samples"
+            if ordered and times.size and (np.any(np.diff(times) < 0) or times[0] < journal.last_time):
                 raise RemoteError(
                     409,
                     f"{stream} batch {sequence} goes back in time (starts at {times[0]:.6f} s, "

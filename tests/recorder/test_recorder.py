@@ -84,6 +84,19 @@ def test_overflow_is_counted_and_recorded(tmp_path):
     assert header["dropped_samples"] == 500
 
 
+def test_events_reported_late_are_finished_in_time_order(tmp_path):
+    """A real-time session's haptic process reports its safety events when the run ends, with the
+    times they happened: the journal holds them as they came, the finished file in time order (one
+    time keeping its order)."""
+    writer = SessionWriter(tmp_path / "s", {}, flush_interval=0.01)
+    for time_, kind in ((0.5, "contact_start"), (0.9, "pierce"), (0.2, "force_clamped"), (0.9, "exit")):
+        writer.event(time_, kind)
+    writer.close()
+    events = open_session(tmp_path / "s").events
+    assert events.column("time").to_pylist() == [0.2, 0.5, 0.9, 0.9]
+    assert events.column("kind").to_pylist() == ["force_clamped", "contact_start", "pierce", "exit"]
+
+
 CHILD = textwrap.dedent("""
     import sys, time, numpy as np
     from recorder import SessionWriter, COLUMN, SAMPLE_COLUMNS
