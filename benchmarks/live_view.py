@@ -72,16 +72,20 @@ def watched(page, base: str, address: str, run: subprocess.Popen, seconds: float
     """(frames the page loaded, the seconds watched, views the ingest received) on the live page at
     ``address`` while ``run`` records; ``received``: the file the ingest keeps a remote view in."""
     sizes: list[int] = []
+    distinct: set[int] = set()
 
     def on_response(response) -> None:
         if "/view.jpg" in response.url and response.status == 200:
-            sizes.append(len(response.body()))
+            body = response.body()
+            sizes.append(len(body))
+            distinct.add(hash(body))
 
     page.on("response", on_response)
     page.goto(f"{base}{address}")
     while not sizes and run.poll() is None:  # the window's first published frame
         page.wait_for_timeout(100)
     sizes.clear()
+    distinct.clear()
     views, seen = [], None
     start = time.perf_counter()
     while time.perf_counter() - start < seconds:
@@ -94,7 +98,7 @@ def watched(page, base: str, address: str, run: subprocess.Popen, seconds: float
             if (facts.st_mtime_ns, facts.st_size) != seen:
                 seen = (facts.st_mtime_ns, facts.st_size)
                 views.append(facts.st_size)
-    return list(sizes), time.perf_counter() - start, views
+    return list(sizes), time.perf_counter() - start, views, len(distinct)
 
 
 def main() -> None:
@@ -157,7 +161,7 @@ def main() -> None:
                         received = view_path(settings.ingest_root, "bay-1", uid)
                 time.sleep(0.1)
             page = signed_in_supervisor(browser, base)
-            frames, seconds, views = watched(page, base, address, run, args.seconds, received)
+            frames, seconds, views, different = watched(page, base, address, run, args.seconds, received)
             run.wait(120)
     finally:
         if run is not None and run.poll() is None:
@@ -177,7 +181,8 @@ def main() -> None:
     state = scene_state_bytes()
     print(
         f"live page ({args.station} station), one supervisor, {seconds:.1f} s: "
-        f"{len(frames) / seconds:.1f} frames/s in the browser, {sum(frames) / seconds / 1e3:.0f} kB/s for "
+        f"{len(frames) / seconds:.1f} frames/s loaded in the browser ({different / seconds:.1f}/s of them "
+        f"different: new views), {sum(frames) / seconds / 1e3:.0f} kB/s for "
         f"the watched station (median frame {jpeg / 1e3:.1f} kB, 960x540 JPEG at quality 75)"
     )
     print(
