@@ -113,6 +113,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     simulation.graphics = SharedGraphics(arena)
     simulation.fem = SharedFem(arena)
     display_telemetry = SharedTelemetry(arena, display_capacity)
+    relay = HapticEventRelay(simulation, events)
     display_pid, display_errors = start_display_process(simulation, duration, control, display_telemetry)
     errors_read, errors_write = os.pipe()
     started = clock.perf_counter()
@@ -141,7 +142,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
             wait_for_display(display_pid, control)
             # every layer counts from here: the haptic set-up (memory locking, warm-up) is not in the session
             control.start = clock.perf_counter() + START_DELAY
-            _run_other_layers(simulation, duration, control)
+            _run_other_layers(simulation, duration, control, relay)
     finally:
         control.request_stop()
         wait_for(pid, timeout=5.0)
@@ -159,7 +160,7 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
     if control.stop_reason not in ("", "stopped"):  # the trainee, Ctrl-C or the task asked for the stop
         simulation.stop(control.stop_reason, 0.0)
     return _collect(
-        simulation, shared_log, telemetry, events, control, child_error, clock.perf_counter() - started
+        simulation, shared_log, telemetry, relay, control, child_error, clock.perf_counter() - started
     )
 
 
@@ -294,12 +295,38 @@ def _paced_wind_down(simulation: Simulation, now: float, period: float) -> None:
         simulation.haptic_log.append(when, np.zeros(3), False, force)
 
 
-def _run_other_layers(simulation: Simulation, duration: float, control: ControlBlock) -> None:
+class HapticEventRelay:
+    """The haptic process's events (its safety filter's, a camera's tracking changes) passed on to the
+    simulation's own, and so to the recording, as they come: by the graphics layer after each of its
+    frames (at most a frame late), and whatever is left when the run ends."""
+
+    def __init__(self, simulation: Simulation, events: SharedEvents) -> None:
+        self.simulation, self.events = simulation, events
+        self.delivered = 0
+        self._lock = threading.Lock()
+
+    def deliver(self, failure: str = "") -> None:
+        """Emit the events added since the last call (``failure``: the detail of a ``layer_failed``)."""
+        with self._lock:
+            new = self.events.read(self.delivered)
+            self.delivered += len(new)
+        for when, kind in new:
+            detail = failure if kind == "layer_failed" else ""
+            self.simulation._emit(RuntimeEvent(kind, when, "haptic", detail))
+
+    def graphics_step(self, now: float) -> None:
+        self.simulation.graphics_step(now)
+        self.deliver()
+
+
+def _run_other_layers(
+    simulation: Simulation, duration: float, control: ControlBlock, relay: HapticEventRelay
+) -> None:
     from threadpoolctl import threadpool_limits
 
     steps: dict[str, Callable[[float], None]] = {
         "fem": simulation.fem_step,
-        "graphics": simulation.graphics_step,
+        "graphics": relay.graphics_step,
     }
     if simulation.renderer is None:
         steps["display"] = simulation.display_step  # nothing to render: a cheap thread
@@ -386,7 +413,7 @@ def _collect(
     simulation: Simulation,
     shared_log: SharedHapticLog,
     telemetry: SharedTelemetry,
-    events: SharedEvents,
+    relay: HapticEventRelay,
     control: ControlBlock,
     child_error: str,
     wall: float,
@@ -397,8 +424,7 @@ def _collect(
     ):
         log.append(float(t), p, bool(g), f)
     simulation.telemetry["haptic"] = _as_layer_telemetry("haptic", simulation, telemetry)
-    for when, kind in events.read():  # recorded as well (the recorder hears them only here)
-        simulation._emit(RuntimeEvent(kind, when, "haptic", child_error if kind == "layer_failed" else ""))
+    relay.deliver(child_error)  # those the graphics layer had not passed on (the run's last frame's)
     simulation.events.sort(key=lambda event: event.time)
     if control.haptic_state == ControlBlock.DEVICE_LOST:
         simulation.stop("device_lost", 0.0)

@@ -4,6 +4,7 @@ import ctypes
 import dataclasses
 import gc
 import math
+import time
 
 import numpy as np
 import pytest
@@ -252,6 +253,32 @@ def test_holder_snapshot_pose_is_validated(tissue, corrupt, message):
     assert message in result.error
     assert_forces_safe(result, LIMITS)
     assert isinstance(Pose.identity(), Pose)
+
+
+def test_the_haptic_process_events_reach_the_recording_as_they_happen(tissue):
+    """Its safety filter's events (limits of 2 mN clamp the force from the first touch) were passed
+    on only when the run ended, with the times they happened: the live page and a central recorder
+    saw them at the end, out of time order. The graphics layer now passes them on each frame."""
+    simulation, _, _ = make(tissue, limits=DeviceLimits(max_force=0.002, max_force_rate=2.0))
+    heard = []  # (kind, event time, seconds after the run started that it was heard)
+    began = []
+
+    def hear(event) -> None:
+        heard.append((event.kind, event.time, time.perf_counter() - began[0]))
+
+    simulation.on_event = hear
+    began.append(time.perf_counter())
+    result = simulation.run_realtime(2.4)
+    ended = time.perf_counter() - began[0]
+    assert result.completed, result.error
+    clamped = [(when, at) for kind, when, at in heard if kind == "force_clamped"]
+    assert clamped, [kind for kind, _, _ in heard]
+    # heard within a few graphics frames of happening (the set-up before the clock, a few seconds, is
+    # in both), long before the run's end
+    first_when, first_heard = clamped[0]
+    assert first_heard < ended - 1.0, (first_heard, ended, first_when)
+    assert sorted(set(e.kind for e in result.events)) == sorted(set(kinds(result)))
+    assert sum(e.kind == "force_clamped" for e in result.events) == len(clamped)  # each once
 
 
 def test_realtime_run_shares_state_across_processes(tissue):
