@@ -221,8 +221,9 @@ def from_recorded(session, participant_id: str | None = None, label: str | None 
     time = column("time").astype(np.float64)
     tool = columns("tool_x", "tool_y", "tool_z")
     if str(header.get("device", "")).startswith("camera"):  # measured poses only, smoothed
-        tool = measured_path(time, tool, column("tool_tracking"))
-        metadata = dict(metadata, tool_measured_fraction=float(np.mean(column("tool_tracking") == 0)))
+        labels = column("tool_tracking")
+        tool = measured_path(time, tool, labels)
+        metadata = dict(metadata, tool_measured_fraction=float(np.mean(labels == 0)))
     subordinate = columns("sub_dx", "sub_dy", "sub_dz") if two_handed else None
     if subordinate is not None and str(header.get("sub_device", "")) == "camera":  # the same for the forceps
         subordinate = measured_path(time, subordinate, column("sub_tracking"))

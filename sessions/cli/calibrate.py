@@ -101,14 +101,10 @@ def calibrate(
 
 
 def _calibrate_live(source: str, board, out, timeout: float, view: str | None) -> None:
+    from sessions.cli.station import chosen_view
     from sessions.running.camera import calibrate_live
-    from sessions.running.live import default_view
-    from sim.devices.discovery import display_problem
 
-    if (view or default_view()) == "window":
-        problem = display_problem()
-        if problem is not None:
-            raise click.UsageError(f"--view window needs a display: {problem}")
+    if chosen_view(view) == "window":
         from sessions.running.calibration_window import CalibrationWindow
 
         window = CalibrationWindow()

@@ -37,6 +37,19 @@ def station_device(_context, _parameter, value: str) -> str:
     )
 
 
+def chosen_view(view: str | None) -> str:
+    """``--view`` as asked, else ``window`` where a display exists; a window asked for where no display
+    answers is a usage error naming why."""
+    from sessions.running.live import default_view
+    from sim.devices.discovery import display_problem
+
+    chosen = view or default_view()
+    problem = display_problem() if chosen == "window" else None
+    if problem is not None:
+        raise click.UsageError(f"--view window needs a display: {problem}")
+    return chosen
+
+
 def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
     """``--view``, ``--stereo``, ``--size`` and ``--handedness``, turned into one ``view`` argument (a
     :class:`sessions.running.live.LiveView`, or None for no window)."""
@@ -74,15 +87,11 @@ def view_options(command: Callable[..., Any]) -> Callable[..., Any]:
     )
     @wraps(command)
     def wrapper(*args: Any, view: str | None, stereo, size, handedness, **kwargs: Any) -> Any:
-        from sessions.running.live import LiveView, default_view
+        from sessions.running.live import LiveView
         from sessions.running.window import ViewSettings
-        from sim.devices.discovery import display_problem
         from sim.devices.mouse import MouseMapping
 
-        chosen = view or default_view()
-        problem = display_problem() if chosen == "window" else None
-        if problem is not None:
-            raise click.UsageError(f"--view window needs a display: {problem}")
+        chosen = chosen_view(view)
         live = None
         if chosen == "window":
             live = LiveView(ViewSettings(size=size, stereo=stereo), MouseMapping(handedness=handedness))

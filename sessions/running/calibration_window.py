@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from sessions.running.screens import keyed_window, text_actor
 from sim.errors import VascsimError
 from sim.tracking.guided import KINDS, VIEWS_PER_KIND
 
@@ -59,27 +60,16 @@ class CalibrationWindow:
     :class:`CalibrationCancelled` when the person gives up."""
 
     def __init__(self, size: tuple[int, int] = (960, 540)) -> None:
-        import pyvista as pv
-        from vtkmodules.vtkInteractionStyle import vtkInteractorStyleUser
-
         self.size = size
-        self.plotter = pv.Plotter(window_size=size, title=TITLE)
-        self.plotter.set_background("black")
-        self.plotter.show(auto_close=False, interactive_update=True)
-        interactor = self.plotter.iren.interactor
-        interactor.RemoveAllObservers()
-        interactor.SetInteractorStyle(vtkInteractorStyleUser())
-        interactor.AddObserver("KeyPressEvent", lambda caller, _: self._keys.append(caller.GetKeySym()), 10.0)
-        interactor.AddObserver("ExitEvent", lambda *_: self._keys.append("Escape"), 10.0)
-        self._interactor = interactor
         self._keys: list[str] = []
+        self.plotter, self._interactor = keyed_window(size, TITLE, "black", self._keys)
         self._picture = None
         self._texts: list = []
 
     def show(self, frame: NDArray[np.uint8], counts: dict[str, int], corners: NDArray | None) -> None:
         """Draw ``frame`` (grey or BGR) with the board's ``corners`` (n, 2 px) and the guidance."""
         self._interactor.ProcessEvents()
-        if any(key in ("Escape", "q", "Q") for key in self._keys):
+        if any(key in ("Escape", "q", "Q", "closed") for key in self._keys):
             raise CalibrationCancelled("the calibration was given up in its window; nothing was written")
         self._keys.clear()
         self._draw_picture(self._marked(frame, corners))
@@ -122,8 +112,6 @@ class CalibrationWindow:
             self._picture.Modified()
 
     def _draw_text(self, lines: list[tuple[str, str]]) -> None:
-        from vtkmodules.vtkRenderingCore import vtkTextActor
-
         renderer = self.plotter.renderer
         for actor in self._texts:
             renderer.RemoveViewProp(actor)
@@ -131,20 +119,13 @@ class CalibrationWindow:
         width, height = self.size
         y = height - 40
         for text, style in lines:
-            size, bold, colour = STYLES[style]
-            actor = vtkTextActor()
-            actor.SetInput(text)
-            prop = actor.GetTextProperty()
-            prop.SetFontSize(size)
-            prop.SetBold(bold)
-            prop.SetColor(*colour)
-            prop.SetBackgroundColor(0.0, 0.0, 0.0)
-            prop.SetBackgroundOpacity(0.6)
-            if style == "next":
-                actor.SetDisplayPosition(16, 16)  # the instruction under the picture, large
+            if style == "next":  # the instruction under the picture, large
+                actor = text_actor(text, STYLES[style], (16, 16))
             else:  # the checklist's column, right of the picture
-                actor.SetDisplayPosition(width - COLUMN_PX + 12, y)
-                y -= int(size * 1.8)
+                actor = text_actor(text, STYLES[style], (width - COLUMN_PX + 12, y))
+                y -= int(STYLES[style][0] * 1.8)
+            actor.GetTextProperty().SetBackgroundColor(0.0, 0.0, 0.0)
+            actor.GetTextProperty().SetBackgroundOpacity(0.6)
             renderer.AddViewProp(actor)
             self._texts.append(actor)
 

@@ -45,25 +45,47 @@ def wrapped(text: str, style: str = "body", indent: str = "") -> list[Line]:
     return [Line(line, style) for line in lines or [""]]
 
 
+def keyed_window(size: tuple[int, int], title: str, background: str, pressed: list[str]):
+    """An open window with no camera interaction, each key pressed appended to ``pressed`` by name
+    (``"closed"`` when the window is closed); returns its plotter and interactor."""
+    import pyvista as pv
+    from vtkmodules.vtkInteractionStyle import vtkInteractorStyleUser
+
+    plotter = pv.Plotter(window_size=size, title=title)
+    plotter.set_background(background)
+    plotter.show(auto_close=False, interactive_update=True)
+    plotter.set_background(background)  # opening the window applies the theme's own
+    interactor = plotter.iren.interactor
+    interactor.RemoveAllObservers()
+    interactor.SetInteractorStyle(vtkInteractorStyleUser())
+    interactor.AddObserver("KeyPressEvent", lambda caller, _: pressed.append(caller.GetKeySym()), 10.0)
+    interactor.AddObserver("ExitEvent", lambda *_: pressed.append("closed"), 10.0)
+    return plotter, interactor
+
+
+def text_actor(text: str, style: tuple[int, bool, tuple[float, float, float]], position: tuple[int, int]):
+    """A line of text at ``position`` (px from the bottom left) in ``style`` (size, bold, colour)."""
+    from vtkmodules.vtkRenderingCore import vtkTextActor
+
+    size, bold, colour = style
+    actor = vtkTextActor()
+    actor.SetInput(text)
+    prop = actor.GetTextProperty()
+    prop.SetFontSize(size)
+    prop.SetBold(bold)
+    prop.SetColor(*colour)
+    actor.SetDisplayPosition(*position)
+    return actor
+
+
 class Screen:
     """A window of text lines and the keys that leave it (see the module docstring)."""
 
     def __init__(self, settings: ViewSettings, name: str) -> None:
-        import pyvista as pv
-        from vtkmodules.vtkInteractionStyle import vtkInteractorStyleUser
-
         self.settings = settings
-        self.plotter = pv.Plotter(window_size=settings.size, title=f"{settings.title}: {name}")
-        self.plotter.set_background("white")
-        self.plotter.show(auto_close=False, interactive_update=True)
-        self.plotter.set_background("white")
-        interactor = self.plotter.iren.interactor
-        interactor.RemoveAllObservers()
-        interactor.SetInteractorStyle(vtkInteractorStyleUser())
-        interactor.AddObserver("KeyPressEvent", self._key, 10.0)
-        interactor.AddObserver("ExitEvent", lambda *_: self._pressed.append("closed"), 10.0)
-        self._interactor = interactor
         self._pressed: list[str] = []
+        title = f"{settings.title}: {name}"
+        self.plotter, self._interactor = keyed_window(settings.size, title, "white", self._pressed)
         self._actors: list = []
 
     def show(self, lines: list[Line]) -> None:
@@ -85,16 +107,7 @@ class Screen:
         self.plotter.render()
 
     def _place(self, line: Line, y: int) -> None:
-        from vtkmodules.vtkRenderingCore import vtkTextActor
-
-        size, bold, colour = STYLES[line.style]
-        actor = vtkTextActor()
-        actor.SetInput(line.text)
-        prop = actor.GetTextProperty()
-        prop.SetFontSize(size)
-        prop.SetBold(bold)
-        prop.SetColor(*colour)
-        actor.SetDisplayPosition(28, y)
+        actor = text_actor(line.text, STYLES[line.style], (28, y))
         self.plotter.renderer.AddViewProp(actor)
         self._actors.append(actor)
 
@@ -123,9 +136,6 @@ class Screen:
             if deadline is not None and clock.monotonic() > deadline:
                 return "timeout"
             clock.sleep(0.02)
-
-    def _key(self, interactor, _event) -> None:
-        self._pressed.append(interactor.GetKeySym())
 
     def close(self) -> None:
         self.plotter.close()

@@ -138,7 +138,8 @@ class _Reader:
             raise VascsimError(f"{where} must be an object, not {type(data).__name__}")
         self.data, self.where, self.read = data, where, set()
 
-    def _value(self, name: str, default: Any = dataclasses.MISSING) -> Any:
+    def raw(self, name: str, default: Any = dataclasses.MISSING) -> Any:
+        """The field as stored (marked read), ``default`` when absent, or refused when required."""
         self.read.add(name)
         if name not in self.data:
             if default is dataclasses.MISSING:
@@ -147,7 +148,7 @@ class _Reader:
         return self.data[name]
 
     def number(self, name: str, low: float, high: float, default: Any = dataclasses.MISSING) -> float:
-        value = self._value(name, default)
+        value = self.raw(name, default)
         return self._number(value, name, low, high)
 
     def _number(self, value: Any, name: str, low: float, high: float) -> float:
@@ -160,7 +161,7 @@ class _Reader:
     def numbers(
         self, name: str, count: int, low: float, high: float, value: Any = dataclasses.MISSING
     ) -> tuple:
-        value = self._value(name) if value is dataclasses.MISSING else value
+        value = self.raw(name) if value is dataclasses.MISSING else value
         if not isinstance(value, list) or len(value) != count:
             raise VascsimError(f"{self.where}: {name} must be a list of {count} numbers, not {value!r}")
         return tuple(self._number(v, name, low, high) for v in value)
@@ -172,7 +173,7 @@ class _Reader:
         return start, stop
 
     def integers(self, name: str, count: int | None, low: int, high: int) -> tuple[int, ...]:
-        value = self._value(name)
+        value = self.raw(name)
         if not isinstance(value, list) or (count is not None and len(value) != count) or not value:
             raise VascsimError(f"{self.where}: {name} must be a list of whole numbers, not {value!r}")
         if not all(type(v) is int and low <= v <= high for v in value):
@@ -182,14 +183,14 @@ class _Reader:
     def text(
         self, name: str, choices: tuple[str, ...] | None = None, default: Any = dataclasses.MISSING
     ) -> str:
-        value = self._value(name, default)
+        value = self.raw(name, default)
         if not isinstance(value, str) or (choices is not None and value not in choices):
             listed = f"one of {', '.join(choices)}" if choices is not None else "text"
             raise VascsimError(f"{self.where}: {name} must be {listed}, not {value!r}")
         return value
 
     def names(self, name: str) -> tuple[str, ...]:
-        value = self._value(name)
+        value = self.raw(name)
         if not isinstance(value, list) or not value:
             raise VascsimError(f"{self.where}: {name} must be a list of node set names, not {value!r}")
         for item in value:
@@ -198,7 +199,7 @@ class _Reader:
         return tuple(value)
 
     def presets(self, name: str) -> dict[str, str]:
-        value = self._value(name, {})
+        value = self.raw(name, {})
         if not isinstance(value, dict):
             raise VascsimError(f"{self.where}: {name} must map region names to presets, not {value!r}")
         for region, preset in value.items():
@@ -209,7 +210,7 @@ class _Reader:
         return dict(value)
 
     def nested(self, name: str, optional: bool = False) -> _Reader | None:
-        value = self._value(name, None if optional else dataclasses.MISSING)
+        value = self.raw(name, None if optional else dataclasses.MISSING)
         return None if value is None else _Reader(value, f"{self.where}: {name}")
 
     def finish(self) -> None:
@@ -232,7 +233,7 @@ def parameters_from(scenario: str, data: Any, where: str) -> TaskParameters:
         "region_tissue": read.presets("region_tissue"),
     }
     if scenario == "wall_patch":
-        region = read._value("stitch_region_m")
+        region = read.raw("stitch_region_m")
         if not isinstance(region, list) or len(region) != 2:
             raise VascsimError(f"{where}: stitch_region_m must be [[x0, x1], [y0, y1]], not {region!r}")
         made: TaskParameters = WallPatchParameters(
