@@ -93,6 +93,7 @@ def start_display_process(
             finish()
     except BaseException as error:
         status = 1
+        control.mark_display_failed(clock.perf_counter())
         report_failure(errors_write, "display", error)
     finally:
         os._exit(status)

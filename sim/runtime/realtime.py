@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
 import os
 import signal
 import sys
@@ -152,8 +153,10 @@ def run_realtime(simulation: Simulation, duration: float, pin_cpus: bool = True)
             set_all_threads(previous_affinity)
     child_error = read_all(errors_read)
     failed = read_all(display_errors)
-    if failed:  # the session went on without its view; the failure is recorded, with its message
-        simulation._emit(RuntimeEvent("layer_failed", 0.0, "display", failed))  # recorded too
+    if failed:  # the session went on without its view; the failure is recorded, with its message and time
+        failed_at = control.display_failed_at
+        when = failed_at if math.isfinite(failed_at) else 0.0
+        simulation._emit(RuntimeEvent("layer_failed", when, "display", failed))
     if display_pid is not None:
         simulation.telemetry["display"] = _as_layer_telemetry("display", simulation, display_telemetry)
     simulation.telemetry[FORCE_PATH] = _as_layer_telemetry(FORCE_PATH, simulation, force_path_telemetry)
@@ -260,11 +263,11 @@ def _haptic_process(
             simulation.haptic_step(now)
             telemetry.record(now, clock.perf_counter() - began)
             force_path_telemetry.record(now, simulation.force_path_seconds)
-            for when, kind, _detail in simulation.safety.events[reported:]:
-                events.add(when, kind)
+            for when, kind, detail in simulation.safety.events[reported:]:
+                events.add(when, kind, detail)
             reported = len(simulation.safety.events)
-            for when, kind in simulation.tracking_events[tracked:]:
-                events.add(when, kind)
+            for when, kind, detail in simulation.tracking_events[tracked:]:
+                events.add(when, kind, detail)
             tracked = len(simulation.tracking_events)
             if simulation.stop_reason == "device_lost":
                 events.add(now, "device_lost")
@@ -310,9 +313,9 @@ class HapticEventRelay:
         with self._lock:
             new = self.events.read(self.delivered)
             self.delivered += len(new)
-        for when, kind in new:
-            detail = failure if kind == "layer_failed" else ""
-            self.simulation._emit(RuntimeEvent(kind, when, "haptic", detail))
+        for when, kind, detail in new:
+            said = failure if kind == "layer_failed" else detail
+            self.simulation._emit(RuntimeEvent(kind, when, "haptic", said))
 
     def graphics_step(self, now: float) -> None:
         self.simulation.graphics_step(now)

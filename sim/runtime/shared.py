@@ -270,33 +270,54 @@ EVENT_CODES = (
 
 
 class SharedEvents:
-    """Runtime events raised in the haptic process: (time, code) pairs."""
+    """Runtime events raised in the haptic process: (time, code, detail) rows, the detail as at most
+    :attr:`DETAIL_BYTES` of UTF-8 (cut at a character), so what the recording says of a clamped force
+    ("1200 mN clamped to the rated 880 mN") is what the haptic process said."""
 
-    @staticmethod
-    def doubles(capacity: int = 4096) -> int:
-        """Its size in the arena: ``capacity`` events of 2 and a count."""
-        return capacity * 2 + 1
+    DETAIL_BYTES = 96
+    _ROW = 3 + DETAIL_BYTES // 8  # time, code, detail length, then the detail's bytes
+
+    @classmethod
+    def doubles(cls, capacity: int = 4096) -> int:
+        """Its size in the arena: ``capacity`` rows and a count."""
+        return capacity * cls._ROW + 1
 
     def __init__(self, arena: Arena, capacity: int = 4096) -> None:
-        self._data = arena.take(capacity, 2)
+        self._data = arena.take(capacity, self._ROW)
         self._count = arena.take(1)
 
-    def add(self, time: float, kind: str) -> None:
+    def add(self, time: float, kind: str, detail: str = "") -> None:
         index = int(self._count[0])
         if index < len(self._data):
-            self._data[index] = (time, EVENT_CODES.index(kind))
+            text = detail.encode()[: self.DETAIL_BYTES].decode(errors="ignore").encode()
+            row = self._data[index]
+            row[:3] = (time, EVENT_CODES.index(kind), len(text))
+            row[3:].view(np.uint8)[: len(text)] = np.frombuffer(text, dtype=np.uint8)
             self._count[0] = index + 1
 
-    def read(self, start: int = 0) -> list[tuple[float, str]]:
+    def read(self, start: int = 0) -> list[tuple[float, str, str]]:
         end = int(self._count[0])
-        return [(float(t), EVENT_CODES[int(c)]) for t, c in self._data[start:end]]
+        return [
+            (
+                float(row[0]),
+                EVENT_CODES[int(row[1])],
+                row[3:].view(np.uint8)[: int(row[2])].tobytes().decode(),
+            )
+            for row in self._data[start:end]
+        ]
+
+
+def _text(row: NDArray[np.float64]) -> str:
+    """The detail stored in an event row (its length, then its bytes)."""
+    return row[3:].view(np.uint8)[: int(row[2])].tobytes().decode()
 
 
 class ControlBlock:
-    """[stop requested, haptic state, start time, haptic ready, display ready]: states 0 running,
-    1 finished, 2 device lost, 3 failed. The start time (perf_counter seconds, shared by all processes)
-    is 0 until the parent sets it, which it does only once the haptic process is ready. The stop word
-    holds why the stop was asked for (an index into :data:`STOP_REASONS`, 0: not asked)."""
+    """[stop requested, haptic state, start time, haptic ready, display ready, display failed at]:
+    states 0 running, 1 finished, 2 device lost, 3 failed. The start time (perf_counter seconds, shared
+    by all processes) is 0 until the parent sets it, which it does only once the haptic process is
+    ready. The stop word holds why the stop was asked for (an index into :data:`STOP_REASONS`, 0: not
+    asked). The display's failure time is nan until the display process fails."""
 
     RUNNING, FINISHED, DEVICE_LOST, FAILED = 0.0, 1.0, 2.0, 3.0
     STOP_REASONS = ("", "stopped", "stopped_by_trainee", "interrupted", "task_done")
@@ -305,11 +326,12 @@ class ControlBlock:
 
     @staticmethod
     def doubles() -> int:
-        """Its size in the arena: five control words."""
-        return 5
+        """Its size in the arena: six control words."""
+        return 6
 
     def __init__(self, arena: Arena) -> None:
         self._data = arena.take(self.doubles())
+        self._data[5] = math.nan
 
     @property
     def stop_requested(self) -> bool:
@@ -354,6 +376,18 @@ class ControlBlock:
 
     def mark_display_ready(self) -> None:
         self._data[4] = 1.0
+
+    @property
+    def display_failed_at(self) -> float:
+        """Session time (s) at which the display process failed (0 before the session's start; nan
+        while it has not)."""
+        return float(self._data[5])
+
+    def mark_display_failed(self, clock_now: float) -> None:
+        """In the display process, as it fails at ``clock_now`` (the shared perf_counter clock): the
+        session time then (0 before the start)."""
+        start = float(self._data[2])
+        self._data[5] = max(clock_now - start, 0.0) if start else 0.0
 
     def wait_for_start(self, poll: float = 0.0005) -> float:
         """The shared start time, once set (0.0 if a stop was requested first)."""

@@ -119,7 +119,7 @@ class Simulation:
         self._prefetcher: Prefetcher | None = None  # started for the length of a run (a worker process)
         self._previous_tip: NDArray[np.float64] | None = None  # at the last graphics frame
         self._tracking = 0  # the needle hand's pose: measured (0) or held (2) at the last change
-        self.tracking_events: list[tuple[float, str]] = []
+        self.tracking_events: list[tuple[float, str, str]] = []
 
     # -- the four steps ----------------------------------------------------------------
     def haptic_step(self, now: float) -> None:
@@ -163,8 +163,9 @@ class Simulation:
         """``tracking_lost`` when the pose becomes held (2), ``tracking_regained`` when it is measured (0)
         again (a predicted pose, 1, in between changes nothing and is not passed here)."""
         kind = "tracking_lost" if tracking == 2 else "tracking_regained"
-        self.tracking_events.append((now, kind))  # the real-time loop passes these to the parent
-        self._emit(RuntimeEvent(kind, now, "haptic", "pose held" if tracking == 2 else "pose measured"))
+        detail = "pose held" if tracking == 2 else "pose measured"
+        self.tracking_events.append((now, kind, detail))  # the real-time loop passes these to the parent
+        self._emit(RuntimeEvent(kind, now, "haptic", detail))
         self._tracking = tracking
 
     def _read_subordinate(self, now: float) -> None:

@@ -4,6 +4,7 @@ import ctypes
 import dataclasses
 import gc
 import math
+import re
 import time
 
 import numpy as np
@@ -279,6 +280,9 @@ def test_the_haptic_process_events_reach_the_recording_as_they_happen(tissue):
     assert first_heard < ended - 1.0, (first_heard, ended, first_when)
     assert sorted(set(e.kind for e in result.events)) == sorted(set(kinds(result)))
     assert sum(e.kind == "force_clamped" for e in result.events) == len(clamped)  # each once
+    # with what the haptic process said (they crossed as time and code only, their text lost)
+    details = [e.detail for e in result.events if e.kind == "force_clamped"]
+    assert all(re.fullmatch(r"\d+ mN clamped to the rated 2 mN", d) for d in details), details
 
 
 def test_realtime_run_shares_state_across_processes(tissue):
@@ -358,7 +362,8 @@ def test_a_failing_layer_process_reaches_the_parent_with_its_message(tissue):
     from sim.runtime import LayerProcessError
 
     def broken_view(frame):
-        raise ValueError("the view's GPU is gone")
+        if frame.time >= 0.4:
+            raise ValueError("the view's GPU is gone")
 
     simulation, _, _ = make(tissue)
     simulation.renderer = broken_view
@@ -367,6 +372,8 @@ def test_a_failing_layer_process_reaches_the_parent_with_its_message(tissue):
     failed = [e for e in result.events if e.kind == "layer_failed"]
     expected = ("display", "display: ValueError: the view's GPU is gone")
     assert [(e.layer, e.detail) for e in failed] == [expected]
+    # recorded when the view failed (it was at 0.0, the session's start, whenever it happened)
+    assert 0.4 <= failed[0].time < 0.7, failed[0].time
 
     def no_memory_lock():
         raise PermissionError("mlockall refused")

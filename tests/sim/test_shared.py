@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim.runtime.logs import ForceHistory
-from sim.runtime.shared import Arena, SharedForceHistory
+from sim.runtime.shared import Arena, SharedEvents, SharedForceHistory
 
 CAPACITY = 16
 
@@ -153,3 +153,35 @@ def test_the_display_gets_both_hands_loads_and_the_jaws():
     assert seen.jaws is None and seen.loads is None
     alone = with_grasp(None, np.array([9]), np.array([[0.0, 0.05, 0.0]]))
     assert alone[0].tolist() == [9] and np.isnan(alone[2])
+
+
+@settings(max_examples=60, deadline=None)
+@given(details=st.lists(st.text(max_size=140), min_size=1, max_size=6))
+def test_the_haptic_process_events_keep_their_detail_text(details):
+    """The haptic process's events crossed to the parent as (time, code) only: a clamped force was
+    recorded without its "1200 mN clamped to the rated 880 mN". Now the detail crosses too, cut at a
+    character within its 96 bytes (never a broken character)."""
+    events = SharedEvents(Arena(SharedEvents.doubles(capacity=8)), capacity=8)
+    for k, detail in enumerate(details):
+        events.add(0.5 * k, "force_clamped", detail)
+    read = events.read()
+    assert [(when, kind) for when, kind, _ in read] == [
+        (0.5 * k, "force_clamped") for k in range(len(details))
+    ]
+    for (_, _, got), sent in zip(read, details, strict=True):
+        encoded = sent.encode()
+        assert len(got.encode()) <= SharedEvents.DETAIL_BYTES
+        assert encoded.startswith(got.encode())
+        assert got == sent or len(encoded) > SharedEvents.DETAIL_BYTES
+    assert events.read(len(details) - 1) == read[-1:]
+
+
+def test_a_clamp_message_reads_back_whole():
+    events = SharedEvents(Arena(SharedEvents.doubles(capacity=2)), capacity=2)
+    events.add(1.25, "force_clamped", "1200 mN clamped to the rated 880 mN")
+    events.add(2.0, "watchdog")
+    events.add(3.0, "watchdog")  # over capacity: dropped, never written past the block
+    assert events.read() == [
+        (1.25, "force_clamped", "1200 mN clamped to the rated 880 mN"),
+        (2.0, "watchdog", ""),
+    ]
