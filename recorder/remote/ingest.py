@@ -30,6 +30,7 @@ from recorder.integrity import CHECKSUM_NAME
 from recorder.layout import EVENTS_JOURNAL, HEADER_FILE, SAMPLES_JOURNAL, write_json_atomically
 from recorder.remote.journal import GroupCommit, Journal
 from recorder.remote.protocol import (
+    CLOSING_STATUSES,
     STREAMS,
     RemoteError,
     decode_batch,
@@ -42,7 +43,6 @@ from recorder.writer import finalize
 
 log = logging.getLogger("vascsim.ingest")
 JOURNALS = {"samples": SAMPLES_JOURNAL, "events": EVENTS_JOURNAL}
-CLOSING_STATUSES = ("complete", "failed")
 BATCH_DIGESTS = "batch-digests.json"
 """Written at close: each stored batch's SHA-256 per stream, so a batch re-sent to a closed session
 is checked against what was stored, also after a restart (the journals are gone by then)."""

@@ -54,6 +54,10 @@ _FINITE = {
     "events": [EVENT_SCHEMA.get_field_index("time")],
 }
 
+CLOSING_STATUSES = ("complete", "failed", "recovered")
+"""How a station closes a session: ``recovered`` when it crashed during the session and closes the
+central copy later, once the session was recovered on the station (the copy holds what it had sent)."""
+
 
 class RemoteError(RecorderError):
     """A station's request the central recorder refuses; ``status`` is the HTTP status it answers."""

@@ -133,8 +133,7 @@ def stream_option(command: Callable[..., Any]) -> Callable[..., Any]:
     @wraps(command)
     def wrapper(*args: Any, stream_to: str | None, **kwargs: Any) -> Any:
         from sessions.catalog.errors import CatalogError
-        from sessions.config import data_home
-        from sessions.running.streaming import StreamTarget, send_leftovers
+        from sessions.running.streaming import StreamTarget, catalog_status, send_leftovers
 
         stream = None
         if stream_to is not None:
@@ -142,7 +141,8 @@ def stream_option(command: Callable[..., Any]) -> Callable[..., Any]:
                 stream = StreamTarget.from_environment(stream_to)
             except CatalogError as error:
                 raise click.UsageError(str(error)) from None
-            for line in send_leftovers(stream, data_home()):
+            catalog, home = open_catalog()
+            for line in send_leftovers(stream, home, catalog_status(catalog)):
                 click.echo(f"note: left from an earlier session: {line}", err=True)
         return command(*args, stream=stream, **kwargs)
 

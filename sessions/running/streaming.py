@@ -12,13 +12,18 @@ from __future__ import annotations
 import logging
 import os
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from recorder.remote.protocol import CLOSING_STATUSES
 from recorder.remote.station import StationUploader, ViewSender
 from recorder.schema import RecorderError
+from sessions.catalog import Catalog
 from sessions.catalog.errors import CatalogError
+from sessions.catalog.lookups import session_with_uid
 from sessions.running.live import live_view_path
+from sessions.status import SessionStatus
 
 STATION_TOKEN_VARIABLE = "VASCSIM_STATION_TOKEN"
 """The environment variable holding this station's ingest token (issued on the dashboard's
@@ -94,15 +99,40 @@ class StreamedSession:
         return None
 
 
-def send_leftovers(target: StreamTarget, home: Path, timeout: float = 2.0) -> list[str]:
+def catalog_status(catalog: Catalog) -> Callable[[str], str | None]:
+    """``status_of`` for :func:`send_leftovers` from this station's catalog."""
+
+    def status_of(uid: str) -> str | None:
+        with catalog.session() as orm:
+            row = session_with_uid(orm, uid)
+            return None if row is None else str(row.status)
+
+    return status_of
+
+
+def send_leftovers(
+    target: StreamTarget, home: Path, status_of: Callable[[str], str | None], timeout: float = 2.0
+) -> list[str]:
     """Send what earlier streamed sessions left in this station's spool (the link was down when they
-    ended); a spool the central recorder now holds entirely is removed. Returns a line per session
-    still left (kept for the next try)."""
+    ended, or the station crashed during them); a spool the central recorder now holds entirely is
+    removed. Returns a line per session still left (kept for the next try).
+
+    ``status_of(uid)``: the session's status in this station's catalog (None when it has none). A
+    session still ``running`` here is left alone: it is recording now, or a crash left it and it has
+    not been recovered. One that ended without asking the central recorder to close its copy (the
+    station crashed, the session was recovered or failed here since) is closed there with that
+    status, so the central copy stops showing as recording; it holds what the station had sent."""
     root = spool_root(home)
     left = []
     for spool in sorted(root.iterdir()) if root.is_dir() else []:
+        status = status_of(spool.name)
+        if status == SessionStatus.RUNNING:
+            left.append(f"session {spool.name} is still recording here, or a crash left it unrecovered")
+            continue
         uploader = StationUploader(target.url, target.token, spool.name, spool, timeout=timeout)
         try:
+            if status is not None and not (spool / "close.json").exists():
+                uploader.finish(status if status in CLOSING_STATUSES else SessionStatus.FAILED)
             uploader.send_pending()
         except RecorderError as error:
             left.append(str(error))

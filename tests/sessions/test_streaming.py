@@ -15,7 +15,7 @@ from recorder import open_session
 from sessions.catalog import Catalog
 from sessions.cli import main
 from sessions.running.runner import SessionPlan, run_session
-from sessions.running.streaming import StreamTarget, send_leftovers
+from sessions.running.streaming import StreamTarget, catalog_status, send_leftovers
 from sessions.synthetic import scripted_hands
 from tests.recorder.test_remote import free_port, start_server
 
@@ -91,7 +91,7 @@ def test_a_central_recorder_down_costs_no_trial_and_the_next_session_sends_what_
         assert re.search(rf"did not take \d+ item\(s\) of session {uid} within 0.5 s", caplog.text)
         server = start_server(tmp_path / "central", port)
         try:
-            assert send_leftovers(target, home) == []
+            assert send_leftovers(target, home, catalog_status(catalog)) == []
         finally:
             server.kill()
             server.wait()
