@@ -11,7 +11,10 @@ and a straight needle is, through the runtime's own interaction:
 2. pierced at 0.8 N and levered sideways across itself in the wall until the local stress reaches it:
    that sideways offset (the way levering trainees fire the event).
 
-Prints both per cell size and the relative difference between the two finest meshes (target <= 5 %).
+Prints both per cell size and the relative difference between the two finest meshes (target <= 5 %),
+and why the lever's does not converge: the levering kernel's compliance along and across the wall,
+and the von Mises stress per newton of sideways load of the elements next to the surface (within
+0.12 mm of the kernel's point and 0.1 mm deep) against those half-way through the 1.5 mm wall.
 """
 
 from __future__ import annotations
@@ -75,6 +78,31 @@ def press_depth(tissue: BiphaseTissue, limit: float) -> float:
     return crossing(depths, stresses, limit)
 
 
+def diagnose(
+    tissue: BiphaseTissue, interaction: NeedleInteraction, normal: np.ndarray, sideways: np.ndarray
+) -> None:
+    """The levering kernel's compliance, and the stress per newton of sideways load near the surface
+    and half-way through the wall (see the module docstring)."""
+    operator, load = interaction._stress, interaction._load  # what the FEM step reads
+    elements = operator.elements
+    rows = (operator._operator[: 6 * len(elements)] @ sideways).reshape(-1, 6)
+    per_newton = np.sqrt((rows**2).sum(axis=1))
+    kernel = load.kernels[0]
+    offsets = tissue.mesh.points[tissue.mesh.tets[elements]].mean(axis=1) - kernel.point
+    depth = -(offsets @ normal)
+    across = np.linalg.norm(offsets + np.outer(depth, normal), axis=1)
+    block = load.soft.compliance[:3, :3]
+    surface = per_newton[np.hypot(depth - 0.1e-3, across) < 0.12e-3].mean()
+    mid = per_newton[np.hypot(depth - 0.5e-3, across) < 0.12e-3].mean()
+    print(
+        f"  kernel compliance {normal @ block @ normal * 1e3:.2f} mm/N along the normal, "
+        f"{sideways @ block @ sideways * 1e3:.2f} mm/N sideways; stress per newton sideways: largest "
+        f"{per_newton.max() / 1e6:.3f} MPa, next to the surface {surface / 1e6:.3f}, 0.5 mm deep "
+        f"{mid / 1e6:.3f}",
+        flush=True,
+    )
+
+
 def lever_offset(tissue: BiphaseTissue, limit: float) -> float:
     spec, forces = task_spec("wall-stitch"), task_preset(task_spec("wall-stitch")).forces
     needle = Needle.straight(0.01)
@@ -99,6 +127,8 @@ def lever_offset(tissue: BiphaseTissue, limit: float) -> float:
         if depth > 1.4e-3:
             raise SystemExit("set-up failed: the needle did not pierce")
     place(depth + 0.2e-3, 0.0)  # in the wall, not yet through it
+    place(depth + 0.2e-3, 0.5e-3)
+    diagnose(tissue, interaction, normal, sideways)
     offsets, stresses = [], []
     for offset in np.arange(0.01e-3, 1.0e-3, 0.01e-3):
         place(depth + 0.2e-3, float(offset))
