@@ -213,8 +213,7 @@ class _KernelIndentation:
         if self._last is None:
             self.per_tick(tips, np.full(len(tips), speed))
         kernel_forces, share = self._last
-        reactions = self.load.nodal_forces(kernel_forces)
-        drive = self.load.equivalent_drive(reactions, share)
+        drive = self.load.kernel_drive(kernel_forces, share)
         return _surface_table(self.tissue, self.load.nodes, drive, speed, share)
 
 

@@ -157,7 +157,7 @@ class KernelContact:
     penalty drive that produces them.
     """
 
-    __slots__ = ("_block", "_map", "compliance", "kernels", "nodes", "penalty", "stiffness")
+    __slots__ = ("_block", "_block_map", "_map", "compliance", "kernels", "nodes", "penalty", "stiffness")
 
     def __init__(
         self, tissue: TissueModel, kernels: list[ForceKernel], near_field: list[NDArray[np.float64]]
@@ -173,7 +173,9 @@ class KernelContact:
         self._map = np.kron(per_node, np.eye(3))
         self._block = tissue.compliance_block(self.nodes)
         self.penalty = tissue.penalty
-        compliance = self._map.T @ self._block @ self._map
+        # G_JJ M (3k, 3m): the nodes' displacement per unit kernel force, for the drive each step
+        self._block_map = np.ascontiguousarray(self._block @ self._map)
+        compliance = self._map.T @ self._block_map
         for i, extra in enumerate(near_field):
             compliance[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += extra
         self.compliance = np.ascontiguousarray(compliance)
@@ -194,6 +196,13 @@ class KernelContact:
         a = G_JJ R + R / C, from R = C (I + C G_JJ)^-1 a."""
         r = nodal_forces.reshape(-1)
         return (self._block.dot(r) + r / self.penalty).reshape(-1, 3)
+
+    def kernel_drive(self, kernel_forces: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`equivalent_drive` of the nodal forces of the kernels' stacked forces (3m,), through
+        G_JJ M formed once for the kernel set: a (3k x 3m) product a step instead of (3k x 3k)
+        (about 45 us a step on two kernels of the interrupted stitch's artery)."""
+        f = np.asarray(kernel_forces, dtype=np.float64).reshape(-1)
+        return (self._block_map.dot(f) + self._map.dot(f) / self.penalty).reshape(-1, 3)
 
 
 @dataclass(frozen=True)

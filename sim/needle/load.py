@@ -18,9 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.errors import ModelError
 from sim.fem import Tissue, TissueModel
 from sim.fem.fields import LocalStress
 from sim.fem.kernel import ForceKernel, KernelContact, kernel_at, lateral_near_field, normal_near_field
+from sim.needle import _contact_law as compiled
 from sim.needle.forces import NeedleForces
 
 KernelFactory = Callable[[TissueModel], tuple[list[ForceKernel], list[NDArray[np.float64]]]]
@@ -77,27 +79,6 @@ def mindlin_ratio(poisson_ratio: float) -> float:
     return 2.0 * (1.0 - poisson_ratio) / (2.0 - poisson_ratio)
 
 
-def surface_contact(
-    displacements: NDArray[np.float64], normals: NDArray[np.float64], ratio: float, friction: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Stick-slip of a needle pressing on the surface at m kernels: (the displacements (m, 3) the wall
-    carries, each contact point's slide (m, 3), zero while it sticks). The tangential force ``ratio``
-    k_n |d_t| is bounded by ``friction`` times the normal force k_n d_n (Coulomb), so the tangential
-    displacement is bounded by friction d_n / ratio whatever the stiffness; beyond it the contact
-    point slides after the needle and the wall carries the bound."""
-    pressed = -np.einsum("ij,ij->i", displacements, normals)  # indentation depths (m), into the wall
-    along = displacements + pressed[:, None] * normals
-    size = np.sqrt(np.einsum("ij,ij->i", along, along))
-    bound = friction * np.maximum(pressed, 0.0) / ratio
-    slides = np.zeros_like(displacements)
-    sliding = size > bound
-    if not sliding.any():
-        return displacements, slides
-    kept = along[sliding] * (bound[sliding] / size[sliding])[:, None]
-    slides[sliding] = along[sliding] - kept
-    return displacements - slides, slides
-
-
 @dataclass(frozen=True)
 class KernelStep:
     """One FEM step of the needle's load through its kernels (:func:`kernel_step`).
@@ -134,41 +115,56 @@ def kernel_step(
 
     - ``surface`` ((m, 3) outward normals of a needle pressing on the surface at each kernel): each
       kernel's normal stiffness k_n, the tangential one ``ratio`` k_n (Mindlin) with the Coulomb
-      limit (:func:`surface_contact`: the hold slides beyond it);
+      limit (beyond it the hold slides after the needle and the wall carries the bound);
     - the tip's speed stiffens the wall only while it is loading (the kernels' displacement not
       shrinking): unloading follows the rest curve, so no cycle returns more work than it took;
     - a kernel whose elastic force would exceed ``forces.tear_force`` gives way: its hold follows the
       needle and it carries that force, no more.
+
+    One compiled pass (:mod:`sim.needle._contact_law`; its NumPy reference, which it must equal, is
+    in tests/sim/test_contact_law.py).
     """
-    displacements = np.array(displacements, dtype=np.float64)
-    shifts = np.zeros_like(displacements)
-    if surface is not None:
-        surface = np.asarray(surface, dtype=np.float64).reshape(-1, 3)
-        displacements, slides = surface_contact(displacements, surface, ratio, forces.friction_coefficient)
-        shifts += slides
-    total = load.total_displacements(displacements, extra_forces)
-    now = float(np.sqrt(np.einsum("ij,ij->i", total, total).max()))
-    share = load.soft_share(total, speed if now >= indentation else 0.0)
-    if surface is None:
-        elastic = load.elastic_forces(displacements, share)
-    else:  # each kernel's own normal stiffness (its diagonal block: contacts apart barely couple)
-        probe = np.zeros_like(displacements)
-        stiffness = np.empty(len(surface))
-        for m in range(len(surface)):
-            probe[m] = surface[m]
-            stiffness[m] = float(load.elastic_forces(probe, share)[m] @ surface[m])
-            probe[m] = 0.0
-        normal = np.einsum("ij,ij->i", displacements, surface)[:, None] * surface
-        elastic = stiffness[:, None] * (normal + ratio * (displacements - normal))
-    torn = []
-    if forces.tear_force is not None:
-        sizes = np.sqrt(np.einsum("ij,ij->i", elastic, elastic))
-        for m in np.flatnonzero(sizes > forces.tear_force):
-            scale = forces.tear_force / sizes[m]
-            shifts[m] += (1.0 - scale) * displacements[m]
-            elastic[m] *= scale
-            torn.append(int(m))
-    return KernelStep(elastic + extra_forces, share, now, shifts, tuple(torn))
+    biphase = load.parameters
+    limits = (
+        (math.nan, 1.0, 1.0, 1.0)
+        if biphase is None
+        else (
+            biphase.strain_limit,
+            biphase.critical_speed,
+            biphase.speed_exponent,
+            biphase.limit_floor,
+        )
+    )
+    d = np.ascontiguousarray(displacements, dtype=np.float64).reshape(-1, 3)
+    m = len(d)
+    kernel_forces, shifts, torn = np.empty((m, 3)), np.empty((m, 3)), np.empty(m, dtype=np.int64)
+    try:
+        share, now, count = compiled.step(
+            d,
+            np.ascontiguousarray(extra_forces, dtype=np.float64),
+            load.soft.compliance,
+            load.soft.stiffness,
+            _NONE if load._stiff is None else load._stiff.stiffness,
+            load._stiff_scale,
+            _NONE if surface is None else np.ascontiguousarray(surface, dtype=np.float64),
+            ratio,
+            forces.friction_coefficient,
+            float(speed),
+            float(indentation),
+            load.depth,
+            *limits,
+            math.nan if forces.tear_force is None else forces.tear_force,
+            kernel_forces,
+            shifts,
+            torn,
+        )
+    except ValueError as error:  # a speed that is not a number, or arrays that do not fit
+        raise ModelError(str(error)) from None
+    return KernelStep(kernel_forces, share, now, shifts, tuple(torn[:count].tolist()))
+
+
+_NONE = np.zeros(0)
+"""An empty array: no stiff phase of its own, or no surface normals (the needle is in the wall)."""
 
 
 class KernelLoad:
@@ -194,15 +190,6 @@ class KernelLoad:
             else:
                 self._stiff = KernelContact(tissue.stiff, *make_kernels(tissue.stiff))
             self.depth = tissue.depth_under(self.nodes)
-
-    def total_displacements(
-        self, displacements: NDArray[np.float64], extra_forces: NDArray[np.float64] | None = None
-    ) -> NDArray[np.float64]:
-        """(m, 3) the kernels' displacements (m): the imposed ones plus what explicit forces on the
-        tissue (m, 3) (N; the passage forces along a needle in the wall) would add in the soft phase."""
-        if extra_forces is None or not np.any(extra_forces):
-            return displacements
-        return displacements + self.soft.compliance.dot(extra_forces.reshape(-1)).reshape(-1, 3)
 
     def soft_share(self, displacements: NDArray[np.float64], speed: float) -> float:
         """The soft phase's share (1 in a one-phase tissue) at the kernels' total displacements (m, 3)
@@ -244,3 +231,8 @@ class KernelLoad:
         """(k, 3) penalty drive (m) of :attr:`nodes` that the tissue answers with ``nodal_forces`` when
         split between the phases by ``share`` (what the display and the replay drive)."""
         return self.soft.equivalent_drive(nodal_forces) / self.drive_scale(share)
+
+    def kernel_drive(self, kernel_forces: NDArray[np.float64], share: float) -> NDArray[np.float64]:
+        """:meth:`equivalent_drive` of :meth:`nodal_forces` (``kernel_forces`` (m, 3)), by the kernel
+        set's own product (what each FEM step and the replay's field use)."""
+        return self.soft.kernel_drive(kernel_forces) / self.drive_scale(share)

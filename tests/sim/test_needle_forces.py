@@ -55,6 +55,27 @@ def graded_patch(fine):
     return TissueModel(mesh, SOFT, fixed)
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    forces=st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6),
+    x=st.floats(0.003, 0.007),
+)
+def test_the_drive_of_kernel_forces_is_that_of_their_nodal_forces(forces, x):
+    """Each FEM step's penalty drive (what the display, the scene log and the replay drive) is formed
+    through G_JJ M for the kernel set (a (3k x 3m) product) rather than G_JJ times the nodal forces
+    (3k x 3k): the same drive for two kernels' forces, to rounding."""
+    kernels = [
+        kernel_at(KERNEL_BOX, (x, 0.005, 0.01), (0, 0, 1), 1e-3),
+        kernel_at(KERNEL_BOX, (0.005, x, 0.01), (0, 0, 1), 1e-3),
+    ]
+    contact = KernelContact(KERNEL_BOX, kernels, [np.zeros((3, 3))] * 2)
+    f = np.asarray(forces)
+    expected = contact.equivalent_drive(contact.nodal_forces(f))
+    np.testing.assert_allclose(
+        contact.kernel_drive(f), expected, rtol=0, atol=1e-12 * max(abs(expected).max(), 1e-30)
+    )
+
+
 def test_halfspace_factor_is_the_hankel_integral():
     """beta from the closed form equals (2304 / pi) x the J3^2 / t^6 integral done by quadrature."""
     integral = quad(lambda t: jv(3, t) ** 2 / t**6, 0, 400, limit=4000)[0]
