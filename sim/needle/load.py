@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.errors import ModelError
-from sim.fem import Tissue, TissueModel
+from sim.fem import BiphaseParameters, Tissue, TissueModel
 from sim.fem.fields import LocalStress
 from sim.fem.kernel import ForceKernel, KernelContact, kernel_at, lateral_near_field, normal_near_field
 from sim.needle import _contact_law as compiled
@@ -124,17 +124,6 @@ def kernel_step(
     One compiled pass (:mod:`sim.needle._contact_law`; its NumPy reference, which it must equal, is
     in tests/sim/test_contact_law.py).
     """
-    biphase = load.parameters
-    limits = (
-        (math.nan, 1.0, 1.0, 1.0)
-        if biphase is None
-        else (
-            biphase.strain_limit,
-            biphase.critical_speed,
-            biphase.speed_exponent,
-            biphase.limit_floor,
-        )
-    )
     d = np.ascontiguousarray(displacements, dtype=np.float64).reshape(-1, 3)
     m = len(d)
     kernel_forces, shifts, torn = np.empty((m, 3)), np.empty((m, 3)), np.empty(m, dtype=np.int64)
@@ -152,7 +141,7 @@ def kernel_step(
             float(speed),
             float(indentation),
             load.depth,
-            *limits,
+            *biphase_limits(load.parameters),
             math.nan if forces.tear_force is None else forces.tear_force,
             kernel_forces,
             shifts,
@@ -161,6 +150,15 @@ def kernel_step(
     except ValueError as error:  # a speed that is not a number, or arrays that do not fit
         raise ModelError(str(error)) from None
     return KernelStep(kernel_forces, share, now, shifts, tuple(torn[:count].tolist()))
+
+
+def biphase_limits(parameters: BiphaseParameters | None) -> tuple[float, float, float, float]:
+    """(strain limit, critical speed, speed exponent, limit floor) as the compiled law reads them; a
+    strain limit of nan for a one-phase tissue (its soft share is always 1)."""
+    if parameters is None:
+        return (math.nan, 1.0, 1.0, 1.0)
+    p = parameters
+    return (p.strain_limit, p.critical_speed, p.speed_exponent, p.limit_floor)
 
 
 _NONE = np.zeros(0)

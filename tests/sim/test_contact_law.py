@@ -15,7 +15,7 @@ from sim.fem import BiphaseParameters
 from sim.fem.kernel import kernel_at
 from sim.needle import _contact_law as compiled
 from sim.needle.forces import NeedleForces
-from sim.needle.load import KernelLoad, kernel_step
+from sim.needle.load import KernelLoad, biphase_limits, kernel_step
 
 
 def surface_contact(displacements, normals, ratio, friction):
@@ -85,16 +85,6 @@ def compiled_step(law, displacements, extra, speed, indentation, surface):
     compliance, soft, stiff, scale, parameters, depth, ratio, friction, tear = law
     m = len(displacements)
     forces, shifts, torn = np.empty((m, 3)), np.empty((m, 3)), np.empty(m, dtype=np.int64)
-    limits = (
-        (math.nan, 1.0, 1.0, 1.0)
-        if parameters is None
-        else (
-            parameters.strain_limit,
-            parameters.critical_speed,
-            parameters.speed_exponent,
-            parameters.limit_floor,
-        )
-    )
     share, now, count = compiled.step(
         np.ascontiguousarray(displacements),
         np.ascontiguousarray(extra),
@@ -108,7 +98,7 @@ def compiled_step(law, displacements, extra, speed, indentation, surface):
         speed,
         indentation,
         depth,
-        *limits,
+        *biphase_limits(parameters),
         math.nan if tear is None else tear,
         forces,
         shifts,
