@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.collision import _near as near
 from sim.collision.segments import SegmentHits, bounding_boxes, candidate_pairs, intersect_pairs
 from sim.geometry import ray_triangle_distances
 from sim.mesh.tetmesh import TetMesh
@@ -80,6 +81,21 @@ class CollisionMesh:
         distances[entry] = np.inf
         distances[distances < 1e-9] = np.inf  # triangles sharing the entry point
         return float(distances.min()) if distances.size else math.inf
+
+    def near_swept(
+        self, before: NDArray[np.float64], after: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """:meth:`near_boxes` of the boxes a polyline's segments sweep from ``before`` to ``after``
+        ((V, 3) vertices; segment k from vertex k+1 to vertex k). When every box lies inside the
+        last query's padded balls its answer holds, which one compiled test says (a needle pressing
+        or held in the wall: most steps), without forming the boxes."""
+        cached = self._near_cache
+        if cached is not None and len(cached[0]) == len(before) - 1:
+            if near.swept_inside(before, after, self._moved, cached[0], cached[1]):
+                return cached[2]
+        lower = np.minimum(np.minimum(before[1:], before[:-1]), np.minimum(after[1:], after[:-1]))
+        upper = np.maximum(np.maximum(before[1:], before[:-1]), np.maximum(after[1:], after[:-1]))
+        return self.near_boxes(lower, upper)
 
     def near_boxes(
         self, lower: NDArray[np.float64], upper: NDArray[np.float64]

@@ -63,8 +63,8 @@ from sim.needle.events import (
 )
 from sim.needle.forces import NeedleForces
 from sim.needle.load import KernelLoad, mindlin_ratio, tissue_poisson_ratio
-from sim.needle.passage import NEAR_CONTACT, GraphicsRateTracking
-from sim.needle.sweep import Touch, touches
+from sim.needle.passage import HOLE_REACH, NEAR_CONTACT, GraphicsRateTracking
+from sim.needle.sweep import KnownBalls, Touch, touches
 
 
 def _checked_region_forces(
@@ -315,11 +315,11 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
         the needle's body dips below the undeformed surface as the tip presses in) is another contact,
         up to :attr:`max_surface_contacts`."""
         events = []
-
-        def known(points: NDArray) -> NDArray:
-            """Points within reach of a current contact or a hole the needle made."""
-            return self._near_contacts(points, NEAR_CONTACT) | self._near_holes(points)
-
+        # points within reach of a current contact or a hole the needle made
+        known = KnownBalls.of(
+            [c.point for c in self.contacts] + self._holes,
+            [self._triangle_reach(c) + NEAR_CONTACT for c in self.contacts] + [HOLE_REACH] * len(self._holes),
+        )
         for touch in touches(self.collision, before, after, known):
             event = self._touched(touch, previous_time, time, before, after)
             if event is not None:

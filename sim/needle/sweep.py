@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.collision import _near as near
 from sim.collision.mesh import CollisionMesh
 
 
@@ -84,13 +85,11 @@ def touches(
     elif before is after or np.array_equal(before, after):  # a needle held still crosses nothing new
         return []
     else:
-        # each segment's swept box: its ends before and after the step
-        lower = np.minimum(np.minimum(before[1:], before[:-1]), np.minimum(after[1:], after[:-1]))
-        upper = np.maximum(np.maximum(before[1:], before[:-1]), np.maximum(after[1:], after[:-1]))
-        triangles, edges = collision.near_boxes(lower, upper)
+        # what each segment's swept box (its ends before and after the step) may reach
+        triangles, edges = collision.near_swept(before, after)
         if len(triangles) == 0 and len(edges) == 0:  # nothing within reach: most steps of a free needle
             return []
-        if known is not None and known(collision.corners[triangles].reshape(-1, 3)).all():
+        if known is not None and _all_known(collision, triangles, known):
             return []  # only the surface around what the needle already touches (a needle pressing on)
         # one test for both: the vertices' paths (before -> after) and the polyline as it is now
         count = len(after)
@@ -112,6 +111,31 @@ def touches(
         if unexplained:
             candidates += _swept_across_edges(collision, before, after, edges)
     return sorted((t for t in candidates if t.entering), key=lambda t: (t.fraction, t.segment, -t.along))
+
+
+@dataclass(frozen=True)
+class KnownBalls:
+    """Surface points a needle already accounts for (its current contacts' reach, the holes it made):
+    those within ``radii`` (c,) (m) of one of ``centres`` (c, 3). Called with points (N, 3), says
+    which are; :func:`touches` asks, compiled, whether every corner of the triangles within reach is."""
+
+    centres: NDArray[np.float64]
+    radii: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, centres: list, radii: list) -> KnownBalls:
+        return cls(np.array(centres, dtype=np.float64).reshape(-1, 3), np.array(radii, dtype=np.float64))
+
+    def __call__(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        offsets = np.atleast_2d(points)[:, None, :] - self.centres[None, :, :]
+        return (np.einsum("ijk,ijk->ij", offsets, offsets) <= self.radii * self.radii).any(axis=1)
+
+
+def _all_known(collision: CollisionMesh, triangles: NDArray[np.int64], known: Callable) -> bool:
+    """Whether ``known`` accounts for every corner of ``triangles``."""
+    if isinstance(known, KnownBalls):
+        return near.all_within(collision.corners, triangles, known.centres, known.radii * known.radii)
+    return bool(known(collision.corners[triangles].reshape(-1, 3)).all())
 
 
 EXPLAINED_WITHIN = 2e-3
@@ -201,4 +225,4 @@ def _swept_across_edges(
     return result
 
 
-__all__ = ["Touch", "first_touch", "touches"]
+__all__ = ["KnownBalls", "Touch", "first_touch", "touches"]

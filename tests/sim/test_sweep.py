@@ -8,12 +8,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sessions.tasks import task_preset, task_spec, tissue_for
+from sim.collision import _near as near
 from sim.collision.mesh import CollisionMesh
 from sim.fem import Material, TissueModel
 from sim.mesh import box_mesh
 from sim.needle import Needle, Pose, rotation_aligning
 from sim.needle.interaction import NeedleInteraction
-from sim.needle.sweep import first_touch
+from sim.needle.sweep import KnownBalls, first_touch
 
 THICKNESS = 0.0015
 
@@ -167,3 +168,53 @@ def test_a_fast_needle_is_felt_from_where_it_met_the_wall_and_pierces(wall_stitc
     tip_height = [start - speed * k * FEM_DT for k in range(len(states))]
     inside = [s for s, z in zip(states, tip_height, strict=True) if top - THICKNESS < z < top - 1e-9]
     assert inside and "free" not in inside
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    vertices=st.integers(2, 8),
+    step=st.floats(0.0, 2e-3),
+    pad=st.floats(-1e-3, 2e-3),
+    poison=st.booleans(),
+)
+def test_the_compiled_swept_box_test_is_the_numpy_one(seed, vertices, step, pad, poison):
+    """sim.collision._near.swept_inside (whether a step's swept boxes stay inside the last near-box
+    query's padded balls, so its answer holds) says what the NumPy test said; a NaN says no."""
+    rng = np.random.default_rng(seed)
+    before = rng.normal(size=(vertices, 3)) * 1e-3
+    after = before + rng.normal(size=(vertices, 3)) * step
+    if poison:
+        after[int(rng.integers(vertices)), int(rng.integers(3))] = np.nan
+    centres = rng.normal(size=(vertices - 1, 3)) * 1e-4 + 0.5 * (before[1:] + before[:-1])
+    radii = np.abs(rng.normal(size=vertices - 1)) * 1e-3 + pad
+    moved = float(rng.uniform(0.0, 1e-4))
+    lower = np.minimum(np.minimum(before[1:], before[:-1]), np.minimum(after[1:], after[:-1]))
+    upper = np.maximum(np.maximum(before[1:], before[:-1]), np.maximum(after[1:], after[:-1]))
+    own = 0.5 * np.sqrt(np.einsum("ij,ij->i", upper - lower, upper - lower)) + moved
+    shift = np.sqrt(np.einsum("ij,ij->i", 0.5 * (lower + upper) - centres, 0.5 * (lower + upper) - centres))
+    expected = bool(np.all(shift + own <= radii))
+    assert near.swept_inside(before, after, moved, centres, radii) == expected
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), listed=st.integers(0, 12), balls=st.integers(0, 4))
+def test_the_compiled_known_corners_test_is_the_numpy_one(seed, listed, balls):
+    """sim.collision._near.all_within (every corner of the triangles within reach is one the needle
+    already accounts for) says what KnownBalls says of those corners point by point."""
+    rng = np.random.default_rng(seed)
+    corners = rng.normal(size=(20, 3, 3)) * 1e-3
+    triangles = rng.integers(0, 20, size=listed)
+    known = KnownBalls(rng.normal(size=(balls, 3)) * 5e-4, rng.uniform(5e-4, 4e-3, size=balls))
+    expected = bool(known(corners[triangles].reshape(-1, 3)).all())
+    assert near.all_within(corners, triangles, known.centres, known.radii**2) == expected
+
+
+def test_the_compiled_collision_answers_refuse_what_does_not_fit():
+    box = np.zeros((3, 3))
+    with pytest.raises(ValueError, match=r"centres \(V - 1, 3\)"):
+        near.swept_inside(box, box, 0.0, np.zeros((3, 3)), np.zeros(2))
+    with pytest.raises(ValueError, match="triangle id 20 is not one of the 20 triangles"):
+        near.all_within(np.zeros((20, 3, 3)), np.array([3, 20]), np.zeros((1, 3)), np.ones(1))
+    with pytest.raises(TypeError, match="triangles must be int64"):
+        near.all_within(np.zeros((20, 3, 3)), np.array([3.0]), np.zeros((1, 3)), np.ones(1))
