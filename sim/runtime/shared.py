@@ -19,14 +19,20 @@ import math
 import mmap
 import os
 import time
-import types
 
 import numpy as np
 from numpy.typing import NDArray
 
 from sim.needle import Pose
 from sim.runtime.logs import HapticColumns, interpolate_force
-from sim.runtime.snapshots import STATE_CODES, FemSnapshot, GraphicsSnapshot, HolderSnapshot
+from sim.runtime.snapshots import (
+    FEM_LAYOUT,
+    HOLDER_LAYOUT,
+    STATE_CODES,
+    FemSnapshot,
+    GraphicsSnapshot,
+    HolderSnapshot,
+)
 
 
 class Arena:
@@ -47,49 +53,6 @@ class Arena:
         return out
 
 
-class SlotLayout:
-    """Named places in a shared slot, from one declaration of (name, doubles) in order: a field of one
-    double is an index, a wider one a slice. ``size`` is the slot's length; ``at`` has each place as
-    an attribute (``layout.at.time``: what the 1 kHz readers use, one attribute lookup a field)."""
-
-    def __init__(self, fields: tuple[tuple[str, int], ...]) -> None:
-        self.fields = fields
-        places: dict[str, int | slice] = {}
-        start = 0
-        for name, size in fields:
-            places[name] = start if size == 1 else slice(start, start + size)
-            start += size
-        self.size = start
-        self.at = types.SimpleNamespace(**places)
-
-    def __getitem__(self, name: str) -> int | slice:
-        return getattr(self.at, name)
-
-
-HOLDER_LAYOUT = SlotLayout(
-    (("seq", 1), ("time", 1), ("position", 3), ("rotation", 9), ("velocity", 3), ("grip", 1))
-)
-"""The holder slot (a seqlock counter first). The compiled force path (sim/runtime/_haptic.c) writes
-its counter, time and grip at the same places; tests/sim/test_shared.py checks them."""
-FEM_LAYOUT = SlotLayout(
-    (
-        ("seq", 1),
-        ("time", 1),
-        ("tip", 3),
-        ("tip_speed", 1),
-        ("tangent", 3),
-        ("triangle", 1),
-        ("barycentric", 3),
-        ("state", 1),
-        ("needle_force", 3),
-        ("local_stress", 1),
-        ("stretch", 1),
-        ("tip_velocity", 3),
-        ("grasp_force", 3),
-        ("grasp_displacement", 3),
-    )
-)
-"""The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""
 _STATE_NAMES = {code: name for name, code in STATE_CODES.items()}
 
 

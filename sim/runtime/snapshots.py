@@ -1,10 +1,12 @@
 """What the layers hand each other: snapshots of the holder, the FEM step and the graphics frame,
-and runtime events. Its own module, so the shared-memory channels (sim.runtime.shared) and the
-simulation both import it at the top, with no circle between them."""
+runtime events, and the holder's and FEM step's slots in shared memory laid out by name. Its own
+module, so the shared-memory channels (sim.runtime.shared) and the simulation both import it at the
+top, with no circle between them."""
 
 from __future__ import annotations
 
 import math
+import types
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -86,3 +88,48 @@ class Mailbox:
 
     def get(self) -> object:
         return self._value
+
+
+class SlotLayout:
+    """Named places in a shared slot, from one declaration of (name, doubles) in order: a field of one
+    double is an index, a wider one a slice. ``size`` is the slot's length; ``at`` has each place as
+    an attribute (``layout.at.time``: what the 1 kHz readers use, one attribute lookup a field)."""
+
+    def __init__(self, fields: tuple[tuple[str, int], ...]) -> None:
+        self.fields = fields
+        places: dict[str, int | slice] = {}
+        start = 0
+        for name, size in fields:
+            places[name] = start if size == 1 else slice(start, start + size)
+            start += size
+        self.size = start
+        self.at = types.SimpleNamespace(**places)
+
+    def __getitem__(self, name: str) -> int | slice:
+        return getattr(self.at, name)
+
+
+HOLDER_LAYOUT = SlotLayout(
+    (("seq", 1), ("time", 1), ("position", 3), ("rotation", 9), ("velocity", 3), ("grip", 1))
+)
+"""The holder slot (a seqlock counter first). The compiled force path (sim/runtime/_haptic.c) writes
+its counter, time and grip at the same places; tests/sim/test_shared.py checks them."""
+FEM_LAYOUT = SlotLayout(
+    (
+        ("seq", 1),
+        ("time", 1),
+        ("tip", 3),
+        ("tip_speed", 1),
+        ("tangent", 3),
+        ("triangle", 1),
+        ("barycentric", 3),
+        ("state", 1),
+        ("needle_force", 3),
+        ("local_stress", 1),
+        ("stretch", 1),
+        ("tip_velocity", 3),
+        ("grasp_force", 3),
+        ("grasp_displacement", 3),
+    )
+)
+"""The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""

@@ -55,20 +55,21 @@ def test_a_long_force_delay_reaches_back_past_64_outputs():
 
 
 def test_the_holder_slot_is_where_the_compiled_force_path_writes_it():
-    """Issue 48: the shared slots are laid out once, by name (sim.runtime.shared.HOLDER_LAYOUT). The
+    """Issue 48: the shared slots are laid out once, by name (sim.runtime.snapshots.HOLDER_LAYOUT). The
     compiled haptic tick (sim/runtime/_haptic.c, publish_holder) writes the same slot; its offsets
     are read from the C source here, so the two cannot drift apart unseen."""
     import re
     from pathlib import Path
 
     import sim.runtime.shared as shared
+    import sim.runtime.snapshots as snapshots
 
     source = (Path(shared.__file__).parent / "_haptic.c").read_text()
     body = source[source.index("publish_holder(double *slot") :]
     body = body[: body.index("\n}\n")]
     copies = {int(at): int(n) for at, n in re.findall(r"memcpy\(slot \+ (\d+), \w+, (\d+) \* sizeof", body)}
     scalars = [int(at) for at in re.findall(r"slot\[(\d+)\] = ", body)]
-    layout = shared.HOLDER_LAYOUT
+    layout = snapshots.HOLDER_LAYOUT
     vectors = ("position", "rotation", "velocity")
     assert copies == {layout[name].start: layout[name].stop - layout[name].start for name in vectors}
     assert scalars == [layout["time"], layout["grip"]] and layout.size == shared.SharedHolder.doubles() == 18
@@ -77,8 +78,8 @@ def test_the_holder_slot_is_where_the_compiled_force_path_writes_it():
 def test_a_snapshot_read_from_shared_memory_is_the_one_written():
     """The holder and FEM slots round-trip every field by name (as the haptic process reads them)."""
     from sim.needle import Pose
-    from sim.runtime.shared import FEM_LAYOUT, SharedFem, SharedHolder
-    from sim.runtime.snapshots import FemSnapshot, HolderSnapshot
+    from sim.runtime.shared import SharedFem, SharedHolder
+    from sim.runtime.snapshots import FEM_LAYOUT, FemSnapshot, HolderSnapshot
 
     arena = Arena(SharedHolder.doubles() + SharedFem.doubles())
     holder, fem = SharedHolder(arena), SharedFem(arena)
