@@ -89,6 +89,7 @@ class CollisionMesh:
         ((V, 3) vertices; segment k from vertex k+1 to vertex k). When every box lies inside the
         last query's padded balls its answer holds, which one compiled test says (a needle pressing
         or held in the wall: most steps), without forming the boxes."""
+        before, after = (np.ascontiguousarray(v, dtype=np.float64) for v in (before, after))
         cached = self._near_cache
         if cached is not None and len(cached[0]) == len(before) - 1:
             if near.swept_inside(before, after, self._moved, cached[0], cached[1]):
