@@ -153,11 +153,11 @@ class KernelContact:
     """Per-tick needle forces for a fixed set of kernels in one linear tissue phase.
 
     ``stiffness`` maps the kernels' stacked displacements d (3m,) to the forces on the tissue
-    F (3m,); ``nodal_forces(F)`` spreads them on the nodes (k, 3) and ``equivalent_drive`` gives the
+    F (3m,); ``nodal_forces(F)`` spreads them on the nodes (k, 3) and ``kernel_drive(F)`` gives the
     penalty drive that produces them.
     """
 
-    __slots__ = ("_block", "_block_map", "_map", "compliance", "kernels", "nodes", "penalty", "stiffness")
+    __slots__ = ("_block_map", "_map", "compliance", "kernels", "nodes", "penalty", "stiffness")
 
     def __init__(
         self, tissue: TissueModel, kernels: list[ForceKernel], near_field: list[NDArray[np.float64]]
@@ -171,10 +171,9 @@ class KernelContact:
         per_node = np.zeros((len(self.nodes), len(kernels)))
         np.add.at(per_node, (position, owner), weights)
         self._map = np.kron(per_node, np.eye(3))
-        self._block = tissue.compliance_block(self.nodes)
         self.penalty = tissue.penalty
         # G_JJ M (3k, 3m): the nodes' displacement per unit kernel force, for the drive each step
-        self._block_map = np.ascontiguousarray(self._block @ self._map)
+        self._block_map = np.ascontiguousarray(tissue.compliance_block(self.nodes) @ self._map)
         compliance = self._map.T @ self._block_map
         for i, extra in enumerate(near_field):
             compliance[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += extra
@@ -191,16 +190,10 @@ class KernelContact:
         """(k, 3) forces on the kernel nodes (N) for the kernels' stacked forces (3m,)."""
         return self._map.dot(kernel_forces).reshape(-1, 3)
 
-    def equivalent_drive(self, nodal_forces: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(k, 3) intended displacements (m) whose penalty response is ``nodal_forces``:
-        a = G_JJ R + R / C, from R = C (I + C G_JJ)^-1 a."""
-        r = nodal_forces.reshape(-1)
-        return (self._block.dot(r) + r / self.penalty).reshape(-1, 3)
-
     def kernel_drive(self, kernel_forces: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:meth:`equivalent_drive` of the nodal forces of the kernels' stacked forces (3m,), through
-        G_JJ M formed once for the kernel set: a (3k x 3m) product a step instead of (3k x 3k)
-        (about 45 us a step on two kernels of the interrupted stitch's artery)."""
+        """(k, 3) intended displacements (m) whose penalty response is the nodal forces R = M F of the
+        kernels' stacked forces F (3m,): a = G_JJ R + R / C, from R = C (I + C G_JJ)^-1 a, with G_JJ M
+        formed once for the kernel set (a (3k x 3m) product a step, not (3k x 3k))."""
         f = np.asarray(kernel_forces, dtype=np.float64).reshape(-1)
         return (self._block_map.dot(f) + self._map.dot(f) / self.penalty).reshape(-1, 3)
 

@@ -210,7 +210,7 @@ class KernelLoad:
 
     def drive_scale(self, share: float) -> float:
         """share + (1 - share) s: the factor by which the two phases' penalty answer to one drive
-        exceeds the soft phase's (what :meth:`equivalent_drive` divides by)."""
+        exceeds the soft phase's (what :meth:`kernel_drive` divides by)."""
         return share + (1.0 - share) * self._stiff_scale
 
     def local_stress(self, tissue: Tissue) -> LocalStress:
@@ -225,12 +225,8 @@ class KernelLoad:
         """(k, 3) forces (N) on :attr:`nodes` for the kernels' forces (m, 3)."""
         return self.soft.nodal_forces(kernel_forces.reshape(-1))
 
-    def equivalent_drive(self, nodal_forces: NDArray[np.float64], share: float) -> NDArray[np.float64]:
-        """(k, 3) penalty drive (m) of :attr:`nodes` that the tissue answers with ``nodal_forces`` when
-        split between the phases by ``share`` (what the display and the replay drive)."""
-        return self.soft.equivalent_drive(nodal_forces) / self.drive_scale(share)
-
     def kernel_drive(self, kernel_forces: NDArray[np.float64], share: float) -> NDArray[np.float64]:
-        """:meth:`equivalent_drive` of :meth:`nodal_forces` (``kernel_forces`` (m, 3)), by the kernel
-        set's own product (what each FEM step and the replay's field use)."""
+        """(k, 3) penalty drive (m) of :attr:`nodes` that the tissue answers with the
+        :meth:`nodal_forces` of ``kernel_forces`` (m, 3) when split between the phases by ``share``
+        (what the display and the replay drive)."""
         return self.soft.kernel_drive(kernel_forces) / self.drive_scale(share)
