@@ -146,10 +146,10 @@ async function drawSession() {
     button.type = "button";
     button.className = "event";
     button.dataset.time = event.time;
-    const angle = event.detail ? " (" + event.detail + ")" : "";
+    const detail = event.detail ? " (" + event.detail + ")" : "";
     const count = event.count > 1 ? " ×" + event.count : "";
     const when = event.until > event.time ? event.time.toFixed(2) + "-" + event.until.toFixed(2) : event.time.toFixed(2);
-    button.textContent = when + " s: " + event.name + angle + count;
+    button.textContent = when + " s: " + event.name + detail + count;
     if (event.explanation) button.title = event.explanation;
     button.addEventListener("click", () => seek(event.time));
     item.appendChild(button);

@@ -8,6 +8,7 @@ The dashboard's event list (and anything else that lists events) takes them from
 from __future__ import annotations
 
 import math
+import re
 
 import pandas as pd
 
@@ -67,27 +68,49 @@ EPISODE_GAP_S = 0.5
 the time it ended (a levered needle overstresses the wall tick after tick)."""
 
 
+_FIRST_NUMBER = re.compile(r"-?\d+(?:\.\d+)?")
+
+
 def event_name(kind: str) -> str:
     return EVENT_NAMES.get(kind, kind.replace("_", " "))
 
 
+def _recorded_words(event) -> str:
+    """The words the simulator recorded with the event (their first line; "" for none)."""
+    words = getattr(event, "detail", None)
+    return words.splitlines()[0].strip() if isinstance(words, str) and words.strip() else ""
+
+
+def _size(words: str) -> float:
+    """The first number in an event's words: the value the one code site writing each kind puts
+    first ("local stress 930 kPa over 800 kPa", "2400 mN clamped to the rated 880 mN"); -inf for none."""
+    found = _FIRST_NUMBER.search(words)
+    return float(found.group()) if found else -math.inf
+
+
 def readable_events(events: pd.DataFrame) -> list[dict]:
     """One entry per event in time order (time s, kind, name, the needle's angle to the surface's
-    normal in deg or None and that as ``detail`` text, ``safety`` for :data:`SAFETY_EVENTS`), the
-    :data:`COLLAPSED` kinds as one entry each at their first time with ``count`` and ``explanation``,
-    and a run of one safety kind (:data:`EPISODE_GAP_S`) as one entry with ``count`` and ``until`` (s)."""
+    normal in deg or None, ``detail``: the words the simulator recorded with it and that angle as
+    text, ``safety`` for :data:`SAFETY_EVENTS`), the :data:`COLLAPSED` kinds as one entry each at their
+    first time with ``count`` and ``explanation``, and a run of one safety kind (:data:`EPISODE_GAP_S`)
+    as one entry with ``count`` and ``until`` (s). An entry standing for several events shows the
+    words of the largest one ("largest: local stress 930 kPa over 800 kPa")."""
     out: list[dict] = []
+    largest: dict[int, str] = {}  # id of an entry standing for a run -> its largest event's words
     collapsed: dict[str, dict] = {}  # kind -> its one entry in ``out``
     episodes: dict[str, dict] = {}  # safety kind -> its latest episode's entry
     for event in events.sort_values("time", kind="stable").itertuples():
         kind = str(event.kind)
-        if kind in collapsed:
-            collapsed[kind]["count"] += 1
-            continue
+        words = _recorded_words(event)
+        run = collapsed.get(kind)
         episode = episodes.get(kind)
-        if episode is not None and float(event.time) - episode["until"] < EPISODE_GAP_S:
-            episode["count"] += 1
-            episode["until"] = round(float(event.time), 4)
+        if run is None and episode is not None and float(event.time) - episode["until"] < EPISODE_GAP_S:
+            run = episode
+            run["until"] = round(float(event.time), 4)
+        if run is not None:
+            run["count"] += 1
+            if _size(words) > _size(largest[id(run)]):
+                largest[id(run)] = words
             continue
         angle = getattr(event, "entry_angle_deg", None)
         angle = None if angle is None or not math.isfinite(angle) else round(float(angle), 1)
@@ -96,7 +119,9 @@ def readable_events(events: pd.DataFrame) -> list[dict]:
             "kind": kind,
             "name": event_name(kind),
             "entry_angle_deg": angle,  # the needle's angle to the surface's normal where it met it
-            "detail": "" if angle is None else f"{angle:g} deg off perpendicular",
+            "detail": "; ".join(
+                part for part in (words, "" if angle is None else f"{angle:g} deg off perpendicular") if part
+            ),
             "safety": kind in SAFETY_EVENTS,
         }
         if kind in COLLAPSED:
@@ -105,5 +130,11 @@ def readable_events(events: pd.DataFrame) -> list[dict]:
         elif kind in SAFETY_EVENTS:
             entry.update(count=1, until=entry["time"])
             episodes[kind] = entry
+        if kind in COLLAPSED or kind in SAFETY_EVENTS:
+            largest[id(entry)] = words
         out.append(entry)
+    for entry in out:
+        words = largest.get(id(entry), "")
+        if entry.get("count", 1) > 1 and words and math.isfinite(_size(words)):
+            entry["detail"] = f"largest: {words}"
     return out

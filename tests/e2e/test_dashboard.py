@@ -67,7 +67,7 @@ def _plot_has_data(page, selector: str) -> bool:
 
 
 @pytest.mark.slow
-def test_supervisor_reviews_a_session(demo_site):
+def test_supervisor_reviews_a_session(demo_site, tmp_path):
     base, ids, own, _ = demo_site
     with chromium() as browser:
         page = browser.new_page()
@@ -95,6 +95,10 @@ def test_supervisor_reviews_a_session(demo_site):
         page.wait_for_function("() => parseFloat(document.getElementById('signals').dataset.cursor) > 0.5")
         cursor = page.evaluate("() => document.querySelector('#plot-force').layout.shapes[0].x0")
         assert cursor > 0.5
+        # each event says what the simulator recorded with it (the pierce: at what normal force)
+        pierce = page.locator("#events li[data-kind='pierce'] button.event").first.inner_text()
+        assert re.search(r"needle entered the tissue \(normal force \d+ mN[;)]", pierce), pierce
+        page.locator("#events").screenshot(path=str(tmp_path / "session-events.png"))  # looked at
         # an event in the list seeks the video, and the cursor follows
         page.evaluate("() => document.getElementById('replay').pause()")
         last = page.locator("#events button.event").last

@@ -64,3 +64,45 @@ def test_a_run_of_overstress_is_one_episode_with_its_count_and_end():
         ("edge_overstress", 1.5, 1, 1.5),
         ("overstress", 3.21, 1, 3.21),  # 1.5 s after the last: a new episode
     ]
+
+
+def test_an_event_shows_the_words_the_simulator_recorded_with_it():
+    """Seen: the recording keeps each event's detail ("1200 mN clamped to the rated 880 mN", "normal
+    force 815 mN"), but the event list showed only the kind's name."""
+    events = pd.DataFrame(
+        [
+            {"time": 0.5, "kind": "contact_start", "entry_angle_deg": 4.0, "detail": "needle tip"},
+            {"time": 0.8, "kind": "pierce", "entry_angle_deg": float("nan"), "detail": "normal force 815 mN"},
+            {"time": 0.9, "kind": "exit", "entry_angle_deg": float("nan"), "detail": ""},
+        ]
+    )
+    readable = readable_events(events)
+    assert [e["detail"] for e in readable] == [
+        "needle tip; 4 deg off perpendicular",
+        "normal force 815 mN",
+        "",
+    ]
+
+
+def test_a_run_of_one_safety_kind_shows_its_worst_recorded_value():
+    """An overstress episode or a run of clamps is one line: it shows the largest value recorded in it
+    (the first number of each event's words, which one code site writes per kind), not the first."""
+    stresses = [813, 930, 850]
+    clamps = [1200, 2400, 900]
+    events = pd.DataFrame(
+        [
+            {"time": 1.0 + 0.1 * k, "kind": "overstress", "detail": f"local stress {s} kPa over 800 kPa"}
+            for k, s in enumerate(stresses)
+        ]
+        + [
+            {"time": 2.0 + 0.1 * k, "kind": "force_clamped", "detail": f"{c} mN clamped to the rated 880 mN"}
+            for k, c in enumerate(clamps)
+        ]
+        + [{"time": 4.0, "kind": "edge_overstress", "detail": "wound-edge stress 618 kPa over 600 kPa"}]
+    )
+    readable = readable_events(events)
+    assert [(e["kind"], e["count"], e["detail"]) for e in readable] == [
+        ("overstress", 3, "largest: local stress 930 kPa over 800 kPa"),
+        ("force_clamped", 3, "largest: 2400 mN clamped to the rated 880 mN"),
+        ("edge_overstress", 1, "wound-edge stress 618 kPa over 600 kPa"),
+    ]
