@@ -1,6 +1,6 @@
 """The subordinate hand's figures of issue 46: which grasp rule converges, and what both hands cost.
 
-Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|cost|realtime|all]
+Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|cost|realtime|eversion|all]
 
 - convergence: the force to lift a 1.5 mm wall patch's wound edge 0.5 mm with the forceps (the
   porcine-artery preset's soft phase, 300 kPa), by the jaws rule (every surface node within the
@@ -12,7 +12,12 @@ Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|c
   K0^-1 columns solved, then the three unit patterns), median over ``--repeats``;
 - realtime: the same stitch on the real-time clock, ``--repeats`` runs: the grasp's contact change
   (the FEM step reading the closed jaws to the grasp's forces; the task's grasp sites solved before
-  the clock), and the FEM and haptic steps' compute with both hands.
+  the clock), and the FEM and haptic steps' compute with both hands;
+- eversion: on the interrupted stitch's artery, the scripted hand's grasp at the wound's rim lifted
+  0.05-1 mm along the entry's normal: how far the wall's outward normal at the bite's entry (the
+  collision mesh's triangles within 0.35 mm of it, as the graphics layer moves them) turns, which
+  way, and the forceps' force. What an eversion buys a needle that must enter square, and what a
+  task needing one would ask of the hand (linear kinematics: turns past ~10 deg are first-order).
 """
 
 from __future__ import annotations
@@ -143,10 +148,37 @@ def realtime(repeats: int) -> None:
     )
 
 
+def eversion() -> None:
+    from sessions.tasks import task_spec, tissue_for
+    from sessions.tasks.build import edge_grasps
+
+    spec = task_spec("interrupted-stitch")
+    tissue = tissue_for(spec)
+    collision = CollisionMesh(tissue.mesh)
+    hand = ForcepsInteraction(tissue, collision)
+    rim, lift = edge_grasps(spec)[0]
+    entry, normal, towards_wound = (np.asarray(v) for v in (spec.entry, spec.normal, spec.bite_direction))
+    centres = collision.corners.mean(axis=1)
+    near = (np.linalg.norm(centres - entry, axis=1) < 0.35e-3) & (collision.normals @ normal > 0.9)
+    hand.hold(0.0, rim, True)
+    print(f"interrupted stitch: the rim grasped ({hand.nodes.size} nodes), lifted along the entry's normal:")
+    print(f"{'lift (mm)':>9}  {'normal turned (deg)':>19}  {'towards':>16}  {'forceps force (mN)':>18}")
+    for lifted in (0.05e-3, 0.12e-3, 0.25e-3, 0.5e-3, 0.75e-3, 1e-3):
+        hand.hold(0.1, rim + lifted * lift, True)
+        step = hand.fem_step(0.1)
+        hand.deform_collision()
+        turned = collision.normals[near].mean(axis=0)
+        turned /= np.linalg.norm(turned)
+        angle = np.degrees(np.arccos(np.clip(turned @ normal, -1.0, 1.0)))
+        way = "the wound" if turned @ towards_wound > 0 else "away from wound"
+        print(f"{lifted * 1e3:9.2f}  {angle:19.2f}  {way:>16}  {np.linalg.norm(step.force) * 1e3:18.0f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--part", choices=("convergence", "cost", "realtime", "all"), default="all")
+    parts = ("convergence", "cost", "realtime", "eversion", "all")
+    parser.add_argument("--part", choices=parts, default="all")
     args = parser.parse_args()
     if args.part in ("convergence", "all"):
         convergence()
@@ -154,6 +186,8 @@ def main() -> None:
         cost(args.repeats)
     if args.part in ("realtime", "all"):
         realtime(args.repeats)
+    if args.part in ("eversion", "all"):
+        eversion()
 
 
 if __name__ == "__main__":

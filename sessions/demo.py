@@ -180,6 +180,22 @@ def _run_planned(url: str, home: str, plan: SessionPlan, skills: tuple, seed: in
     return plan
 
 
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+"""The demo's worker processes run their numerical libraries on one thread each: with one worker per
+core, CHOLMOD's OpenMP threads and OpenBLAS's own in each worker would oversubscribe the cores
+(measured on 2 cores: the demo 141 s with them, 100 s without; docs/benchmarks.md)."""
+
+
+def one_thread_each() -> None:
+    """A worker process's initializer: one thread per numerical library, for those loaded from now on
+    (the environment they read as they load: CHOLMOD's OpenMP) and those already loaded (NumPy's
+    OpenBLAS, which the worker's first import brought in)."""
+    from threadpoolctl import threadpool_limits
+
+    os.environ.update(ONE_THREAD)
+    threadpool_limits(1)
+
+
 def _run_all(catalog: Catalog, home: Path, runs: list, workers: int) -> Iterator[SessionPlan]:
     """Run the sessions, ``workers`` at a time (each session is one process's simulation: they are
     independent, their trials are fixed in advance and the catalog takes concurrent writers);
@@ -193,7 +209,7 @@ def _run_all(catalog: Catalog, home: Path, runs: list, workers: int) -> Iterator
     # the longest first (a closure's three stitches before the single ones), so no worker is left
     # with a long session while the other has nothing to do; each session's seed is its own
     ordered = sorted(runs, key=lambda run: -len(task_spec(run[0].task).bites()))
-    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=one_thread_each) as pool:
         pending = [pool.submit(_run_planned, catalog.url, str(home), *run) for run in ordered]
         try:
             for done in as_completed(pending):
