@@ -22,7 +22,8 @@ REGISTRY_VERSION = "10"
 """8: ``stretch`` (peak_stretch, time_above_strain_limit) is the largest edge stretch around the contact
 in the field the display draws, no longer 1 + |d|/h (issue 43). 9: the subordinate hand's metrics from
 its recorded forceps (edge_held_at_insertion, peak_grasp_force, forceps_tears added), and not measured
-(NaN) for a session recorded one-handed, where they had read zeros (issue 46)."""
+(NaN) for a session recorded one-handed, where they had read zeros (issue 46). 10: bimanual_dexterity
+added (issue 46)."""
 
 LOWER, HIGHER = "lower", "higher"
 KINDS = ("safety", "quality", "efficiency")
