@@ -29,6 +29,14 @@ EVENT_KINDS = (
     "tear",
 )
 
+NEEDLE_STATES = {
+    "free": "the needle clear of the tissue",
+    "contact": "the needle pressing on the wall",
+    "pierced": "the needle in the wall, its tip not yet out",
+    "exited": "the needle through the wall, its tip out",
+}
+"""The needle's states in the words an event's detail uses (a supervisor reads them in the event list)."""
+
 
 class InteractionError(VascsimError, ValueError):
     """Bad input to the needle-tissue interaction."""

@@ -55,6 +55,7 @@ from sim.needle import Needle, Pose
 from sim.needle.bearing import WallBearing, held_faces
 from sim.needle.events import (
     EVENT_KINDS,
+    NEEDLE_STATES,
     FemStep,
     InteractionError,
     NeedleEvent,
@@ -191,9 +192,8 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
         if self.grasped and not grip_closed:
             self.grasped = False
             self._settled_at = time  # the wall starts pushing the needle back from here
-            events.append(
-                NeedleEvent("release", time, tip_speed=self.tip_speed, detail=f"state {self.state}")
-            )
+            detail = f"let go with {NEEDLE_STATES.get(self.state, self.state)}"
+            events.append(NeedleEvent("release", time, tip_speed=self.tip_speed, detail=detail))
         elif not self.grasped and grip_closed:
             distance = float(np.min(np.linalg.norm(self.needle_vertices() - holder_pose.position, axis=1)))
             if distance <= self.rules.regrab_distance:

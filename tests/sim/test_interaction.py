@@ -10,6 +10,7 @@ from sim.collision.mesh import CollisionMesh
 from sim.fem import BiphaseTissue, Material, TissueModel
 from sim.mesh import box_mesh
 from sim.needle import Needle, Pose, rotation_about, rotation_aligning
+from sim.needle.events import NEEDLE_STATES
 from sim.needle.forces import NeedleForces
 from sim.needle.interaction import NeedleInteraction, PiercingRules, entry_angle_deg
 
@@ -168,6 +169,10 @@ def test_release_and_regrab_while_pierced(wall):
     sequence = kinds(events)
     assert sequence.index("pierce") < sequence.index("release") < sequence.index("regrab")
     assert interaction.state in ("pierced", "exited") and interaction.grasped
+    # the release says in words where the needle was let go (seen: "state exited" in the event list)
+    release = next(e for e in events if e.kind == "release")
+    assert release.detail in {f"let go with {words}" for words in NEEDLE_STATES.values()}
+    assert "wall" in release.detail and "state" not in release.detail
 
 
 def test_curved_needle_rotated_through_a_wall_enters_and_exits(wall):
