@@ -6,7 +6,7 @@ from __future__ import annotations
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 
-from sessions.demo import one_thread_each
+from sessions.demo import ONE_THREAD, one_thread_each
 
 
 def _thread_counts() -> dict[str, int]:
@@ -22,7 +22,10 @@ def _thread_counts() -> dict[str, int]:
 
 
 def test_a_demo_worker_runs_every_numerical_library_on_one_thread(tmp_path, monkeypatch):
+    """Whatever the parent's environment says (the suite's own workers run on one thread each)."""
     monkeypatch.setenv("VASCSIM_CACHE_DIR", str(tmp_path))
+    for name in ONE_THREAD:
+        monkeypatch.setenv(name, "2")
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(1, mp_context=context, initializer=one_thread_each) as pool:
         counts = pool.submit(_thread_counts).result(timeout=300)
