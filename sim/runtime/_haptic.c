@@ -35,6 +35,11 @@ enum { LAST_X, LAST_Y, LAST_Z, LAST_TIME, WATCHDOG_SINCE, CLAMPING, NONFINITE, E
 enum { STALL_TIMEOUT, RAMP_TIME, MAX_FORCE, MAX_FORCE_RATE, TICK, FORCE_DELAY, HAPTIC_SCALE,
        PARAMETERS };
 enum { EVENT_NONFINITE = 1, EVENT_WATCHDOG = 2, EVENT_RECOVERED = 4, EVENT_CLAMPED = 8 };
+/* The holder slot's fields, in the order ForcePath's holder_layout gives their (start, width): the
+ * places come from sim.runtime.snapshots.HOLDER_LAYOUT, the one declaration of the slot. */
+enum { H_SEQ, H_TIME, H_POSITION, H_ROTATION, H_VELOCITY, H_GRIP, HOLDER_FIELDS };
+static const char *HOLDER_NAMES[] = {"seq", "time", "position", "rotation", "velocity", "grip"};
+static const Py_ssize_t HOLDER_WIDTHS[] = {1, 1, 3, 9, 3, 1};
 
 typedef struct {
     PyObject_HEAD
@@ -43,10 +48,11 @@ typedef struct {
     double *holder, *ring, *counter, *log, *log_count, *state, *out;
     long long capacity, log_capacity;
     double parameters[PARAMETERS];
+    Py_ssize_t holder_at[HOLDER_FIELDS];  /* where each holder field starts in the holder slot */
 } ForcePath;
 
 static const char *VIEW_NAMES[] = {"holder", "ring", "counter", "log", "log_count", "state", "out"};
-static const Py_ssize_t MIN_CELLS[] = {18, 4, 1, 8, 1, STATE_CELLS, 3};
+static const Py_ssize_t MIN_CELLS[] = {1, 4, 1, 8, 1, STATE_CELLS, 3};  /* the holder: its layout */
 
 static void
 release(ForcePath *self)
@@ -56,15 +62,50 @@ release(ForcePath *self)
     self->held = 0;
 }
 
+/* holder_layout: a (start, width) pair per holder field in HOLDER_NAMES' order; each width must be
+ * the one this file writes, and each field must lie inside the holder buffer. */
+static int
+read_holder_layout(ForcePath *self, PyObject *layout)
+{
+    PyObject *pairs = PySequence_Fast(layout, "ForcePath: holder_layout must be a sequence");
+    if (pairs == NULL)
+        return -1;
+    if (PySequence_Fast_GET_SIZE(pairs) != HOLDER_FIELDS) {
+        PyErr_Format(PyExc_ValueError, "ForcePath: holder_layout needs %d (start, width) pairs, got %zd",
+                     HOLDER_FIELDS, PySequence_Fast_GET_SIZE(pairs));
+        Py_DECREF(pairs);
+        return -1;
+    }
+    Py_ssize_t cells = self->views[0].len / (Py_ssize_t)sizeof(double);
+    for (int i = 0; i < HOLDER_FIELDS; i++) {
+        Py_ssize_t start, width;
+        if (!PyArg_ParseTuple(PySequence_Fast_GET_ITEM(pairs, i), "nn;holder_layout: (start, width) pairs",
+                              &start, &width)) {
+            Py_DECREF(pairs);
+            return -1;
+        }
+        if (width != HOLDER_WIDTHS[i] || start < 0 || start + width > cells) {
+            PyErr_Format(PyExc_ValueError,
+                         "ForcePath: the holder's %s must be %zd cells inside its %zd; got %zd at %zd",
+                         HOLDER_NAMES[i], HOLDER_WIDTHS[i], cells, width, start);
+            Py_DECREF(pairs);
+            return -1;
+        }
+        self->holder_at[i] = start;
+    }
+    Py_DECREF(pairs);
+    return 0;
+}
+
 static int
 ForcePath_init(ForcePath *self, PyObject *args, PyObject *kwargs)
 {
     static char *names[] = {"holder", "ring", "counter", "log", "log_count", "state", "out",
-                            "parameters", NULL};
-    PyObject *objects[7], *parameters;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOO", names, &objects[0], &objects[1],
+                            "parameters", "holder_layout", NULL};
+    PyObject *objects[7], *parameters, *layout;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOO", names, &objects[0], &objects[1],
                                      &objects[2], &objects[3], &objects[4], &objects[5],
-                                     &objects[6], &parameters))
+                                     &objects[6], &parameters, &layout))
         return -1;
     if (self->held) {
         PyErr_SetString(PyExc_TypeError, "ForcePath: already initialised");
@@ -103,6 +144,8 @@ ForcePath_init(ForcePath *self, PyObject *args, PyObject *kwargs)
         PyErr_SetString(PyExc_ValueError, "ForcePath: the force ring needs at least 2 rows");
         goto fail;
     }
+    if (read_holder_layout(self, layout) < 0)
+        goto fail;
     PyObject *values = PySequence_Fast(parameters, "ForcePath: parameters must be a sequence");
     if (values == NULL)
         goto fail;
@@ -133,20 +176,22 @@ ForcePath_dealloc(ForcePath *self)
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
-/* SharedHolder.put */
+/* SharedHolder.put, at the places the holder's layout gives */
 static void
-publish_holder(double *slot, double now, const double *position, const double *rotation,
+publish_holder(const ForcePath *self, double now, const double *position, const double *rotation,
                const double *velocity, double grip)
 {
-    slot[0] += 1.0;  /* odd: writing */
+    double *slot = self->holder;
+    const Py_ssize_t *at = self->holder_at;
+    slot[at[H_SEQ]] += 1.0;  /* odd: writing */
     __atomic_thread_fence(__ATOMIC_RELEASE);
-    slot[1] = now;
-    memcpy(slot + 2, position, 3 * sizeof(double));
-    memcpy(slot + 5, rotation, 9 * sizeof(double));
-    memcpy(slot + 14, velocity, 3 * sizeof(double));
-    slot[17] = grip;
+    slot[at[H_TIME]] = now;
+    memcpy(slot + at[H_POSITION], position, 3 * sizeof(double));
+    memcpy(slot + at[H_ROTATION], rotation, 9 * sizeof(double));
+    memcpy(slot + at[H_VELOCITY], velocity, 3 * sizeof(double));
+    slot[at[H_GRIP]] = grip;
     __atomic_thread_fence(__ATOMIC_RELEASE);
-    slot[0] += 1.0;  /* even: consistent */
+    slot[at[H_SEQ]] += 1.0;  /* even: consistent */
 }
 
 /* SharedForceHistory.at (and interpolate_force's arithmetic); *latest: the newest output's time,
@@ -328,7 +373,7 @@ ForcePath_tick(ForcePath *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     double grip = truth ? 1.0 : 0.0;
     const double *p = self->parameters;
-    publish_holder(self->holder, now, position, rotation, velocity, grip);
+    publish_holder(self, now, position, rotation, velocity, grip);
     double force[3], latest;
     force_at(self, now - p[FORCE_DELAY], force, &latest);
     if (p[HAPTIC_SCALE] != 1.0) {
@@ -354,7 +399,8 @@ ForcePath_warm(ForcePath *self, PyObject *argument)
     memcpy(state, self->state, sizeof(state));
     force_at(self, now - self->parameters[FORCE_DELAY], force, &latest);
     safety_filter(self, state, now, force, latest);
-    volatile double sink = self->holder[0] + self->holder[17] + *self->log_count + self->out[0];
+    volatile double sink = self->holder[self->holder_at[H_SEQ]] + self->holder[self->holder_at[H_GRIP]]
+                           + *self->log_count + self->out[0];
     long long index = (long long)*self->log_count;
     if (index < self->log_capacity)
         sink += self->log[8 * index] + self->log[8 * index + 7];
@@ -376,7 +422,7 @@ static PyTypeObject ForcePathType = {
     .tp_name = "sim.runtime._haptic.ForcePath",
     .tp_basicsize = sizeof(ForcePath),
     .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "ForcePath(holder, ring, counter, log, log_count, state, out, parameters)\n--\n\n"
+    .tp_doc = "ForcePath(holder, ring, counter, log, log_count, state, out, parameters, holder_layout)\n--\n\n"
               "The haptic tick's force path over shared float64 arrays (see sim/runtime/_haptic.c).",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)ForcePath_init,

@@ -16,9 +16,13 @@ from numpy.typing import NDArray
 from sim.runtime._haptic import ForcePath
 from sim.runtime.safety import ForceSafety, clamped_event, nonfinite_event, recovered_event, watchdog_event
 from sim.runtime.shared import SharedForceHistory, SharedHapticLog, SharedHolder
+from sim.runtime.snapshots import HOLDER_LAYOUT
 
 NONFINITE, WATCHDOG, RECOVERED, CLAMPED = 1, 2, 4, 8
 """The event bits ``ForcePath.tick`` returns (sim/runtime/_haptic.c)."""
+HOLDER_FIELDS = ("seq", "time", "position", "rotation", "velocity", "grip")
+"""The holder fields the compiled tick writes, in the order it takes their (start, width): their places
+come from :data:`sim.runtime.snapshots.HOLDER_LAYOUT`, the slot's one declaration."""
 EVENT_MAGNITUDE, EVENT_SILENCE = 7, 8
 """State cells naming an event's values: the clamped magnitude (N), the FEM layer's silence (s)."""
 
@@ -50,7 +54,10 @@ class CompiledForcePath:
             force_delay,
             haptic_scale,
         )
-        self._kernel = ForcePath(holder.cells, ring, counter, rows, count, self.state, self.force, parameters)
+        places = HOLDER_LAYOUT.spans(HOLDER_FIELDS)
+        self._kernel = ForcePath(
+            holder.cells, ring, counter, rows, count, self.state, self.force, parameters, places
+        )
 
     def tick(
         self,

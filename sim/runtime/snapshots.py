@@ -108,12 +108,17 @@ class SlotLayout:
     def __getitem__(self, name: str) -> int | slice:
         return getattr(self.at, name)
 
+    def spans(self, names: tuple[str, ...]) -> tuple[tuple[int, int], ...]:
+        """(start, width) of each named field, in the order asked (what compiled code is given)."""
+        places = [self[name] for name in names]
+        return tuple((p, 1) if isinstance(p, int) else (p.start, p.stop - p.start) for p in places)
+
 
 HOLDER_LAYOUT = SlotLayout(
     (("seq", 1), ("time", 1), ("position", 3), ("rotation", 9), ("velocity", 3), ("grip", 1))
 )
-"""The holder slot (a seqlock counter first). The compiled force path (sim/runtime/_haptic.c) writes
-its counter, time and grip at the same places; tests/sim/test_shared.py checks them."""
+"""The holder slot (a seqlock counter first). The compiled force path (sim/runtime/_haptic.c) is given
+these places by name (:data:`sim.runtime.force_path.HOLDER_FIELDS`) and writes the slot there."""
 FEM_LAYOUT = SlotLayout(
     (
         ("seq", 1),

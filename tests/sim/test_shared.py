@@ -3,6 +3,7 @@
 import itertools
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -54,25 +55,44 @@ def test_a_long_force_delay_reaches_back_past_64_outputs():
     np.testing.assert_allclose(shared.at(0.999 - 0.2), [799.0, 0.0, 0.0])
 
 
-def test_the_holder_slot_is_where_the_compiled_force_path_writes_it():
-    """Issue 48: the shared slots are laid out once, by name (sim.runtime.snapshots.HOLDER_LAYOUT). The
-    compiled haptic tick (sim/runtime/_haptic.c, publish_holder) writes the same slot; its offsets
-    are read from the C source here, so the two cannot drift apart unseen."""
-    import re
-    from pathlib import Path
+def test_the_compiled_tick_writes_the_holder_where_its_one_declaration_says():
+    """Issue 48: the holder slot is laid out once, by name (sim.runtime.snapshots.HOLDER_LAYOUT), and the
+    compiled haptic tick (sim/runtime/_haptic.c) is given its places (it wrote at fixed offsets, which a
+    test read out of the C source). A layout declared in another order is written in that order; one
+    whose field has the wrong width, or lies outside the holder, is refused with the field's name."""
+    from sim.runtime._haptic import ForcePath
+    from sim.runtime.force_path import HOLDER_FIELDS
+    from sim.runtime.snapshots import HOLDER_LAYOUT, SlotLayout
 
-    import sim.runtime.shared as shared
-    import sim.runtime.snapshots as snapshots
+    shuffled = SlotLayout(
+        (("grip", 1), ("velocity", 3), ("seq", 1), ("rotation", 9), ("time", 1), ("position", 3))
+    )
+    holder = np.zeros(shuffled.size + 2)
+    ring, counter = np.zeros((8, 4)), np.zeros(1)
+    log, count = np.zeros((8, 8)), np.zeros(1)
+    state, out = np.zeros(16), np.zeros(3)
+    parameters = (0.05, 0.1, 3.0, 100.0, 1e-3, 0.0, 1.0)
+    cells = (holder, ring, counter, log, count, state, out, parameters)
+    kernel = ForcePath(*cells, shuffled.spans(HOLDER_FIELDS))
+    rotation = np.arange(9.0).reshape(3, 3)
+    kernel.tick(0.25, np.array([0.01, 0.02, 0.03]), rotation, np.array([0.4, 0.5, 0.6]), True)
+    assert (
+        holder[shuffled["seq"]] == 2.0
+        and holder[shuffled["time"]] == 0.25
+        and holder[shuffled["grip"]] == 1.0
+    )
+    np.testing.assert_array_equal(holder[shuffled["position"]], [0.01, 0.02, 0.03])
+    np.testing.assert_array_equal(holder[shuffled["rotation"]], rotation.ravel())
+    np.testing.assert_array_equal(holder[shuffled["velocity"]], [0.4, 0.5, 0.6])
+    assert holder[-2:].tolist() == [0.0, 0.0]  # nothing written past the layout
 
-    source = (Path(shared.__file__).parent / "_haptic.c").read_text()
-    body = source[source.index("publish_holder(double *slot") :]
-    body = body[: body.index("\n}\n")]
-    copies = {int(at): int(n) for at, n in re.findall(r"memcpy\(slot \+ (\d+), \w+, (\d+) \* sizeof", body)}
-    scalars = [int(at) for at in re.findall(r"slot\[(\d+)\] = ", body)]
-    layout = snapshots.HOLDER_LAYOUT
-    vectors = ("position", "rotation", "velocity")
-    assert copies == {layout[name].start: layout[name].stop - layout[name].start for name in vectors}
-    assert scalars == [layout["time"], layout["grip"]] and layout.size == shared.SharedHolder.doubles() == 18
+    narrow = SlotLayout(
+        (("seq", 1), ("time", 1), ("position", 2), ("rotation", 9), ("velocity", 3), ("grip", 1))
+    )
+    with pytest.raises(ValueError, match="the holder's position must be 3 cells"):
+        ForcePath(np.zeros(narrow.size), *cells[1:], narrow.spans(HOLDER_FIELDS))
+    with pytest.raises(ValueError, match="the holder's grip must be 1 cells inside its 17"):
+        ForcePath(np.zeros(17), *cells[1:], HOLDER_LAYOUT.spans(HOLDER_FIELDS))  # one cell short
 
 
 def test_a_snapshot_read_from_shared_memory_is_the_one_written():
