@@ -40,6 +40,10 @@ enum { EVENT_NONFINITE = 1, EVENT_WATCHDOG = 2, EVENT_RECOVERED = 4, EVENT_CLAMP
 enum { H_SEQ, H_TIME, H_POSITION, H_ROTATION, H_VELOCITY, H_GRIP, HOLDER_FIELDS };
 static const char *HOLDER_NAMES[] = {"seq", "time", "position", "rotation", "velocity", "grip"};
 static const Py_ssize_t HOLDER_WIDTHS[] = {1, 1, 3, 9, 3, 1};
+/* A haptic log row's fields, likewise (sim.runtime.snapshots.HAPTIC_LOG_LAYOUT). */
+enum { L_TIME, L_POSITION, L_GRIP, L_FORCE, LOG_FIELDS };
+static const char *LOG_NAMES[] = {"time", "position", "grip", "force"};
+static const Py_ssize_t LOG_WIDTHS[] = {1, 3, 1, 3};
 
 typedef struct {
     PyObject_HEAD
@@ -49,10 +53,11 @@ typedef struct {
     long long capacity, log_capacity;
     double parameters[PARAMETERS];
     Py_ssize_t holder_at[HOLDER_FIELDS];  /* where each holder field starts in the holder slot */
+    Py_ssize_t log_at[LOG_FIELDS], log_row;  /* where each log field starts in a row; a row's cells */
 } ForcePath;
 
 static const char *VIEW_NAMES[] = {"holder", "ring", "counter", "log", "log_count", "state", "out"};
-static const Py_ssize_t MIN_CELLS[] = {1, 4, 1, 8, 1, STATE_CELLS, 3};  /* the holder: its layout */
+static const Py_ssize_t MIN_CELLS[] = {1, 4, 1, 1, 1, STATE_CELLS, 3};  /* holder, log: their layouts */
 
 static void
 release(ForcePath *self)
@@ -62,36 +67,35 @@ release(ForcePath *self)
     self->held = 0;
 }
 
-/* holder_layout: a (start, width) pair per holder field in HOLDER_NAMES' order; each width must be
- * the one this file writes, and each field must lie inside the holder buffer. */
+/* A layout: a (start, width) pair per field in ``names``' order; each width must be the one this file
+ * writes, and each field must lie inside ``cells``. */
 static int
-read_holder_layout(ForcePath *self, PyObject *layout)
+read_layout(PyObject *layout, const char **names, const Py_ssize_t *widths, int fields, Py_ssize_t cells,
+            Py_ssize_t *at, const char *what)
 {
-    PyObject *pairs = PySequence_Fast(layout, "ForcePath: holder_layout must be a sequence");
+    PyObject *pairs = PySequence_Fast(layout, "ForcePath: a layout must be a sequence");
     if (pairs == NULL)
         return -1;
-    if (PySequence_Fast_GET_SIZE(pairs) != HOLDER_FIELDS) {
-        PyErr_Format(PyExc_ValueError, "ForcePath: holder_layout needs %d (start, width) pairs, got %zd",
-                     HOLDER_FIELDS, PySequence_Fast_GET_SIZE(pairs));
+    if (PySequence_Fast_GET_SIZE(pairs) != fields) {
+        PyErr_Format(PyExc_ValueError, "ForcePath: the %s's layout needs %d (start, width) pairs, got %zd",
+                     what, fields, PySequence_Fast_GET_SIZE(pairs));
         Py_DECREF(pairs);
         return -1;
     }
-    Py_ssize_t cells = self->views[0].len / (Py_ssize_t)sizeof(double);
-    for (int i = 0; i < HOLDER_FIELDS; i++) {
+    for (int i = 0; i < fields; i++) {
         Py_ssize_t start, width;
-        if (!PyArg_ParseTuple(PySequence_Fast_GET_ITEM(pairs, i), "nn;holder_layout: (start, width) pairs",
+        if (!PyArg_ParseTuple(PySequence_Fast_GET_ITEM(pairs, i), "nn;a layout holds (start, width) pairs",
                               &start, &width)) {
             Py_DECREF(pairs);
             return -1;
         }
-        if (width != HOLDER_WIDTHS[i] || start < 0 || start + width > cells) {
-            PyErr_Format(PyExc_ValueError,
-                         "ForcePath: the holder's %s must be %zd cells inside its %zd; got %zd at %zd",
-                         HOLDER_NAMES[i], HOLDER_WIDTHS[i], cells, width, start);
+        if (width != widths[i] || start < 0 || start + width > cells) {
+            PyErr_Format(PyExc_ValueError, "ForcePath: the %s's %s must be %zd cells inside its %zd; got %zd at %zd",
+                         what, names[i], widths[i], cells, width, start);
             Py_DECREF(pairs);
             return -1;
         }
-        self->holder_at[i] = start;
+        at[i] = start;
     }
     Py_DECREF(pairs);
     return 0;
@@ -101,11 +105,11 @@ static int
 ForcePath_init(ForcePath *self, PyObject *args, PyObject *kwargs)
 {
     static char *names[] = {"holder", "ring", "counter", "log", "log_count", "state", "out",
-                            "parameters", "holder_layout", NULL};
-    PyObject *objects[7], *parameters, *layout;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOO", names, &objects[0], &objects[1],
+                            "parameters", "holder_layout", "log_layout", NULL};
+    PyObject *objects[7], *parameters, *layout, *log_layout;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOO(nO)", names, &objects[0], &objects[1],
                                      &objects[2], &objects[3], &objects[4], &objects[5],
-                                     &objects[6], &parameters, &layout))
+                                     &objects[6], &parameters, &layout, &self->log_row, &log_layout))
         return -1;
     if (self->held) {
         PyErr_SetString(PyExc_TypeError, "ForcePath: already initialised");
@@ -139,12 +143,18 @@ ForcePath_init(ForcePath *self, PyObject *args, PyObject *kwargs)
     self->state = cells[5];
     self->out = cells[6];
     self->capacity = (long long)(self->views[1].len / (Py_ssize_t)(4 * sizeof(double)));
-    self->log_capacity = (long long)(self->views[3].len / (Py_ssize_t)(8 * sizeof(double)));
+    if (self->log_row < 1) {
+        PyErr_SetString(PyExc_ValueError, "ForcePath: a log row needs at least one cell");
+        goto fail;
+    }
+    self->log_capacity = (long long)(self->views[3].len / (self->log_row * (Py_ssize_t)sizeof(double)));
     if (self->capacity < 2) {
         PyErr_SetString(PyExc_ValueError, "ForcePath: the force ring needs at least 2 rows");
         goto fail;
     }
-    if (read_holder_layout(self, layout) < 0)
+    if (read_layout(layout, HOLDER_NAMES, HOLDER_WIDTHS, HOLDER_FIELDS,
+                    self->views[0].len / (Py_ssize_t)sizeof(double), self->holder_at, "holder") < 0
+        || read_layout(log_layout, LOG_NAMES, LOG_WIDTHS, LOG_FIELDS, self->log_row, self->log_at, "log row") < 0)
         goto fail;
     PyObject *values = PySequence_Fast(parameters, "ForcePath: parameters must be a sequence");
     if (values == NULL)
@@ -315,11 +325,12 @@ log_tick(ForcePath *self, double now, const double *position, double grip, const
     long long index = (long long)*self->log_count;
     if (index >= self->log_capacity)
         return;  /* full: the run outlived its planned duration */
-    double *row = self->log + 8 * index;
-    row[0] = now;
-    memcpy(row + 1, position, 3 * sizeof(double));
-    row[4] = grip;
-    memcpy(row + 5, f, 3 * sizeof(double));
+    double *row = self->log + self->log_row * index;
+    const Py_ssize_t *at = self->log_at;
+    row[at[L_TIME]] = now;
+    memcpy(row + at[L_POSITION], position, 3 * sizeof(double));
+    row[at[L_GRIP]] = grip;
+    memcpy(row + at[L_FORCE], f, 3 * sizeof(double));
     *self->log_count = (double)(index + 1);
 }
 
@@ -403,7 +414,7 @@ ForcePath_warm(ForcePath *self, PyObject *argument)
                            + *self->log_count + self->out[0];
     long long index = (long long)*self->log_count;
     if (index < self->log_capacity)
-        sink += self->log[8 * index] + self->log[8 * index + 7];
+        sink += self->log[self->log_row * index] + self->log[self->log_row * (index + 1) - 1];
     (void)sink;
     Py_RETURN_NONE;
 }
@@ -422,7 +433,7 @@ static PyTypeObject ForcePathType = {
     .tp_name = "sim.runtime._haptic.ForcePath",
     .tp_basicsize = sizeof(ForcePath),
     .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "ForcePath(holder, ring, counter, log, log_count, state, out, parameters, holder_layout)\n--\n\n"
+    .tp_doc = "ForcePath(holder, ring, counter, log, log_count, state, out, parameters, holder_layout, log_layout)\n--\n\n"
               "The haptic tick's force path over shared float64 arrays (see sim/runtime/_haptic.c).",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)ForcePath_init,

@@ -16,13 +16,16 @@ from numpy.typing import NDArray
 from sim.runtime._haptic import ForcePath
 from sim.runtime.safety import ForceSafety, clamped_event, nonfinite_event, recovered_event, watchdog_event
 from sim.runtime.shared import SharedForceHistory, SharedHapticLog, SharedHolder
-from sim.runtime.snapshots import HOLDER_LAYOUT
+from sim.runtime.snapshots import HAPTIC_LOG_LAYOUT, HOLDER_LAYOUT
 
 NONFINITE, WATCHDOG, RECOVERED, CLAMPED = 1, 2, 4, 8
 """The event bits ``ForcePath.tick`` returns (sim/runtime/_haptic.c)."""
 HOLDER_FIELDS = ("seq", "time", "position", "rotation", "velocity", "grip")
 """The holder fields the compiled tick writes, in the order it takes their (start, width): their places
 come from :data:`sim.runtime.snapshots.HOLDER_LAYOUT`, the slot's one declaration."""
+LOG_FIELDS = ("time", "position", "grip", "force")
+"""The haptic log's fields the compiled tick writes, in the order it takes their (start, width)
+(:data:`sim.runtime.snapshots.HAPTIC_LOG_LAYOUT`)."""
 EVENT_MAGNITUDE, EVENT_SILENCE = 7, 8
 """State cells naming an event's values: the clamped magnitude (N), the FEM layer's silence (s)."""
 
@@ -55,8 +58,9 @@ class CompiledForcePath:
             haptic_scale,
         )
         places = HOLDER_LAYOUT.spans(HOLDER_FIELDS)
+        row = (HAPTIC_LOG_LAYOUT.size, HAPTIC_LOG_LAYOUT.spans(LOG_FIELDS))
         self._kernel = ForcePath(
-            holder.cells, ring, counter, rows, count, self.state, self.force, parameters, places
+            holder.cells, ring, counter, rows, count, self.state, self.force, parameters, places, row
         )
 
     def tick(

@@ -7,28 +7,35 @@ import bisect
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.runtime.snapshots import HAPTIC_LOG_LAYOUT
+
+_AT = HAPTIC_LOG_LAYOUT.at
+_ROW_ORDER = np.r_[_AT.time, _AT.position, _AT.grip, _AT.force]
+"""A row's places for (time, x, y, z, grip, fx, fy, fz): one assignment a tick, in any declared order."""
+
 
 class HapticColumns:
-    """Named columns over ``self._data`` rows [time, position 3, grip, force 3] up to ``self.count``."""
+    """Named columns over ``self._data`` rows (:data:`sim.runtime.snapshots.HAPTIC_LOG_LAYOUT`) up to
+    ``self.count``."""
 
     _data: NDArray[np.float64]
     count: int
 
     @property
     def time(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 0]
+        return self._data[: self.count, _AT.time]
 
     @property
     def position(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 1:4]
+        return self._data[: self.count, _AT.position]
 
     @property
     def grip(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 4]
+        return self._data[: self.count, _AT.grip]
 
     @property
     def force(self) -> NDArray[np.float64]:
-        return self._data[: self.count, 5:8]
+        return self._data[: self.count, _AT.force]
 
 
 def interpolate_force(
@@ -81,7 +88,7 @@ class HapticLog(HapticColumns):
     """Every haptic tick: time, holder position, grip, force sent, in growing preallocated arrays."""
 
     def __init__(self, capacity: int = 1 << 16) -> None:
-        self._data = np.empty((capacity, 8))
+        self._data = np.empty((capacity, HAPTIC_LOG_LAYOUT.size))
         self.count = 0
 
     def append(self, time: float, position: NDArray, grip: bool, force: NDArray) -> None:
@@ -89,5 +96,5 @@ class HapticLog(HapticColumns):
             self._data = np.concatenate([self._data, np.empty_like(self._data)])
         x, y, z = position.tolist()
         fx, fy, fz = force.tolist()
-        self._data[self.count] = (time, x, y, z, float(grip), fx, fy, fz)  # one assignment a tick
+        self._data[self.count, _ROW_ORDER] = (time, x, y, z, float(grip), fx, fy, fz)
         self.count += 1

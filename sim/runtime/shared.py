@@ -27,6 +27,7 @@ from sim.needle import Pose
 from sim.runtime.logs import HapticColumns, interpolate_force
 from sim.runtime.snapshots import (
     FEM_LAYOUT,
+    HAPTIC_LOG_LAYOUT,
     HOLDER_LAYOUT,
     STATE_CODES,
     FemSnapshot,
@@ -164,15 +165,15 @@ class SharedForceHistory:
 
 
 class SharedHapticLog(HapticColumns):
-    """The haptic log in shared memory: [time, position 3, grip, force 3] per tick."""
+    """The haptic log in shared memory: a row per tick (:data:`sim.runtime.snapshots.HAPTIC_LOG_LAYOUT`)."""
 
     @staticmethod
     def doubles(capacity: int) -> int:
-        """Its size in the arena: ``capacity`` rows of 8 and a count."""
-        return capacity * 8 + 1
+        """Its size in the arena: ``capacity`` rows and a count."""
+        return capacity * HAPTIC_LOG_LAYOUT.size + 1
 
     def __init__(self, arena: Arena, capacity: int) -> None:
-        self._data = arena.take(capacity, 8)
+        self._data = arena.take(capacity, HAPTIC_LOG_LAYOUT.size)
         self._count = arena.take(1)
 
     @property
@@ -188,8 +189,8 @@ class SharedHapticLog(HapticColumns):
         index = self.count
         if index >= len(self._data):
             return  # full: the run outlived its planned duration; later ticks are not logged
-        row = self._data[index]
-        row[0], row[1:4], row[4], row[5:8] = time, position, float(grip), force
+        row, at = self._data[index], HAPTIC_LOG_LAYOUT.at
+        row[at.time], row[at.position], row[at.grip], row[at.force] = time, position, float(grip), force
         self._count[0] = index + 1
 
 

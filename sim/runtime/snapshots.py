@@ -119,6 +119,9 @@ HOLDER_LAYOUT = SlotLayout(
 )
 """The holder slot (a seqlock counter first). The compiled force path (sim/runtime/_haptic.c) is given
 these places by name (:data:`sim.runtime.force_path.HOLDER_FIELDS`) and writes the slot there."""
+HAPTIC_LOG_LAYOUT = SlotLayout((("time", 1), ("position", 3), ("grip", 1), ("force", 3)))
+"""A haptic log row: each tick's time, holder position, grip and the force sent (the Python logs and the
+compiled force path, which is given these places by name, write it)."""
 FEM_LAYOUT = SlotLayout(
     (
         ("seq", 1),

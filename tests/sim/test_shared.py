@@ -55,25 +55,28 @@ def test_a_long_force_delay_reaches_back_past_64_outputs():
     np.testing.assert_allclose(shared.at(0.999 - 0.2), [799.0, 0.0, 0.0])
 
 
-def test_the_compiled_tick_writes_the_holder_where_its_one_declaration_says():
-    """Issue 48: the holder slot is laid out once, by name (sim.runtime.snapshots.HOLDER_LAYOUT), and the
-    compiled haptic tick (sim/runtime/_haptic.c) is given its places (it wrote at fixed offsets, which a
-    test read out of the C source). A layout declared in another order is written in that order; one
-    whose field has the wrong width, or lies outside the holder, is refused with the field's name."""
+def test_the_compiled_tick_writes_the_holder_and_its_log_where_their_one_declaration_says():
+    """Issue 48: the holder slot and a haptic log row are laid out once, by name
+    (sim.runtime.snapshots.HOLDER_LAYOUT, HAPTIC_LOG_LAYOUT), and the compiled haptic tick
+    (sim/runtime/_haptic.c) is given their places (it wrote at fixed offsets, which a test read out of
+    the C source). Layouts declared in another order are written in that order; a field of the wrong
+    width, or outside its slot, is refused with the field's name."""
     from sim.runtime._haptic import ForcePath
-    from sim.runtime.force_path import HOLDER_FIELDS
-    from sim.runtime.snapshots import HOLDER_LAYOUT, SlotLayout
+    from sim.runtime.force_path import HOLDER_FIELDS, LOG_FIELDS
+    from sim.runtime.snapshots import HAPTIC_LOG_LAYOUT, HOLDER_LAYOUT, SlotLayout
 
     shuffled = SlotLayout(
         (("grip", 1), ("velocity", 3), ("seq", 1), ("rotation", 9), ("time", 1), ("position", 3))
     )
+    log_layout = SlotLayout((("force", 3), ("spare", 2), ("grip", 1), ("position", 3), ("time", 1)))
     holder = np.zeros(shuffled.size + 2)
     ring, counter = np.zeros((8, 4)), np.zeros(1)
-    log, count = np.zeros((8, 8)), np.zeros(1)
+    log, count = np.zeros((4, log_layout.size)), np.zeros(1)
     state, out = np.zeros(16), np.zeros(3)
     parameters = (0.05, 0.1, 3.0, 100.0, 1e-3, 0.0, 1.0)
     cells = (holder, ring, counter, log, count, state, out, parameters)
-    kernel = ForcePath(*cells, shuffled.spans(HOLDER_FIELDS))
+    row = (log_layout.size, log_layout.spans(LOG_FIELDS))
+    kernel = ForcePath(*cells, shuffled.spans(HOLDER_FIELDS), row)
     rotation = np.arange(9.0).reshape(3, 3)
     kernel.tick(0.25, np.array([0.01, 0.02, 0.03]), rotation, np.array([0.4, 0.5, 0.6]), True)
     assert (
@@ -85,14 +88,25 @@ def test_the_compiled_tick_writes_the_holder_where_its_one_declaration_says():
     np.testing.assert_array_equal(holder[shuffled["rotation"]], rotation.ravel())
     np.testing.assert_array_equal(holder[shuffled["velocity"]], [0.4, 0.5, 0.6])
     assert holder[-2:].tolist() == [0.0, 0.0]  # nothing written past the layout
+    logged = log[0]
+    assert count[0] == 1 and logged[log_layout["time"]] == 0.25 and logged[log_layout["grip"]] == 1.0
+    np.testing.assert_array_equal(logged[log_layout["position"]], [0.01, 0.02, 0.03])
+    np.testing.assert_array_equal(logged[log_layout["force"]], out)
+    assert logged[log_layout["spare"]].tolist() == [0.0, 0.0] and not log[1:].any()
 
+    standard = (
+        HOLDER_LAYOUT.spans(HOLDER_FIELDS),
+        (HAPTIC_LOG_LAYOUT.size, HAPTIC_LOG_LAYOUT.spans(LOG_FIELDS)),
+    )
     narrow = SlotLayout(
         (("seq", 1), ("time", 1), ("position", 2), ("rotation", 9), ("velocity", 3), ("grip", 1))
     )
     with pytest.raises(ValueError, match="the holder's position must be 3 cells"):
-        ForcePath(np.zeros(narrow.size), *cells[1:], narrow.spans(HOLDER_FIELDS))
+        ForcePath(np.zeros(narrow.size), *cells[1:], narrow.spans(HOLDER_FIELDS), standard[1])
     with pytest.raises(ValueError, match="the holder's grip must be 1 cells inside its 17"):
-        ForcePath(np.zeros(17), *cells[1:], HOLDER_LAYOUT.spans(HOLDER_FIELDS))  # one cell short
+        ForcePath(np.zeros(17), *cells[1:], *standard)  # one cell short
+    with pytest.raises(ValueError, match="the log row's force must be 3 cells inside its 7"):
+        ForcePath(np.zeros(18), *cells[1:], standard[0], (7, HAPTIC_LOG_LAYOUT.spans(LOG_FIELDS)))
 
 
 def test_a_snapshot_read_from_shared_memory_is_the_one_written():
