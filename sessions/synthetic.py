@@ -148,7 +148,7 @@ def assisting_parameters(skill: float, seed: int) -> AssistingHandParameters:
     clumsiness = 1.0 - min(max(skill, 0.0), 1.0)
     grasps = bool(rng.random() >= 0.55 * clumsiness)
     delay = float(clumsiness * rng.uniform(0.2, 1.1))
-    eversion = float(0.12e-3 + 0.9e-3 * clumsiness * rng.uniform(0.5, 1.5))
+    eversion = float(EXPERT_EVERSION_M + 0.9e-3 * clumsiness * rng.uniform(0.5, 1.5))
     return AssistingHandParameters(
         grasps=grasps,
         grasp_delay=delay,
@@ -156,6 +156,49 @@ def assisting_parameters(skill: float, seed: int) -> AssistingHandParameters:
         tremor_amplitude=float(2e-5 + 3e-4 * clumsiness),
         seed=seed,
     )
+
+
+EXPERT_EVERSION_M = 0.12e-3
+"""How far a scripted expert lifts a wound's edge before an ordinary bite (m)."""
+
+
+def for_everted_bite(assisting: AssistingHandParameters, lift: float) -> AssistingHandParameters:
+    """The same subordinate hand on a bite that needs the edge lifted ``lift`` (m): it lifts that far
+    plus whatever it over-lifts an ordinary bite's edge (a trainee's excess stays; a hand that leaves
+    the edge alone still does)."""
+    return dataclasses.replace(assisting, eversion=assisting.eversion - EXPERT_EVERSION_M + lift)
+
+
+EVERTED_PULL_ARC_DEG = 100.0
+"""How far a scripted hand turns the needle on after re-grasping it on a bite through an everted edge
+(deg; 170 on an ordinary bite): the wall turned towards the needle turns its circle too, whose far
+side then sweeps the opposite edge's intima (with 170 or 120 deg the needle's body met it and tore it
+in expert sessions on ``inside-edge``); at 100 deg the needle is pulled clear and stops there."""
+
+
+def on_everted_bite(parameters: SuturingPassParameters) -> SuturingPassParameters:
+    """The same needle hand on a bite through an everted edge: it stops turning once the needle is
+    through (:data:`EVERTED_PULL_ARC_DEG`)."""
+    return dataclasses.replace(parameters, pull_arc_deg=EVERTED_PULL_ARC_DEG)
+
+
+def aimed_bites(spec) -> list[tuple]:
+    """The bites a scripted needle hand aims at, (entry, normal, bite_direction) each: the task's own,
+    or, on a task whose bite needs the edge everted (``spec.eversion``), the wall as the task's
+    eversion puts it (turned ``turn_deg`` away from the bite about the wound's line, its entry raised
+    ``rise_m``), which the hand aims at whether or not its other hand lifts the edge."""
+    if spec.eversion is None:
+        return spec.bites()
+    turn = math.radians(spec.eversion.turn_deg)
+    aimed = []
+    for entry, normal, bite_direction in spec.bites():
+        n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
+        s = np.asarray(bite_direction, dtype=np.float64)
+        s = (s - (s @ n) * n) / np.linalg.norm(s - (s @ n) * n)
+        turned = math.cos(turn) * n - math.sin(turn) * s
+        raised = np.asarray(entry, dtype=np.float64) + spec.eversion.rise_m * turned
+        aimed.append((raised, turned, math.cos(turn) * s + math.sin(turn) * n))
+    return aimed
 
 
 def scripted_hands(skill: float, seed: int, placement_skill: float | None = None) -> ScriptedHands:

@@ -15,6 +15,7 @@ from sim.calibration.presets import tissue_preset
 from sim.devices.assisting import edge_grasp
 from sim.fem import BiphaseTissue
 from sim.needle import Needle
+from sim.needle.reach import WristLimit, WristStop
 from sim.runtime import Simulation
 
 
@@ -116,7 +117,7 @@ def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **opt
     tissue = tissue_for(spec, cache_dir)
     if options.get("subordinate") is not None and "grasp_sites" not in options:
         options["grasp_sites"] = grasp_sites(spec)
-    return Simulation(
+    simulation = Simulation(
         tissue,
         Needle.curved(),
         device,
@@ -124,3 +125,7 @@ def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **opt
         region_forces=region_forces(spec, tissue.mesh),
         **options,
     )
+    if spec.eversion is not None:  # the approach stops the wrist short of square to the resting wall
+        stop = WristStop.short_of_square(spec.normal, spec.bite_direction, spec.eversion.short_deg)
+        simulation.interaction.wrist = WristLimit(stop, simulation.interaction.needle)
+    return simulation

@@ -8,6 +8,21 @@ from sessions.tasks.parameters import TaskParameters
 
 
 @dataclass(frozen=True)
+class EvertedBite:
+    """A bite that cannot be made square without everting the wound's edge: the approach stops the
+    wrist ``short_deg`` short of square to the resting wall, tipped towards the bite
+    (:class:`sim.needle.reach.WristStop`); the forceps lifting the rim ``lift_m`` turn the wall at the
+    entry ``turn_deg`` away from the wound and raise the entry ``rise_m`` (measured on the task's mesh
+    by :func:`sim.forceps.eversion.wall_turn`; a test holds the two to it), so an entry square to the
+    everted wall is within the wrist's reach."""
+
+    short_deg: float
+    lift_m: float
+    turn_deg: float
+    rise_m: float
+
+
+@dataclass(frozen=True)
 class TaskSpec:
     name: str
     scenario: str
@@ -28,6 +43,8 @@ class TaskSpec:
     hand can come from) and ``tilt_deg`` (its angle from the wall's normal); None: open access."""
     time_budget_s: float = 60.0
     """The time a course allows for the task (s): chosen at about ten times a scripted expert's."""
+    eversion: EvertedBite | None = None
+    """A bite that needs the subordinate hand to evert the edge first (None: the wrist reaches square)."""
 
     @property
     def stitch_count(self) -> int:

@@ -46,7 +46,7 @@ def _read_user_task(path: Path) -> TaskSpec:
 
 _USER_TASK_FIELDS = frozenset(
     {"name", "scenario", "description", "entry", "normal", "bite_direction", "parameters"}
-    | {"placement", "more_bites", "access", "time_budget_s"}
+    | {"placement", "more_bites", "access", "time_budget_s", "eversion"}
 )
 
 
@@ -61,8 +61,9 @@ def _user_task(data, folder: str) -> TaskSpec:
         raise VascsimError(f"name {data.get('name')!r} is not its folder's, {folder!r}")
     if data.get("scenario") != MeshFileParameters.scenario:
         raise VascsimError(f"scenario {data.get('scenario')!r}: a task added from a mesh is 'mesh_file'")
-    if data.get("placement") is not None or data.get("access") is not None or data.get("more_bites"):
-        raise VascsimError("a task added from a mesh has one bite and no placement marks or access")
+    marked = any(data.get(key) is not None for key in ("placement", "access", "eversion"))
+    if marked or data.get("more_bites"):
+        raise VascsimError("a task added from a mesh has one bite and no placement marks, access or eversion")
     description = data.get("description", "")
     budget = data.get("time_budget_s", 60.0)
     if not isinstance(description, str):

@@ -27,6 +27,7 @@ EVENT_KINDS = (
     "overstress",
     "edge_overstress",
     "tear",
+    "wrist_stop",
 )
 
 NEEDLE_STATES = {

@@ -65,6 +65,7 @@ from sim.needle.events import (
 from sim.needle.forces import NeedleForces
 from sim.needle.load import KernelLoad, mindlin_ratio, tissue_poisson_ratio
 from sim.needle.passage import HOLE_REACH, NEAR_CONTACT, GraphicsRateTracking
+from sim.needle.reach import WristLimit
 from sim.needle.sweep import KnownBalls, Touch, touches
 
 
@@ -153,6 +154,7 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
         there and then, wall seconds the per-tick handle took to build). Prefetching keeps the
         middle one empty; a node there is a contact change the FEM layer waited on."""
         self._implausible_active: set[tuple[str, int]] = set()
+        self.wrist: WristLimit | None = None  # where the task's approach stops the wrist (sim.needle.reach)
         self._previous_tip: tuple[float, float, float] | None = None
         self._previous_time = 0.0
         self._tip_velocity = (0.0, 0.0, 0.0)
@@ -201,7 +203,10 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
                 self.grasped = True
                 events.append(NeedleEvent("regrab", time, detail=f"{distance * 1e3:.2f} mm from the needle"))
         if self.grasped:
-            self.needle_pose = holder_pose.compose(self.grasp)
+            if self.wrist is not None and self.state in ("free", "contact"):  # a cramped approach
+                self.holder_pose, stopped = self.wrist.hold(time, holder_pose, self.grasp)
+                events += stopped
+            self.needle_pose = self.holder_pose.compose(self.grasp)
         self._track_tip(time)
         return events
 
@@ -487,12 +492,5 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
         return FemStep(-reactions.sum(axis=0), all_nodes, reactions)
 
 
-__all__ = [
-    "EVENT_KINDS",
-    "FemStep",
-    "InteractionError",
-    "NeedleEvent",
-    "NeedleInteraction",
-    "PiercingRules",
-    "entry_angle_deg",
-]
+__all__ = ["EVENT_KINDS", "FemStep", "InteractionError", "NeedleEvent", "NeedleInteraction"]
+__all__ += ["PiercingRules", "entry_angle_deg"]
