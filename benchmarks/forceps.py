@@ -1,6 +1,7 @@
 """The subordinate hand's figures of issue 46: which grasp rule converges, and what both hands cost.
 
-Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|cost|realtime|eversion|all]
+Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3]
+      [--part convergence|cost|realtime|eversion|inside-edge|all]
 
 - convergence: the force to lift a 1.5 mm wall patch's wound edge 0.5 mm with the forceps (the
   porcine-artery preset's soft phase, 300 kPa), by the jaws rule (every surface node within the
@@ -18,6 +19,10 @@ Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3] [--part convergence|c
   collision mesh's triangles within 0.35 mm of it, as the graphics layer moves them) turns, which
   way, and the forceps' force. What an eversion buys a needle that must enter square, and what a
   task needing one would ask of the hand (linear kinematics: turns past ~10 deg are first-order).
+- inside-edge: the task that cannot be done square without the forceps (the wrist stops 7 deg short
+  of square to the resting wall): the entry angle at first touch of scripted hands (experts 0.95 and
+  trainees 0.3, seeds 1-5) with both hands and with the forceps leaving the edge alone, and of a
+  needle planned square to the resting wall.
 """
 
 from __future__ import annotations
@@ -174,10 +179,60 @@ def eversion() -> None:
         print(f"{lifted * 1e3:9.2f}  {angle:19.2f}  {way:>16}  {np.linalg.norm(step.force) * 1e3:18.0f}")
 
 
+def inside_edge() -> None:
+    import dataclasses
+
+    from sessions.running.runner import SessionPlan, open_device
+    from sessions.synthetic import scripted_hands
+    from sessions.tasks import task_simulation, task_spec
+    from sim.devices import ScriptedDevice, SuturingPass
+    from sim.needle import Needle
+
+    spec = task_spec("inside-edge")
+
+    def touch(simulation, duration) -> tuple[float, int]:
+        simulation.run_simulated(duration)
+        kinds = [e.kind for e in simulation.events]
+        angle = next(e.entry_angle_deg for e in simulation.events if e.kind == "contact_start")
+        unsafe = sum(
+            kinds.count(k) for k in ("overstress", "edge_overstress", "tear", "edge_torn", "implausible_hit")
+        )
+        return angle, unsafe
+
+    short, lift, turn = spec.eversion.short_deg, spec.eversion.lift_m * 1e3, spec.eversion.turn_deg
+    print(f"inside-edge: the wrist stops {short:g} deg short of square to the resting wall;")
+    print(f"the task's eversion lifts the rim {lift:g} mm, turning the wall {turn:g} deg")
+    header = ("hand", "forceps", "entry angle at first touch (deg), seeds 1-5", "unsafe events")
+    print(f"{header[0]:>14}  {header[1]:>16}  {header[2]:>44}  {header[3]:>13}")
+    for label, skill in (("expert 0.95", 0.95), ("trainee 0.3", 0.3)):
+        for grasps in (True, False):
+            angles, unsafe = [], 0
+            for seed in range(1, 6):
+                hands = scripted_hands(skill, seed)
+                assisting = hands.assisting if grasps else dataclasses.replace(hands.assisting, grasps=False)
+                hands = dataclasses.replace(hands, assisting=assisting)
+                device, duration, sub = open_device(
+                    "scripted", SessionPlan("s", "p", spec.name, 1), None, hands
+                )
+                angle, bad = touch(task_simulation(spec, device, None, subordinate=sub), duration)
+                angles.append(angle)
+                unsafe += bad
+            held = "evert the edge" if grasps else "leave it alone"
+            print(f"{label:>14}  {held:>16}  {' / '.join(f'{a:.1f}' for a in angles):>44}  {unsafe:>13}")
+    planned = SuturingPass(Needle.curved(), spec.entry, spec.normal, spec.bite_direction)
+    angle, _ = touch(task_simulation(spec, ScriptedDevice(planned.pose_and_grip), None), planned.duration)
+    open_angle, _ = touch(
+        task_simulation(task_spec("interrupted-stitch"), ScriptedDevice(planned.pose_and_grip), None),
+        planned.duration,
+    )
+    print(f"a needle planned square to the resting wall: {angle:.1f} deg")
+    print(f"the same needle on the interrupted stitch (no stop): {open_angle:.1f} deg")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
-    parts = ("convergence", "cost", "realtime", "eversion", "all")
+    parts = ("convergence", "cost", "realtime", "eversion", "inside-edge", "all")
     parser.add_argument("--part", choices=parts, default="all")
     args = parser.parse_args()
     if args.part in ("convergence", "all"):
@@ -188,6 +243,8 @@ def main() -> None:
         realtime(args.repeats)
     if args.part in ("eversion", "all"):
         eversion()
+    if args.part in ("inside-edge", "all"):
+        inside_edge()
 
 
 if __name__ == "__main__":

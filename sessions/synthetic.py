@@ -169,35 +169,24 @@ def for_everted_bite(assisting: AssistingHandParameters, lift: float) -> Assisti
     return dataclasses.replace(assisting, eversion=assisting.eversion - EXPERT_EVERSION_M + lift)
 
 
-EVERTED_PULL_ARC_DEG = 100.0
-"""How far a scripted hand turns the needle on after re-grasping it on a bite through an everted edge
-(deg; 170 on an ordinary bite): the wall turned towards the needle turns its circle too, whose far
-side then sweeps the opposite edge's intima (with 170 or 120 deg the needle's body met it and tore it
-in expert sessions on ``inside-edge``); at 100 deg the needle is pulled clear and stops there."""
-
-
-def on_everted_bite(parameters: SuturingPassParameters) -> SuturingPassParameters:
-    """The same needle hand on a bite through an everted edge: it stops turning once the needle is
-    through (:data:`EVERTED_PULL_ARC_DEG`)."""
-    return dataclasses.replace(parameters, pull_arc_deg=EVERTED_PULL_ARC_DEG)
-
-
 def aimed_bites(spec) -> list[tuple]:
     """The bites a scripted needle hand aims at, (entry, normal, bite_direction) each: the task's own,
-    or, on a task whose bite needs the edge everted (``spec.eversion``), the wall as the task's
-    eversion puts it (turned ``turn_deg`` away from the bite about the wound's line, its entry raised
-    ``rise_m``), which the hand aims at whether or not its other hand lifts the edge."""
+    or, on a task whose bite needs the edge everted (``spec.eversion``), with the wrist at its stop:
+    the tip as far back as the approach lets it turn (``short_deg`` past square to the resting wall,
+    towards the bite) on the entry mark, which the wall everted by the task's lift (``turn_deg``)
+    meets nearly square and the resting wall does not. (Aimed square to the everted wall itself, its
+    circle turned 8.9 deg about the entry, the needle's far side then swept the patch's side in four
+    of five expert sessions: "needle enters a second wall".)"""
     if spec.eversion is None:
         return spec.bites()
-    turn = math.radians(spec.eversion.turn_deg)
+    turn = math.radians(spec.eversion.short_deg)
     aimed = []
     for entry, normal, bite_direction in spec.bites():
         n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
         s = np.asarray(bite_direction, dtype=np.float64)
         s = (s - (s @ n) * n) / np.linalg.norm(s - (s @ n) * n)
-        turned = math.cos(turn) * n - math.sin(turn) * s
-        raised = np.asarray(entry, dtype=np.float64) + spec.eversion.rise_m * turned
-        aimed.append((raised, turned, math.cos(turn) * s + math.sin(turn) * n))
+        turned = (math.cos(turn) * n - math.sin(turn) * s, math.cos(turn) * s + math.sin(turn) * n)
+        aimed.append((entry, *turned))
     return aimed
 
 

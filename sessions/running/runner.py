@@ -39,13 +39,7 @@ from sessions.running.scene import LIVE_TIME_FACTOR, mapped_onto_task, start_pos
 from sessions.running.streaming import StreamedSession, StreamTarget
 from sessions.running.streaming import log as streaming_log
 from sessions.status import SCORABLE, SCRIPTED_DEVICE, SessionStatus
-from sessions.synthetic import (
-    aimed_bites,
-    bite_parameters,
-    for_everted_bite,
-    in_restricted_access,
-    on_everted_bite,
-)
+from sessions.synthetic import aimed_bites, bite_parameters, for_everted_bite, in_restricted_access
 from sessions.tasks import (
     edge_grasps,
     region_presets,
@@ -133,14 +127,12 @@ def open_device(
             if isinstance(parameters, ScriptedHands)
             else ScriptedHands(parameters or SuturingPassParameters())
         )
-        bites = aimed_bites(task)  # an edge to be everted: aimed at the wall as the eversion turns it
+        bites = aimed_bites(task)  # an edge to be everted: the wrist at its stop
         each = bite_parameters(hands.needle, len(bites))
         approach = None
         if task.access is not None:  # the hand comes in from where the wound lets it
             approach = task.access["approach"]
             each = [in_restricted_access(p, task.access["tilt_deg"]) for p in each]
-        if task.eversion is not None:
-            each = [on_everted_bite(p) for p in each]
         passes = [
             SuturingPass(Needle.curved(), *bite, p, approach=approach)
             for bite, p in zip(bites, each, strict=True)

@@ -210,7 +210,7 @@ def _inside_edge() -> TaskSpec:
         single.parameters,
         placement=single.placement,
         time_budget_s=90.0,
-        eversion=EvertedBite(short_deg=7.0, lift_m=0.45e-3, turn_deg=8.92, rise_m=0.219e-3),
+        eversion=EvertedBite(short_deg=7.0, lift_m=0.45e-3, turn_deg=8.92),
     )
 
 

@@ -12,14 +12,13 @@ class EvertedBite:
     """A bite that cannot be made square without everting the wound's edge: the approach stops the
     wrist ``short_deg`` short of square to the resting wall, tipped towards the bite
     (:class:`sim.needle.reach.WristStop`); the forceps lifting the rim ``lift_m`` turn the wall at the
-    entry ``turn_deg`` away from the wound and raise the entry ``rise_m`` (measured on the task's mesh
-    by :func:`sim.forceps.eversion.wall_turn`; a test holds the two to it), so an entry square to the
-    everted wall is within the wrist's reach."""
+    entry ``turn_deg`` away from the wound (measured on the task's mesh by
+    :func:`sim.forceps.eversion.wall_turn`; a test holds the task to it), past the stop, so an entry
+    square to the everted wall is within the wrist's reach."""
 
     short_deg: float
     lift_m: float
     turn_deg: float
-    rise_m: float
 
 
 @dataclass(frozen=True)

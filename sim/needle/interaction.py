@@ -201,9 +201,11 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
             if distance <= self.rules.regrab_distance:
                 self.grasp = holder_pose.inverse().compose(self.needle_pose)
                 self.grasped = True
+                if self.wrist is not None:  # a re-grip at the tip, in the wall, resets the wrist
+                    self.wrist.regrip(self.state in ("pierced", "exited"))
                 events.append(NeedleEvent("regrab", time, detail=f"{distance * 1e3:.2f} mm from the needle"))
         if self.grasped:
-            if self.wrist is not None and self.state in ("free", "contact"):  # a cramped approach
+            if self.wrist is not None:  # a cramped approach stops the wrist (sim.needle.reach)
                 self.holder_pose, stopped = self.wrist.hold(time, holder_pose, self.grasp)
                 events += stopped
             self.needle_pose = self.holder_pose.compose(self.grasp)

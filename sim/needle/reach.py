@@ -13,8 +13,9 @@ answer is the other hand: everting the edge turns the wall to meet the needle.
 needle whose tip points further back is turned forward about the holder's shaft through its
 jaws (the wrist cannot turn further; the hand's position is kept), so the tip meets the wall
 where the stop lets it, and the entry angle is measured against the wall where it is. The stop
-holds until the needle pierces: from there the drive turns on and a surgeon re-grips as the
-needle comes round (the re-grasp at the tip), which the stop does not model.
+holds the grip that drives the needle in, through the wall too (the drive turns forward, away from
+it, so a needle held at the stop is never let go of with a jump); the re-grasp at the tip to pull
+the needle through is a new grip with the wrist reset, which the stop lets be.
 """
 
 from __future__ import annotations
@@ -95,15 +96,24 @@ class WristStop:
 
 class WristLimit:
     """A :class:`WristStop` on the hand holding ``needle``: :meth:`hold` gives the holder's pose as the
-    wrist can take it and a ``wrist_stop`` event each time the stop starts holding the wrist (again
-    once the tip has come :data:`REARM_DEG` forward of it)."""
+    wrist can take it and a ``wrist_stop`` event each time the stop starts holding the wrist by at
+    least :data:`NOTICED_DEG` (again once the tip has come :data:`REARM_DEG` forward of it). It holds
+    the grip that drives the needle in; :meth:`regrip` with the needle in the wall (the re-grasp at
+    the tip to pull it through) resets the wrist, and the stop lets that grip be."""
 
     def __init__(self, stop: WristStop, needle: Needle) -> None:
         self.stop, self.needle = stop, needle
         self.holding = False
+        self.released = False  # re-gripped in the wall: the stop no longer applies
         self._axis = np.array([0.0, 0.0, 1.0])  # the needle's circle axis, its own frame
 
+    def regrip(self, in_wall: bool) -> None:
+        """The needle re-grasped; ``in_wall``: with the needle through the wall (the stop lets go)."""
+        self.released = self.released or in_wall
+
     def hold(self, time: float, holder: Pose, grasp: Pose) -> tuple[Pose, list[NeedleEvent]]:
+        if self.released:
+            return holder, []
         rotation = holder.rotation.dot(grasp.rotation)
         shaft, tip = rotation.dot(self._axis), rotation.dot(self.needle.tip_direction)
         turn = self.stop.correction(tip, shaft)
@@ -112,15 +122,17 @@ class WristLimit:
                 self.holding = False
             return holder, []
         events = []
-        if not self.holding and turn > 0:
+        if not self.holding and turn >= math.radians(NOTICED_DEG):
             self.holding = True
             words = f"the tip held {math.degrees(turn):.1f} deg short of where the hand turned it"
             events.append(NeedleEvent("wrist_stop", time, detail=words))
         return Pose.unchecked(holder.position, rotation_about(shaft, turn).dot(holder.rotation)), events
 
 
+NOTICED_DEG = 0.1
+"""A stop holding the wrist by less than this (deg) is applied but not reported."""
 REARM_DEG = 1.0
 """After a ``wrist_stop`` event the next needs the tip this far (deg) forward of the stop first: a
 hand trembling at the stop makes one event, not one per step."""
 
-__all__ = ["REARM_DEG", "WRIST_RANGE_DEG", "WristLimit", "WristStop"]
+__all__ = ["NOTICED_DEG", "REARM_DEG", "WRIST_RANGE_DEG", "WristLimit", "WristStop"]
