@@ -89,6 +89,12 @@ def _clock(seconds: float) -> str:
     return f"{seconds // 60}:{seconds % 60:02d}"
 
 
+NEEDS_FORCEPS = (
+    "This task needs your other hand to evert the edge, and this station gives it no forceps: the needle "
+    "cannot enter square (start the station with --sub-device spacemouse, openhaptics or camera)."
+)
+
+
 def instruction_lines(
     spec: TaskSpec, device: str, participant: str, standard_note: str = "", sub_device: str | None = None
 ) -> list[Line]:
@@ -115,6 +121,8 @@ def instruction_lines(
         lines += wrapped(FORCEPS_CONTROLS.format(device=FORCEPS_DEVICE_NAMES[sub_device]))
     elif sub_device == "camera":
         lines += wrapped(CAMERA_FORCEPS_CONTROLS)
+    elif spec.eversion is not None:  # the task needs the other hand, and there is none
+        lines += wrapped(NEEDS_FORCEPS, "bad-small")
     if standard_note:
         lines += wrapped(standard_note, "bad-small")
     lines.append(Line(""))

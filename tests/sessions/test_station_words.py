@@ -82,6 +82,17 @@ def test_with_a_second_device_the_instructions_say_how_the_forceps_hold_the_edge
     assert spacemouse[-1].startswith("SPACE or a button: start")  # the device in hand starts it
 
 
+def test_a_task_that_needs_the_forceps_says_so_when_the_station_has_none():
+    spec = task_spec("inside-edge")
+    alone = " ".join(line.text for line in instruction_lines(spec, "mouse", "T07"))
+    assert "needs your other hand to evert the edge" in alone and "--sub-device" in alone
+    assert "7 deg short of square" in alone  # the task's own words: why
+    both = " ".join(
+        line.text for line in instruction_lines(spec, "openhaptics", "T07", sub_device="spacemouse")
+    )
+    assert "needs your other hand" not in both and "lift (evert) the edge" in both
+
+
 def review(verdict: str) -> SessionReview:
     return SessionReview(
         "S-1",
