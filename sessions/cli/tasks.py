@@ -66,6 +66,13 @@ def tasks_show(name: str, as_json: bool) -> None:
     if spec.access is not None:
         tilt = spec.access["tilt_deg"]
         click.echo(f"access       restricted: the hand comes in {tilt:g} deg off the wall's normal")
+    if spec.eversion is not None:
+        e = spec.eversion
+        words = (
+            f"the wrist stops {e.short_deg:g} deg short of square to the resting wall; the forceps "
+            f"lifting the edge {e.lift_m * 1e3:g} mm turn it {e.turn_deg:.1f} deg to meet the needle"
+        )
+        click.echo(click.wrap_text(words, 78, initial_indent="two hands    ", subsequent_indent=" " * 13))
     budget = f"{spec.stitch_count} stitch(es) in {spec.time_budget_s:g} s"
     click.echo(f"asks for     {budget} (the course's time budget)")
     entry = ", ".join(f"{1e3 * v:.1f}" for v in spec.entry)
