@@ -175,8 +175,8 @@ def aimed_bites(spec) -> list[tuple]:
     the tip as far back as the approach lets it turn (``short_deg`` past square to the resting wall,
     towards the bite) on the entry mark, which the wall everted by the task's lift (``turn_deg``)
     meets nearly square and the resting wall does not. (Aimed square to the everted wall itself, its
-    circle turned 8.9 deg about the entry, the needle's far side then swept the patch's side in four
-    of five expert sessions: "needle enters a second wall".)"""
+    circle turned 8.9 deg about the entry and 170 deg of pull, the needle's far side then swept the
+    patch's side in four of five expert sessions: "needle enters a second wall".)"""
     if spec.eversion is None:
         return spec.bites()
     turn = math.radians(spec.eversion.short_deg)

@@ -78,6 +78,38 @@ def text_actor(text: str, style: tuple[int, bool, tuple[float, float, float]], p
     return actor
 
 
+KEYS_Y = 16
+"""Where the ``keys`` line sits (px above the window's bottom edge)."""
+TOP_MARGIN = 44
+"""The first line's baseline below the window's top edge (px)."""
+
+
+def _step(line: Line) -> float:
+    """The space (px) a line takes below the one before it at full size, its heading gap included."""
+    size = STYLES[line.style][0]
+    gap = 8 if line.style == "heading" else 0
+    return gap + size * 1.55 + (6 if line.style in ("title", "heading") else 0)
+
+
+def layout(lines: list[Line], height: int) -> list[tuple[Line, int, int]]:
+    """Each line with its baseline (px from the bottom) and font size: the flowing lines top to
+    bottom, the ``keys`` lines pinned at :data:`KEYS_Y`. When the flowing lines would reach the keys
+    line, their sizes and spacing shrink together until they clear it (a screen with more to say
+    stays readable rather than drawing one line over another)."""
+    flowing = [line for line in lines if line.style != "keys"]
+    needed = sum(_step(line) for line in flowing)
+    room = height - TOP_MARGIN - (KEYS_Y + 2 * STYLES["keys"][0])
+    scale = min(1.0, room / needed) if needed > 0 else 1.0
+    placed = [(line, KEYS_Y, STYLES["keys"][0]) for line in lines if line.style == "keys"]
+    y = float(height - TOP_MARGIN)
+    for line in flowing:
+        gap = 8 * scale if line.style == "heading" else 0.0
+        y -= gap
+        placed.append((line, round(y), max(round(STYLES[line.style][0] * scale), 9)))
+        y -= _step(line) * scale - gap
+    return placed
+
+
 class Screen:
     """A window of text lines and the keys that leave it (see the module docstring)."""
 
@@ -94,22 +126,12 @@ class Screen:
         for actor in self._actors:
             renderer.RemoveViewProp(actor)
         self._actors = []
-        y = self.settings.size[1] - 44
-        flowing = [line for line in lines if line.style != "keys"]
-        for line in [line for line in lines if line.style == "keys"]:  # pinned to the bottom
-            self._place(line, 16)
-        for line in flowing:
-            size = STYLES[line.style][0]
-            if line.style == "heading":
-                y -= 8
-            self._place(line, y)
-            y -= int(size * 1.55) + (6 if line.style in ("title", "heading") else 0)
+        for line, y, size in layout(lines, self.settings.size[1]):
+            _, bold, colour = STYLES[line.style]
+            actor = text_actor(line.text, (size, bold, colour), (28, y))
+            renderer.AddViewProp(actor)
+            self._actors.append(actor)
         self.plotter.render()
-
-    def _place(self, line: Line, y: int) -> None:
-        actor = text_actor(line.text, STYLES[line.style], (28, y))
-        self.plotter.renderer.AddViewProp(actor)
-        self._actors.append(actor)
 
     def wait_for(
         self,

@@ -195,22 +195,22 @@ def _inside_edge() -> TaskSpec:
     """The interrupted stitch where the edge must be everted to be met square (PAPER.md section 2:
     the subordinate hand gives access inside the wound's edge, "sufficient to allow perpendicular
     entry of a curved needle"): the approach stops the wrist 7 deg short of square to the resting wall,
-    and the forceps lifting the rim 0.45 mm turn the wall 8.9 deg to meet it (the rim's 48 nodes; the
-    entry rises 0.22 mm; 152 mN on the forceps, well short of the 1.9 mm lift that tears the edge)."""
+    and the forceps lifting the rim 0.38 mm turn the wall 7.6 deg to meet it (the rim's 48 nodes; the
+    entry rises 0.18 mm; 128 mN on the forceps, well short of the 1.9 mm lift that tears the edge)."""
     single = _interrupted_stitch()
     return TaskSpec(
         "inside-edge",
         "vessel_patch",
         "The interrupted stitch where the wrist cannot reach square: the approach stops it 7 deg short "
         "of square to the resting wall, so the subordinate hand must evert the edge (lift it about "
-        "0.45 mm with the forceps) to turn the wall to meet the needle, as inside a wound's edge.",
+        "0.4 mm with the forceps) to turn the wall to meet the needle, as inside a wound's edge.",
         single.entry,
         single.normal,
         single.bite_direction,
         single.parameters,
         placement=single.placement,
         time_budget_s=90.0,
-        eversion=EvertedBite(short_deg=7.0, lift_m=0.45e-3, turn_deg=8.92),
+        eversion=EvertedBite(short_deg=7.0, lift_m=0.38e-3, turn_deg=7.61),
     )
 
 

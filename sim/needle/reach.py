@@ -10,9 +10,10 @@ answer is the other hand: everting the edge turns the wall to meet the needle.
 
 :class:`WristStop` holds that limit as one world direction, ``tip_limit``: the furthest back
 (against the drive) the held needle's tip can point, and the wrist's range forward of it. A held
-needle whose tip points further back is turned forward about the holder's shaft through its
-jaws (the wrist cannot turn further; the hand's position is kept), so the tip meets the wall
-where the stop lets it, and the entry angle is measured against the wall where it is. The stop
+needle whose tip points further back is turned forward about its own axis through its circle's
+centre, the holder with it (the wrist cannot turn it further: a hand that turns the needle about
+that centre, as a drive does, moves it no further), so the tip meets the wall where the stop lets
+it, and the entry angle is measured against the wall where it is. The stop
 holds the grip that drives the needle in, through the wall too (the drive turns forward, away from
 it, so a needle held at the stop is never let go of with a jump); the re-grasp at the tip to pull
 the needle through is a new grip with the wrist reset, which the stop lets be.
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.geometry import circle_through
 from sim.needle.events import NeedleEvent
 from sim.needle.geometry import Needle, NeedleError, Pose, rotation_about
 
@@ -106,6 +108,9 @@ class WristLimit:
         self.holding = False
         self.released = False  # re-gripped in the wall: the stop no longer applies
         self._axis = np.array([0.0, 0.0, 1.0])  # the needle's circle axis, its own frame
+        vertices = needle.vertices
+        circle = circle_through(vertices[0], vertices[len(vertices) // 2], vertices[-1])
+        self._centre = np.zeros(3) if circle is None else circle[0]  # its own frame; straight: the jaws
 
     def regrip(self, in_wall: bool) -> None:
         """The needle re-grasped; ``in_wall``: with the needle through the wall (the stop lets go)."""
@@ -126,7 +131,13 @@ class WristLimit:
             self.holding = True
             words = f"the tip held {math.degrees(turn):.1f} deg short of where the hand turned it"
             events.append(NeedleEvent("wrist_stop", time, detail=words))
-        return Pose.unchecked(holder.position, rotation_about(shaft, turn).dot(holder.rotation)), events
+        # turned back about the needle's own centre: the needle stays on its circle where the wrist's
+        # last possible turn left it (a hand turning it about that centre, as the drive does, then
+        # moves it no further), the holder with it
+        centre = holder.position + holder.rotation.dot(grasp.position + grasp.rotation.dot(self._centre))
+        turned = rotation_about(shaft, turn)
+        position = centre + turned.dot(holder.position - centre)
+        return Pose.unchecked(position, turned.dot(holder.rotation)), events
 
 
 NOTICED_DEG = 0.1

@@ -40,9 +40,9 @@ def test_the_task_declares_the_turn_its_mesh_gives():
     rim, lift = edge_grasps(spec)[0]
     turn = wall_turn(tissue_for(spec), rim, lift, spec.eversion.lift_m, spec.entry, spec.normal)
     assert turn.turned_deg == pytest.approx(spec.eversion.turn_deg, abs=0.05)
-    assert turn.turned_deg > spec.eversion.short_deg + 1.0  # the lift the task asks for reaches square
+    assert turn.turned_deg > spec.eversion.short_deg  # the lift the task asks for reaches square
     assert float(turn.normal @ np.asarray(spec.bite_direction)) < 0  # turned away from the bite
-    assert 0.05 < turn.forceps_force < 0.5  # a gentle lift, far from tearing the edge (1.9 mm)
+    assert 0.05 < turn.forceps_force < 0.3  # a gentle lift, far from tearing the edge (1.9 mm)
 
 
 def test_an_expert_who_everts_the_edge_enters_square():

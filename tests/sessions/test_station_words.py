@@ -2,6 +2,7 @@
 screens' words, the terminal's closing lines, the live scene's camera and start pose."""
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -91,6 +92,26 @@ def test_a_task_that_needs_the_forceps_says_so_when_the_station_has_none():
         line.text for line in instruction_lines(spec, "openhaptics", "T07", sub_device="spacemouse")
     )
     assert "needs your other hand" not in both and "lift (evert) the edge" in both
+
+
+def test_a_long_instruction_screen_shrinks_to_clear_the_keys_line():
+    """Seen: inside-edge's instructions with a standard's note ran into the pinned keys line at 960x540."""
+    from sessions.running.screens import layout
+
+    spec = task_spec("inside-edge")
+    lines = instruction_lines(spec, "mouse", "T07", "No expert has recorded this task in this study yet.")
+    for height in (540, 720):
+        placed = layout(lines, height)
+        keys = [(y, size) for line, y, size in placed if line.style == "keys"]
+        flowing = sorted(((y, size) for line, y, size in placed if line.style != "keys"), reverse=True)
+        assert len(keys) == 1 and len(flowing) == len(lines) - 1
+        lowest, _ = flowing[-1]
+        assert lowest >= keys[0][0] + keys[0][1] + 4  # above the keys line, with room
+        assert flowing[0][0] <= height - 20 and all(size >= 9 for _, size in flowing)
+        for (upper, _), (lower, size) in itertools.pairwise(flowing):
+            assert upper - lower >= size  # no line drawn over the one above
+    short = layout(instruction_lines(task_spec("wall-stitch"), "scripted", "T07"), 540)
+    assert {size for line, _, size in short if line.style == "body"} == {15}  # room enough: full size
 
 
 def review(verdict: str) -> SessionReview:

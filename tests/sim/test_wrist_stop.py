@@ -18,6 +18,15 @@ NORMAL = np.array([0.0, 0.0, 1.0])  # the wall faces +z
 BITE = np.array([1.0, 0.0, 0.0])  # the needle is driven towards +x
 NEEDLE = Needle.curved()
 SHORT_DEG = 7.0
+_FULL = 2 * math.pi * 3 / 8
+CENTRE = -0.004 * np.array([math.cos(_FULL / 3), math.sin(_FULL / 3), 0.0])
+"""The default needle's circle centre in its own frame: the grip, a third of the arc from the swage,
+is the frame's origin (sim.needle.geometry)."""
+
+
+def centre_of(holder: Pose, grasp: Pose) -> np.ndarray:
+    needle = holder.compose(grasp)
+    return needle.position + needle.rotation @ CENTRE
 
 
 def _holder_square_to_the_wall(extra_back_deg: float = 0.0) -> Pose:
@@ -50,7 +59,13 @@ def test_a_square_entry_is_turned_forward_to_the_stop_about_the_jaws():
     limit = WristLimit(stop, NEEDLE)
     holder = _holder_square_to_the_wall()
     held, events = limit.hold(0.0, holder, Pose.identity())
-    np.testing.assert_allclose(held.position, holder.position, atol=0)  # the hand's position kept
+    # turned about the needle's own centre: it stays on its circle, the holder moves with it
+    np.testing.assert_allclose(
+        centre_of(held, Pose.identity()), centre_of(holder, Pose.identity()), atol=1e-15
+    )
+    assert np.linalg.norm(held.position - holder.position) == pytest.approx(
+        2 * 0.004 * math.sin(math.radians(SHORT_DEG) / 2), rel=1e-9
+    )
     np.testing.assert_allclose(held.rotation[:, 2], holder.rotation[:, 2], atol=1e-12)  # about the shaft
     tip = _tip(held)
     assert math.degrees(math.acos(-tip @ NORMAL)) == pytest.approx(SHORT_DEG, abs=1e-9)
@@ -100,7 +115,7 @@ def test_any_held_pose_ends_inside_the_range_turned_only_about_the_shaft(holder_
     held, _ = limit.hold(0.0, holder, grasp)
     needle = held.compose(grasp)
     shaft, tip = needle.rotation[:, 2], needle.rotation @ NEEDLE.tip_direction
-    np.testing.assert_allclose(held.position, holder.position, atol=0)
+    np.testing.assert_allclose(centre_of(held, grasp), centre_of(holder, grasp), atol=1e-15)
     np.testing.assert_allclose(shaft, holder.compose(grasp).rotation[:, 2], atol=1e-9)
     past = stop.turn_past(tip, shaft)
     if math.isnan(past):  # the shaft along the stop's direction: nothing to turn against
