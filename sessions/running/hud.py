@@ -79,9 +79,11 @@ class HudTracker:
         tip: np.ndarray,
         local_stress: float,
         grasp_force: np.ndarray | None = None,
+        wrist_at_stop: bool = False,
     ) -> None:
         """``grasp_force``: the subordinate hand's forceps' force on the tissue (N; zero when they hold
-        nothing), None for a one-handed session."""
+        nothing), None for a one-handed session; ``wrist_at_stop``: the task's approach holds the
+        needle hand's wrist (it cannot turn the needle back further)."""
         previous, self._state = self._state, state
         self._forceps = None if grasp_force is None else float(np.linalg.norm(grasp_force))
         if previous in ("free", "contact") and state in ("pierced", "exited"):
@@ -103,6 +105,8 @@ class HudTracker:
                 now,
                 f"the forceps pull hard on the edge: lift less (it tears at {_force(limits.edge_tear_n)})",
             )
+        elif wrist_at_stop and state in ("free", "contact"):
+            self._warn(now, "your wrist is at the end of its turn: evert the edge to meet the wall square")
 
     def warn(self, now: float, text: str) -> None:
         """Show ``text`` on the warning line for two seconds from ``now`` (said again, it stays)."""

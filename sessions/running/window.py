@@ -204,7 +204,13 @@ class LiveWindow:
         force = np.zeros(3) if fem is None else np.asarray(fem.needle_force)
         if fem is not None:
             self.tracker.update(
-                now, fem.state, force, fem.needle_vertices[0], fem.local_stress, fem.grasp_force
+                now,
+                fem.state,
+                force,
+                fem.needle_vertices[0],
+                fem.local_stress,
+                fem.grasp_force,
+                fem.wrist_at_stop,
             )
         for ask in (self.tracking_problem, self.forceps_problem):
             problem = ask() if ask is not None else None

@@ -458,6 +458,7 @@ class SharedFem:
         slot[at.grasp_displacement] = (
             math.nan if snapshot.grasp_displacement is None else snapshot.grasp_displacement
         )
+        slot[at.wrist_at_stop] = float(snapshot.wrist_at_stop)
         slot[0] += 1
 
     def get(self):
@@ -487,4 +488,5 @@ class SharedFem:
             grasp_displacement=None
             if math.isnan(copy[at.grasp_displacement][0])
             else copy[at.grasp_displacement],
+            wrist_at_stop=bool(copy[at.wrist_at_stop]),
         )

@@ -228,6 +228,7 @@ class Simulation:
                 stretch=interaction.stretch,
                 holder_time=holder.time,
                 tip_velocity=interaction.tip_velocity,
+                wrist_at_stop=interaction.wrist is not None and interaction.wrist.holding,
                 **grasp,
             )
         )

@@ -46,6 +46,7 @@ class FemSnapshot(NamedTuple):
     grasp_displacement: NDArray[np.float64] | None = None  # m, of the tissue the forceps hold
     grasp_loads: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # grasped nodes, forces (k, 3) N
     jaws: tuple[NDArray[np.float64], bool] | None = None  # the forceps' jaw point (m) and whether closed
+    wrist_at_stop: bool = False  # the task's approach holds the needle hand's wrist (sim.needle.reach)
 
 
 STATE_CODES = {"free": 0, "contact": 1, "pierced": 2, "exited": 3}
@@ -138,6 +139,7 @@ FEM_LAYOUT = SlotLayout(
         ("tip_velocity", 3),
         ("grasp_force", 3),
         ("grasp_displacement", 3),
+        ("wrist_at_stop", 1),
     )
 )
 """The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""

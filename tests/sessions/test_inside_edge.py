@@ -65,11 +65,14 @@ def test_a_needle_aimed_square_at_the_resting_wall_is_held_at_the_stop():
     spec = task_spec(TASK)
     aimed = SuturingPass(Needle.curved(), spec.entry, spec.normal, spec.bite_direction)  # 0 deg planned
     simulation = task_simulation(spec, ScriptedDevice(aimed.pose_and_grip), None)
+    held = []  # what the FEM snapshots tell the station's strip
+    simulation.on_sample = lambda now, sample, force, fem: held.append(fem is not None and fem.wrist_at_stop)
     result = simulation.run_simulated(aimed.duration)
     assert result.error is None, result.error
     stops = [e for e in simulation.events if e.kind == "wrist_stop"]
     assert len(stops) == 1 and stops[0].detail.startswith("the tip held 7.0 deg short")
     assert first_touch(simulation.events) >= spec.eversion.short_deg - 0.5
+    assert any(held) and not held[-1]  # held on the approach, not once the drive turned past the stop
     # on an open approach the same pass enters square: the stop, not the pass, costs the angle
     open_task = task_simulation(task_spec("interrupted-stitch"), ScriptedDevice(aimed.pose_and_grip), None)
     open_task.run_simulated(aimed.duration)

@@ -83,6 +83,19 @@ def test_with_a_second_device_the_instructions_say_how_the_forceps_hold_the_edge
     assert spacemouse[-1].startswith("SPACE or a button: start")  # the device in hand starts it
 
 
+def test_the_strip_says_when_the_wrist_is_at_its_stop():
+    hud = HudTracker(LIMITS)
+    tip = np.zeros(3)
+    hud.update(0.1, "free", np.zeros(3), tip, 0.0, None, wrist_at_stop=False)
+    assert hud.reading(0.1, np.zeros(3)).warning == ""
+    hud.update(0.2, "contact", np.zeros(3), tip, 0.0, None, wrist_at_stop=True)
+    assert hud.reading(0.2, np.zeros(3)).warning == (
+        "your wrist is at the end of its turn: evert the edge to meet the wall square"
+    )
+    hud.update(3.0, "pierced", np.zeros(3), tip, 0.0, None, wrist_at_stop=True)  # in the wall: driving
+    assert hud.reading(3.0, np.zeros(3)).warning == ""
+
+
 def test_a_task_that_needs_the_forceps_says_so_when_the_station_has_none():
     spec = task_spec("inside-edge")
     alone = " ".join(line.text for line in instruction_lines(spec, "mouse", "T07"))

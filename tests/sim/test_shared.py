@@ -137,6 +137,7 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
             tip_velocity=np.array([1e-3, 2e-3, 3e-3]),
             grasp_force=np.array([0.0, 0.2, 0.1]),
             grasp_displacement=np.array([0.0, 0.0, 3e-4]),
+            wrist_at_stop=True,
         )
     )
     fem._owner = -1  # read as the haptic process does, from the slot
@@ -150,7 +151,8 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
     assert np.array_equal(seen.tip_velocity, [1e-3, 2e-3, 3e-3])
     assert np.array_equal(seen.grasp_force, [0, 0.2, 0.1])
     assert np.array_equal(seen.grasp_displacement, [0, 0, 3e-4])
-    assert FEM_LAYOUT.size == SharedFem.doubles() == 28
+    assert seen.wrist_at_stop is True
+    assert FEM_LAYOUT.size == SharedFem.doubles() == 29
 
 
 def test_a_one_handed_snapshot_reads_back_with_no_grasp():
