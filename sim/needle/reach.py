@@ -13,10 +13,10 @@ answer is the other hand: everting the edge turns the wall to meet the needle.
 needle whose tip points further back is turned forward about its own axis through its circle's
 centre, the holder with it (the wrist cannot turn it further: a hand that turns the needle about
 that centre, as a drive does, moves it no further), so the tip meets the wall where the stop lets
-it, and the entry angle is measured against the wall where it is. The stop
-holds the grip that drives the needle in, through the wall too (the drive turns forward, away from
-it, so a needle held at the stop is never let go of with a jump); the re-grasp at the tip to pull
-the needle through is a new grip with the wrist reset, which the stop lets be.
+it, and the entry angle is measured against the wall where it is. The stop holds the grip that
+drives the needle in, through the wall too (the drive turns forward, away from it, so a needle
+held at the stop is never let go of with a jump); the re-grasp at the tip to pull the needle
+through is a new grip with the wrist reset, which the stop lets be.
 """
 
 from __future__ import annotations
@@ -131,9 +131,9 @@ class WristLimit:
             self.holding = True
             words = f"the tip held {math.degrees(turn):.1f} deg short of where the hand turned it"
             events.append(NeedleEvent("wrist_stop", time, detail=words))
-        # turned back about the needle's own centre: the needle stays on its circle where the wrist's
-        # last possible turn left it (a hand turning it about that centre, as the drive does, then
-        # moves it no further), the holder with it
+        # turned about the needle's own centre: the needle stays on its circle where the wrist's last
+        # possible turn left it (a hand turning it about that centre, as a drive does, then moves it
+        # no further), the holder with it
         centre = holder.position + holder.rotation.dot(grasp.position + grasp.rotation.dot(self._centre))
         turned = rotation_about(shaft, turn)
         position = centre + turned.dot(holder.position - centre)
