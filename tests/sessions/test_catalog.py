@@ -71,6 +71,7 @@ def test_bad_urls_are_one_line_errors(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.exclusive  # the demo's two workers want both cores (63 s sharing them with the other worker)
 @pytest.mark.parametrize("catalog_url", ["postgresql"], indirect=True)
 def test_reduced_demo_on_postgresql_report_matches_the_stored_streams(catalog_url, tmp_path, open_catalog):
     catalog = open_catalog(catalog_url)
