@@ -9,4 +9,13 @@ class MetricsError(VascsimError, ValueError):
     """A stream, table or parameter given to the metrics engine is unusable; the message names it."""
 
 
-__all__ = ["MetricsError"]
+class GroupsMissing(MetricsError):
+    """A comparison of two groups was asked of a table that lacks one or both: ``absent`` names them,
+    ``present`` the groups it holds (so a front-end can say which group has no data yet)."""
+
+    def __init__(self, message: str, absent: list[str], present: list[str]) -> None:
+        super().__init__(message)
+        self.absent, self.present = list(absent), list(present)
+
+
+__all__ = ["GroupsMissing", "MetricsError"]

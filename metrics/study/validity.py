@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from metrics.errors import MetricsError
+from metrics.errors import GroupsMissing, MetricsError
 from metrics.session.registry import REGISTRY
 from metrics.study.composite import CompositeValidation, validate_composite
 from metrics.study.statistics import (
@@ -115,9 +115,12 @@ def construct_validity(
     present = set(table[group_col].dropna().unique())
     absent = [g for g in groups if g not in present]
     if absent:
-        raise MetricsError(
+        held = sorted(map(str, present))
+        raise GroupsMissing(
             f"group(s) {', '.join(map(repr, absent))} not found in column {group_col!r} "
-            f"(it holds {', '.join(map(repr, sorted(map(str, present))))})"
+            f"(it holds {', '.join(map(repr, held))})",
+            absent,
+            held,
         )
     skilled_group = groups[0] if skilled_group is None else skilled_group
     if skilled_group not in groups:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from metrics.errors import GroupsMissing
 from metrics.reading.band import against_band, expert_quartiles
 from metrics.reading.feedback import session_feedback
 from metrics.session.registry import REGISTRY_VERSION, display_name
@@ -121,6 +122,13 @@ def _against_standard(
         return "no standard", why, [], None
     try:
         analysis, _ = analyse_catalog_study(catalog, study, {"task": task})
+    except GroupsMissing as error:  # a standard compares two groups: one has no scored session yet
+        missing = " or ".join(repr(group) for group in error.absent)
+        why = (
+            f"no standard for {task} in this study yet: a standard compares two groups, and no "
+            f"participant in group {missing} has a scored session of it"
+        )
+        return "no standard", why, [], None
     except VascsimError as error:  # the study's analysis cannot be run (yet): no verdict, and why
         return "no standard", f"no standard for {task} in this study yet: {error}", [], None
     sessions = analysis.sessions

@@ -302,3 +302,23 @@ def test_standards_verdicts_and_rejudgings_travel_with_a_bundle(tmp_path, copy_d
     assert refused.output.count("\n") == 1
     catalog.close()
     other.close()
+
+
+def test_a_study_of_experts_alone_says_which_group_has_no_session_in_plain_words(tmp_path):
+    """Seen: with only experts scored, the verdict read "group(s) 'trainee' not found in column
+    'label' (it holds 'expert')", the analysis's own words."""
+    from sessions.running.runner import SessionPlan, run_session
+    from sessions.synthetic import pass_parameters
+
+    catalog = Catalog(f"sqlite:///{tmp_path / 'catalog.sqlite'}")
+    with catalog.session() as orm:
+        study = catalog.study(orm, "S", create=True)
+        catalog.add_participant(orm, study, "E1", level="expert")
+    plan = SessionPlan("S", "E1", "wall-stitch", None)
+    uid = run_session(catalog, tmp_path, plan, pass_parameters(0.95, 1))
+    review = review_session(catalog, uid)
+    assert review.verdict == "no standard"
+    assert review.standard == (
+        "no standard for wall-stitch in this study yet: a standard compares two groups, and no "
+        "participant in group 'trainee' has a scored session of it"
+    )
