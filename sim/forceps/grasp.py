@@ -99,6 +99,8 @@ class ForcepsInteraction:
         self._shown = False  # whether the collision mesh is away from rest
         self._shown_for: tuple | None = None  # (grasp, displacement) the collision mesh shows
         self._against_key, self._against_matrix = b"", np.zeros((0, 0))  # see _against
+        self._kernels_for = self._kernels_against = None  # see _against_kernels
+        self._kernels_product = np.zeros((0, 0))
 
     @property
     def prefetch_radius(self) -> float:
@@ -192,17 +194,27 @@ class ForcepsInteraction:
         self._against_key = b""
 
     def fem_step(
-        self, time: float, needle_nodes: NDArray[np.int64] | None = None, needle_forces: NDArray | None = None
+        self,
+        time: float,
+        needle_nodes: NDArray[np.int64] | None = None,
+        needle_forces: NDArray | None = None,
+        kernel_loads: tuple[NDArray, NDArray] | None = None,
     ) -> ForcepsStep:
         """The grasp's forces holding its nodes at the hand's displacement, with the needle's nodal
-        forces on the tissue (``needle_nodes``, ``needle_forces`` (n, 3) N) superposed exactly."""
+        forces on the tissue (``needle_nodes``, ``needle_forces`` (n, 3) N) superposed exactly.
+        ``kernel_loads``: (M (3n, q), F (q,)) with ``needle_forces`` = M F, the needle's force kernels'
+        map and forces: the superposition is then a (3P x q) product a step (G_PP^-1 G_PN M formed
+        once per kernel set) instead of (3P x 3n), which read 0.3 MB a step through the wall."""
         events, self._pending = self._pending, []
         if not self.grasping:
             return ForcepsStep(np.zeros(3), np.zeros(3), _NOTHING, np.zeros((0, 3)), events)
         displacement = self.jaw_point - self._anchor
         hand = (self._unit_forces @ displacement).reshape(-1, 3)
         forces = hand
-        if needle_nodes is not None and len(needle_nodes):  # what holds the nodes against the needle
+        if kernel_loads is not None and needle_nodes is not None and len(needle_nodes):
+            mapped, kernel_forces = kernel_loads
+            forces = hand - (self._against_kernels(needle_nodes, mapped) @ kernel_forces).reshape(-1, 3)
+        elif needle_nodes is not None and len(needle_nodes):  # what holds the nodes against the needle
             forces = hand - (self._against(needle_nodes) @ np.reshape(needle_forces, -1)).reshape(-1, 3)
         total = forces.sum(axis=0)
         pull = float(np.linalg.norm(total))
@@ -228,6 +240,15 @@ class ForcepsInteraction:
             self._against_matrix = self._handle.forces_of(coupling)
             self._against_key = key
         return self._against_matrix
+
+    def _against_kernels(self, needle_nodes: NDArray[np.int64], mapped: NDArray[np.float64]) -> NDArray:
+        """G_PP^-1 G_PN M: the grasp's nodal forces per unit force of the needle's kernels whose map
+        to nodal forces on ``needle_nodes`` is ``mapped`` (kept while the same map is given)."""
+        against = self._against(needle_nodes)
+        if self._kernels_for is not mapped or self._kernels_against is not against:
+            self._kernels_product = np.ascontiguousarray(against @ mapped)
+            self._kernels_for, self._kernels_against = mapped, against
+        return self._kernels_product
 
     def surface_displacement(self) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
         """(nodes, displacement (m)) of the tissue's free surface as the hand alone holds it at the last

@@ -166,6 +166,7 @@ class WallBearing:
         self._indentation, self.soft_share = step.indentation, step.share
         share, kernel_forces, torn = step.share, step.kernel_forces, step.torn
         reactions = load.nodal_forces(kernel_forces)
+        self.kernel_loads = (load.soft.force_map, kernel_forces.reshape(-1))
         self.last_contact = (load.nodes, load.kernel_drive(kernel_forces, share))
         if self._stress is None:
             self.local_stress = self.wound_edge_stress = self.stretch = math.nan

@@ -155,6 +155,7 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
         middle one empty; a node there is a contact change the FEM layer waited on."""
         self._implausible_active: set[tuple[str, int]] = set()
         self.wrist: WristLimit | None = None  # where the task's approach stops the wrist (sim.needle.reach)
+        self.kernel_loads: tuple[NDArray, NDArray] | None = None
         self._previous_tip: tuple[float, float, float] | None = None
         self._previous_time = 0.0
         self._tip_velocity = (0.0, 0.0, 0.0)
@@ -249,6 +250,7 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
     def fem_step(self, time: float) -> FemStep:
         """Local CD against the nominated triangle(s), forces, and the piercing decision."""
         previous_time, self._fem_time = self._fem_time, time
+        self.kernel_loads = None  # (M, F): this step's reactions as M F, when its force kernels gave them
         vertices = self.needle_vertices()
         before, self._swept_from = self._swept_from, vertices
         met: list[NeedleEvent] = []

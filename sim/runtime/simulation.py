@@ -242,7 +242,7 @@ class Simulation:
             return {}
         was_grasping, began = forceps.grasping, wallclock.perf_counter()
         forceps.hold(hand.time, hand.pose.position, hand.grip)
-        grasp = forceps.fem_step(now, step.contact_nodes, step.reaction_forces)
+        grasp = forceps.fem_step(now, step.contact_nodes, step.reaction_forces, self.interaction.kernel_loads)
         if forceps.grasping and not was_grasping:
             self.contact_latencies["grasp"].append(wallclock.perf_counter() - began)
         for event in grasp.events:

@@ -116,6 +116,17 @@ def test_forceps_hold_their_nodes_where_the_hand_puts_them_under_the_needles_loa
     assert _relative(by_the_hand, hand_alone[nodes]) < 1e-9
     assert np.allclose(step.displacement, d)
     assert np.allclose(step.force, step.nodal_forces.sum(axis=0))
+    # the same loads given as a force kernel's map and forces (what a FEM step passes): the same grasp
+    mapped = np.random.default_rng(3).uniform(0.0, 1.0, size=(9, 6))
+    kernel_forces = np.linalg.lstsq(mapped, needle_forces.reshape(-1), rcond=None)[0]
+    spread = (mapped @ kernel_forces).reshape(-1, 3)
+    by_nodes = forceps.fem_step(0.02, needle_nodes, spread)
+    by_kernels = forceps.fem_step(0.02, needle_nodes, spread, (mapped, kernel_forces))
+    assert _relative(by_kernels.nodal_forces, by_nodes.nodal_forces) < 1e-12
+    # another kernel set's map on the same nodes (the product is kept per map, not per node set)
+    doubled = (2.0 * mapped, 0.5 * kernel_forces)
+    again = forceps.fem_step(0.03, needle_nodes, spread, doubled)
+    assert _relative(again.nodal_forces, by_nodes.nodal_forces) < 1e-12
 
 
 def test_the_jaws_grasp_the_edge_under_them_and_letting_go_returns_the_tissue_to_rest(patch):
