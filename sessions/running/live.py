@@ -12,6 +12,7 @@ from sessions.running.scene import scene_facts
 from sessions.running.window import LiveWindow, ViewSettings
 from sessions.scoring.review import expert_band
 from sessions.tasks import task_preset, tissue_for
+from sessions.tasks.build import wrist_stop
 from sim.devices.discovery import display_available
 from sim.devices.mouse import MouseDevice, MouseHand, MouseMapping
 
@@ -56,7 +57,7 @@ class LiveView:
         facts = scene_facts(spec, tissue.mesh, limits)
         hand = channel = None
         if isinstance(device, MouseDevice):
-            hand, channel = MouseHand(device.start, self.mapping), device.channel
+            hand, channel = MouseHand(device.start, self.mapping, stop=wrist_stop(spec)), device.channel
         published = live_view_path(home, uid) if uid else None
         window = LiveWindow(tissue, facts, self.settings, hand, channel, self.latency_log, published)
         window.tracking_problem = getattr(device, "tracking_problem", None)  # a camera's: lost, late

@@ -109,6 +109,14 @@ def grasp_sites(spec: TaskSpec) -> np.ndarray:
     return np.asarray([rim for rim, _ in edge_grasps(spec)], dtype=np.float64).reshape(-1, 3)
 
 
+def wrist_stop(spec: TaskSpec) -> WristStop | None:
+    """Where the task's approach stops the needle hand's wrist (``spec.eversion``), None where it
+    reaches square."""
+    if spec.eversion is None:
+        return None
+    return WristStop.short_of_square(spec.normal, spec.bite_direction, spec.eversion.short_deg)
+
+
 def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **options):
     """A :class:`sim.runtime.Simulation` of the task driven by ``device``: the task's tissue, the
     curved needle, its preset's needle forces and its regions' own (a calcified plaque pierces at
@@ -125,7 +133,7 @@ def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **opt
         region_forces=region_forces(spec, tissue.mesh),
         **options,
     )
-    if spec.eversion is not None:  # the approach stops the wrist short of square to the resting wall
-        stop = WristStop.short_of_square(spec.normal, spec.bite_direction, spec.eversion.short_deg)
+    stop = wrist_stop(spec)
+    if stop is not None:  # the approach stops the wrist short of square to the resting wall
         simulation.interaction.wrist = WristLimit(stop, simulation.interaction.needle)
     return simulation

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from sim.devices.base import INPUT_ONLY_LIMITS, DeviceError, DeviceIdentity, DeviceSample
 from sim.geometry import circle_through
 from sim.needle import Pose, rotation_about
+from sim.needle.reach import WristStop
 from sim.runtime.shared import consistent_copy
 
 HANDEDNESS = ("right", "left")
@@ -123,10 +124,20 @@ def needle_circle(vertices: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
 class MouseHand:
     """The holder as the trainee's mouse and keys move it (pure arithmetic: the window feeds it)."""
 
-    def __init__(self, start: Pose, mapping: MouseMapping | None = None, grip: bool = True) -> None:
+    def __init__(
+        self,
+        start: Pose,
+        mapping: MouseMapping | None = None,
+        grip: bool = True,
+        stop: WristStop | None = None,
+    ) -> None:
         self.mapping = mapping or MouseMapping()
         self.pose = start
         self.grip = grip
+        self.stop = stop
+        """Where the task's approach stops the wrist (:class:`sim.needle.reach.WristStop`): a back turn
+        of the held needle goes no further than it, so the keys never wind the hand past what the
+        needle shows (a turn forward then moves it at once)."""
 
     def move(self, offset: NDArray[np.float64]) -> None:
         """Translate the holder by ``offset`` (m, world)."""
@@ -152,6 +163,13 @@ class MouseHand:
         if not self.grip:
             centre = self.pose.position
         angle = direction * math.radians(self.mapping.turn_rate_deg_s) * seconds
+        if angle < 0 and self.grip and self.stop is not None:  # no further back than the stop
+            tip = np.cross(axis, needle_vertices[0] - centre)  # forward along the curve at the tip
+            past = self.stop.turn_past(tip / np.linalg.norm(tip), axis)
+            if math.isfinite(past):
+                angle = max(angle, -max(past, 0.0))
+                if angle == 0.0:
+                    return
         turn = rotation_about(axis, angle)
         position = centre + turn @ (self.pose.position - centre)
         self.pose = Pose.unchecked(position, turn @ self.pose.rotation)

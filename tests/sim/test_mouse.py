@@ -93,3 +93,30 @@ def test_the_device_eases_each_new_pose_in_over_one_frame_without_a_jump(step, a
     np.testing.assert_allclose(previous, target.position, atol=1e-15)
     np.testing.assert_allclose(device.read(0.1).rotation, target.rotation, atol=1e-12)
     assert device.read(0.1).pressed(0)
+
+
+def test_turning_back_stops_at_the_wrist_stop_and_a_forward_turn_moves_at_once():
+    """Seen at the station on inside-edge: A held past the stop wound the hand on while the needle
+    stayed, so D then turned nothing until it had unwound as much."""
+    from sim.needle.reach import WristStop
+
+    needle = Needle.curved()
+    hand = MouseHand(start())
+    vertices = needle.world_vertices(hand.pose)
+    centre, axis = needle_circle(vertices)
+    tip = np.cross(axis, vertices[0] - centre)
+    tip /= np.linalg.norm(tip)
+    # a stop 10 deg back from where the tip points now, as seen about the needle's own axis
+    stop = WristStop(rotation_about(axis, math.radians(-10.0)) @ tip)
+    hand = MouseHand(start(), stop=stop)
+    for _ in range(30):  # A held for a second at 60 deg/s, a display frame at a time
+        hand.turn(1 / 30, -1, needle.world_vertices(hand.pose))
+    shown = needle.world_vertices(hand.pose)
+    at = np.cross(axis, shown[0] - centre)
+    assert stop.turn_past(at / np.linalg.norm(at), axis) == pytest.approx(0.0, abs=1e-9)  # at the stop
+    before = hand.pose.position.copy()
+    hand.turn(1 / 30, +1, shown)  # D: the needle moves on the first frame
+    assert np.linalg.norm(hand.pose.position - before) > 1e-5
+    loose = MouseHand(start(), stop=stop, grip=False)  # an open hand turns the jaws, not the needle
+    loose.turn(1.0, -1, vertices)
+    assert not np.allclose(loose.pose.rotation, start().rotation)
