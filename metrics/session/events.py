@@ -24,8 +24,7 @@ EVENT_NAMES: dict[str, str] = {
     "overstress": "tissue stress at the needle above the damage threshold",
     "edge_overstress": "wound edge stressed past the damage threshold (tearing risk)",
     "tear": "the wall gave way under the needle (more force than it can carry)",
-    "wrist_stop": "the wrist at the end of its turn: the needle could not be turned back further "
-    "(evert the edge to meet the wall square)",
+    "wrist_stop": "the wrist at its stop: evert the edge to enter square",
     "grasp": "forceps took the wound edge",
     "release_grasp": "forceps let go of the wound edge",
     "edge_torn": "the wound edge tore out of the forceps (pulled harder than it holds)",
