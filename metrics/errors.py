@@ -10,12 +10,12 @@ class MetricsError(VascsimError, ValueError):
 
 
 class GroupsMissing(MetricsError):
-    """A comparison of two groups was asked of a table that lacks one or both: ``absent`` names them,
-    ``present`` the groups it holds (so a front-end can say which group has no data yet)."""
+    """A comparison of two groups was asked of a table that lacks one or both: ``absent`` names them
+    (so a front-end can say which group has no data yet)."""
 
-    def __init__(self, message: str, absent: list[str], present: list[str]) -> None:
+    def __init__(self, message: str, absent: list[str]) -> None:
         super().__init__(message)
-        self.absent, self.present = list(absent), list(present)
+        self.absent = list(absent)
 
 
 __all__ = ["GroupsMissing", "MetricsError"]

@@ -115,12 +115,10 @@ def construct_validity(
     present = set(table[group_col].dropna().unique())
     absent = [g for g in groups if g not in present]
     if absent:
-        held = sorted(map(str, present))
         raise GroupsMissing(
             f"group(s) {', '.join(map(repr, absent))} not found in column {group_col!r} "
-            f"(it holds {', '.join(map(repr, held))})",
+            f"(it holds {', '.join(map(repr, sorted(map(str, present))))})",
             absent,
-            held,
         )
     skilled_group = groups[0] if skilled_group is None else skilled_group
     if skilled_group not in groups:
