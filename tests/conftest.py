@@ -170,6 +170,29 @@ def demo_catalog(tmp_path_factory, copy_demo):
     catalog.close()
 
 
+# One synthetic bench video and its ChArUco calibration for the files that track it (14 s to render and
+# encode): built once per test session, their files kept on one worker (pytest_xdist_make_scheduler).
+@pytest.fixture(scope="session")
+def bench_calibration(tmp_path_factory):
+    """(camera calibrated from twelve ChArUco views, the saved camera file)."""
+    from sim.tracking.camera import calibrate_charuco
+    from sim.tracking.synthetic import charuco_views
+
+    camera = calibrate_charuco(charuco_views(count=12))
+    path = camera.save(tmp_path_factory.mktemp("camera") / "camera.json")
+    return camera, path
+
+
+@pytest.fixture(scope="session")
+def bench_video(tmp_path_factory):
+    """(video file, frame times (s), true tip path (m)): six seconds of a flat-marked needle holder."""
+    from sim.tracking.synthetic import write_bench_video
+
+    path = tmp_path_factory.mktemp("video") / "bench.mp4"
+    time, truth = write_bench_video(path, duration_s=6.0, fps=30)
+    return path, time, truth
+
+
 @pytest.fixture(scope="session")
 def display():
     """A virtual 1366x768 X display for window tests (Xvfb picks a free display number itself)."""
@@ -183,13 +206,15 @@ def display():
 
 SHARED_DEMO_GROUP = "reduced-demo"
 DEMO_FIXTURES = ("demo_template", "copy_demo", "demo_catalog")
+SHARED_GROUPS = {SHARED_DEMO_GROUP: DEMO_FIXTURES, "bench-video": ("bench_video", "bench_calibration")}
+"""The costly session fixtures, by the name of the worker group whose files share each."""
 
 
-def files_reading_the_demo() -> set[str]:
-    """The test files (paths from the repository's root) that name a fixture of the shared reduced
-    demo: the file level is all that pytest-xdist's controller sees when it hands out work."""
+def files_naming(fixtures: tuple[str, ...]) -> set[str]:
+    """The test files (paths from the repository's root) that name one of ``fixtures``: the file level
+    is all that pytest-xdist's controller sees when it hands out work."""
     root = Path(__file__).parent
-    named = re.compile(r"\b(" + "|".join(DEMO_FIXTURES) + r")\b")
+    named = re.compile(r"\b(" + "|".join(fixtures) + r")\b")
     return {
         path.relative_to(root.parent).as_posix()
         for path in root.rglob("test_*.py")
@@ -197,20 +222,29 @@ def files_reading_the_demo() -> set[str]:
     }
 
 
+def files_reading_the_demo() -> set[str]:
+    """The test files that name a fixture of the shared reduced demo."""
+    return files_naming(DEMO_FIXTURES)
+
+
 def pytest_xdist_make_scheduler(config, log):
     """How scripts/test's two workers share the tests: a file's tests stay together (its module
-    fixtures are built once), and the files that read the shared reduced demo all go to one worker,
-    so the demo runs once in the suite, not once per worker."""
+    fixtures are built once), and the files that read one of the costly session fixtures (the reduced
+    demo, the bench video) go to one worker each, so each is built once in the suite, not once per
+    worker. A file naming fixtures of two groups goes with the first."""
     from xdist.scheduler import LoadScopeScheduling
 
-    demo_files = files_reading_the_demo()
+    group_of: dict[str, str] = {}
+    for group, fixtures in SHARED_GROUPS.items():
+        for file in files_naming(fixtures):
+            group_of.setdefault(file, group)
 
-    class ByFileDemoTogether(LoadScopeScheduling):
+    class ByFileSharedTogether(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             file = nodeid.split("::", 1)[0]
-            return SHARED_DEMO_GROUP if file in demo_files else file
+            return group_of.get(file, file)
 
-    return ByFileDemoTogether(config, log)
+    return ByFileSharedTogether(config, log)
 
 
 def pytest_collection_modifyitems(config, items):

@@ -347,7 +347,11 @@ def write_instrument_video(
                 draw_body(frame, faces, turns[k], places[k], camera_matrix)
             if occluded is not None and occluded[k]:
                 _cover(frame, body, rotation, translation, camera_matrix)
-            frame = np.clip(frame + rng.normal(0, noise, frame.shape), 0, 255).astype(np.uint8)
+            # sensor noise in single precision: the same Gaussian, a third of the cost of a float64 draw
+            grain = rng.standard_normal(frame.shape, dtype=np.float32)
+            grain *= noise
+            grain += frame
+            frame = np.clip(grain, 0, 255, out=grain).astype(np.uint8)
             for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="gray")):
                 container.mux(packet)
         for packet in stream.encode():

@@ -9,28 +9,14 @@ from metrics.bench.tracking import smooth_path, track_frames
 from metrics.errors import MetricsError
 from sim.errors import TrackingError
 from sim.tracking.camera import Camera, calibrate_charuco
-from sim.tracking.synthetic import charuco_views, default_camera_matrix, write_bench_video
+from sim.tracking.synthetic import default_camera_matrix
 from sim.tracking.video import read_video
 
 MOTION = ("task_time", "path_length", "economy_of_motion", "log_dimensionless_jerk", "spectral_arc_length")
 
 
-@pytest.fixture(scope="module")
-def calibration(tmp_path_factory):
-    camera = calibrate_charuco(charuco_views(count=12))
-    path = camera.save(tmp_path_factory.mktemp("camera") / "camera.json")
-    return camera, path
-
-
-@pytest.fixture(scope="module")
-def bench_video(tmp_path_factory):
-    path = tmp_path_factory.mktemp("video") / "bench.mp4"
-    time, truth = write_bench_video(path, duration_s=6.0, fps=30)
-    return path, time, truth
-
-
-def test_charuco_calibration_recovers_the_camera(calibration, tmp_path):
-    camera, saved = calibration
+def test_charuco_calibration_recovers_the_camera(bench_calibration, tmp_path):
+    camera, saved = bench_calibration
     truth = default_camera_matrix()
     assert camera.rms < 0.2  # pixels
     np.testing.assert_allclose(camera.matrix, truth, rtol=2e-3, atol=1.5)  # focal and centre within ~1 px
@@ -49,8 +35,8 @@ def test_too_few_board_views_is_a_clear_error():
 
 
 @pytest.mark.slow
-def test_tracked_path_within_half_a_millimetre_and_metrics_within_two_percent(calibration, bench_video):
-    camera, _ = calibration
+def test_tracked_path_within_half_a_millimetre_and_metrics_within_two_percent(bench_calibration, bench_video):
+    camera, _ = bench_calibration
     path, time, truth = bench_video
     frames, fps, _ = read_video(path)
     tracked = track_frames(frames, fps, camera)

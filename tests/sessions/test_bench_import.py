@@ -5,14 +5,12 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from tests.metrics.test_bench_video import bench_video, calibration  # noqa: F401 - module fixtures
-
 
 @pytest.mark.slow
-def test_import_video_into_a_study(calibration, bench_video, home):  # noqa: F811
+def test_import_video_into_a_study(bench_calibration, bench_video, home):
     from sessions.cli import main
 
-    _, camera_file = calibration
+    _, camera_file = bench_calibration
     path, _, _ = bench_video
 
     def invoke(*args):

@@ -131,7 +131,7 @@ def test_replay_against_the_expert_group(home, tmp_path):
     out = tmp_path / "t1.mp4"
     result = invoke(
         "replay", trainee, "--vs-group", "experts", "--mode", "side-by-side", "--size", "320x180",
-        "-o", str(out), "--stills", str(tmp_path / "stills"), "--json",
+        "--fps", "15", "-o", str(out), "--stills", str(tmp_path / "stills"), "--json",
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
@@ -139,7 +139,17 @@ def test_replay_against_the_expert_group(home, tmp_path):
     assert {Path(p).name for p in summary["stills"]} >= {"insertion.png", "stress_insertion.exr"}
     # --vs takes what the README says: a participant code means their latest session on the task
     by_code = invoke(
-        "replay", trainee, "--vs", "E1", "--size", "320x180", "-o", str(tmp_path / "e1.mp4"), "--json"
+        "replay",
+        trainee,
+        "--vs",
+        "E1",
+        "--size",
+        "320x180",
+        "--fps",
+        "10",
+        "-o",
+        str(tmp_path / "e1.mp4"),
+        "--json",
     )
     assert by_code.exit_code == 0 and json.loads(by_code.stdout)["experts"] == 1, by_code.output
     # issue 44 seen 6: the blind render goes where the rating page looks for it
