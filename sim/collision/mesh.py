@@ -14,7 +14,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.collision import _near as near
-from sim.collision.segments import SegmentHits, bounding_boxes, candidate_pairs, intersect_pairs
+from sim.collision.segments import (
+    SegmentHits,
+    bounding_boxes,
+    candidate_pairs,
+    compiled_crossings,
+    intersect_pairs,
+)
 from sim.geometry import ray_triangle_distances
 from sim.mesh.tetmesh import TetMesh
 
@@ -156,6 +162,9 @@ class CollisionMesh:
         """Every crossing of segments start -> end (S, 3) with the given triangles (ids)."""
         if len(triangles) == 0 or len(start) == 0:
             return intersect_pairs(start, end, self.corners, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        found = compiled_crossings(start, end, self.corners, triangles)
+        if found is not None:
+            return found
         lower, upper = bounding_boxes(self.corners[triangles])
         segments, local = candidate_pairs(start, end, lower, upper)
         return intersect_pairs(start, end, self.corners, segments, triangles[local])

@@ -17,6 +17,8 @@ _EPSILON = 2.0**-53
 # Shewchuk, "Adaptive precision floating-point arithmetic and fast robust
 # geometric predicates" (1997): orient3d's first error bound.
 ORIENT3D_BOUND = (7.0 + 56.0 * _EPSILON) * _EPSILON
+ORIENT3D_ACCURACY = 1e-9
+"""orient3d recomputes a value exactly where its error bound exceeds this share of its magnitude."""
 
 
 def orient3d_fast(a: NDArray, b: NDArray, c: NDArray, d: NDArray) -> tuple[NDArray, NDArray]:
@@ -69,7 +71,7 @@ def orient3d_exact(a: NDArray, b: NDArray, c: NDArray, d: NDArray) -> Fraction:
 
 
 def orient3d(
-    a: NDArray, b: NDArray, c: NDArray, d: NDArray, relative_accuracy: float = 1e-9
+    a: NDArray, b: NDArray, c: NDArray, d: NDArray, relative_accuracy: float = ORIENT3D_ACCURACY
 ) -> tuple[NDArray, NDArray]:
     """(value, sign) of orient3d over broadcast (K, 3) inputs; the sign is exact.
 

@@ -1,0 +1,230 @@
+/* The continuous collision test's segment-triangle crossings among the triangles within reach, compiled.
+ *
+ *   crossings(start, end, corners, triangles, bound, relative_accuracy)
+ *       -> (segment, triangle, t, barycentric, entering) as five bytearrays, or None
+ *
+ * start, end (S, 3) float64: the segments; corners (T, 3, 3) float64: every triangle's corners;
+ * triangles (n,) int64: the ids to test. The same answer, bit for bit and in the same order, as
+ * sim.collision.segments' NumPy path (candidate_pairs, then intersect_pairs): the pairs whose closed
+ * bounding boxes overlap, segment by segment and in the listed triangles' order; for each, the five
+ * floating-point orient3d determinants of predicates.orient3d_fast (the same operations in the same
+ * order, so this file is compiled without fused multiply-adds) with their error bounds (``bound``
+ * times the permanent). A pair crosses where the segment's ends are not on one side of the plane
+ * and the three volumes around the line share a sign; its t and barycentrics are those of
+ * intersect_pairs.
+ *
+ * None means "ask the exact path": some determinant of some pair is not sure to ``relative_accuracy``
+ * of its magnitude (|det| * relative_accuracy <= bound, a NaN included), or a crossing's volumes
+ * sum to nothing usable. Then NumPy and exact arithmetic decide, as before this file existed. A NaN
+ * in any segment makes no pair (NumPy's boxes of every segment then compare false); a triangle with
+ * a NaN corner meets nothing. Sizes, types and triangle ids are checked before anything is read.
+ * The hits come back as bytearrays (int64, int64, float64, float64 x 3, bool) for numpy.frombuffer.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "../_buffer_views.h"
+
+typedef struct {
+    double det, bound;
+} Orient;
+
+/* predicates.orient3d_fast for one quadruple: the determinant and its error bound. */
+static Orient
+orient3d_fast(const double *a, const double *b, const double *c, const double *d, double bound)
+{
+    double adx = a[0] - d[0], ady = a[1] - d[1], adz = a[2] - d[2];
+    double bdx = b[0] - d[0], bdy = b[1] - d[1], bdz = b[2] - d[2];
+    double cdx = c[0] - d[0], cdy = c[1] - d[1], cdz = c[2] - d[2];
+    double b_c = bdy * cdz, c_b = bdz * cdy;
+    double c_a = cdy * adz, a_c = cdz * ady;
+    double a_b = ady * bdz, b_a = adz * bdy;
+    Orient o;
+    o.det = adx * (b_c - c_b) + bdx * (c_a - a_c) + cdx * (a_b - b_a);
+    double permanent = fabs(adx) * (fabs(b_c) + fabs(c_b)) + fabs(bdx) * (fabs(c_a) + fabs(a_c)) +
+                       fabs(cdx) * (fabs(a_b) + fabs(b_a));
+    o.bound = bound * permanent;
+    return o;
+}
+
+static int
+sure(Orient o, double relative_accuracy)
+{
+    return fabs(o.det) * relative_accuracy > o.bound; /* false for a NaN, as NumPy's test */
+}
+
+static int
+sign_of(double x)
+{
+    return (x > 0) - (x < 0);
+}
+
+/* A growing array of fixed-size items in a bytearray. */
+typedef struct {
+    PyObject *bytes;
+    Py_ssize_t used, item;
+} Column;
+
+static int
+push(Column *column, const void *item)
+{
+    Py_ssize_t size = PyByteArray_GET_SIZE(column->bytes);
+    if (column->used + column->item > size &&
+        PyByteArray_Resize(column->bytes, size ? 2 * size : 16 * column->item) < 0)
+        return -1;
+    memcpy(PyByteArray_AS_STRING(column->bytes) + column->used, item, (size_t)column->item);
+    column->used += column->item;
+    return 0;
+}
+
+static PyObject *
+crossings(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *objects[4];
+    double bound, relative_accuracy;
+    if (!PyArg_ParseTuple(args, "OOOOdd", &objects[0], &objects[1], &objects[2], &objects[3], &bound,
+                          &relative_accuracy))
+        return NULL;
+    static const char *names[4] = {"start", "end", "corners", "triangles"};
+    Py_buffer views[4];
+    int held = 0;
+    PyObject *result = NULL;
+    Column columns[5] = {{NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 24}, {NULL, 0, 1}};
+    Py_ssize_t *near = NULL;
+    for (; held < 4; held++)
+        if (get_view(objects[held], &views[held], 0, held == 3 ? 'q' : 'd', names[held]) < 0)
+            goto done;
+    Py_ssize_t n = cells(&views[0]), count = cells(&views[2]) / 9, listed = cells(&views[3]);
+    if (n % 3 != 0 || cells(&views[1]) != n || cells(&views[2]) % 9 != 0) {
+        PyErr_SetString(PyExc_ValueError, "start and end must be (S, 3) alike and corners (T, 3, 3)");
+        goto done;
+    }
+    const double *start = views[0].buf, *end = views[1].buf, *corners = views[2].buf;
+    const long long *triangles = views[3].buf;
+    for (Py_ssize_t j = 0; j < listed; j++)
+        if (triangles[j] < 0 || triangles[j] >= count) {
+            PyErr_Format(PyExc_ValueError, "triangle id %lld is not one of the %zd triangles", triangles[j],
+                         count);
+            goto done;
+        }
+    for (int k = 0; k < 5; k++)
+        if ((columns[k].bytes = PyByteArray_FromStringAndSize(NULL, 0)) == NULL)
+            goto done;
+    Py_ssize_t segments = n / 3;
+    int finite = 1;
+    double reach_low[3] = {INFINITY, INFINITY, INFINITY}, reach_high[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (Py_ssize_t i = 0; i < n && finite; i++) {
+        finite = !isnan(start[i]) && !isnan(end[i]);
+        reach_low[i % 3] = fmin(reach_low[i % 3], fmin(start[i], end[i]));
+        reach_high[i % 3] = fmax(reach_high[i % 3], fmax(start[i], end[i]));
+    }
+    /* the triangles whose boxes meet the box of every segment (NumPy's first filter), with their boxes */
+    near = PyMem_Malloc((size_t)(listed ? listed : 1) * (sizeof(Py_ssize_t) + 6 * sizeof(double)));
+    if (near == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *boxes = (double *)(near + (listed ? listed : 1));
+    Py_ssize_t kept = 0;
+    for (Py_ssize_t j = 0; j < listed && finite; j++) {
+        const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
+        int overlap = 1;
+        double *box = boxes + 6 * kept;
+        for (int i = 0; i < 3 && overlap; i++) {
+            if (isnan(a[i]) || isnan(b[i]) || isnan(c[i])) {
+                overlap = 0;
+                break;
+            }
+            box[i] = fmin(fmin(a[i], b[i]), c[i]);
+            box[3 + i] = fmax(fmax(a[i], b[i]), c[i]);
+            overlap = box[3 + i] >= reach_low[i] && box[i] <= reach_high[i];
+        }
+        if (overlap)
+            near[kept++] = j;
+    }
+    for (Py_ssize_t s = 0; s < segments && finite; s++) {
+        const double *p = start + 3 * s, *q = end + 3 * s;
+        double low[3], high[3];
+        for (int i = 0; i < 3; i++) {
+            low[i] = p[i] < q[i] ? p[i] : q[i];
+            high[i] = p[i] < q[i] ? q[i] : p[i];
+        }
+        for (Py_ssize_t k = 0; k < kept; k++) {
+            const double *box = boxes + 6 * k;
+            if (!(box[3] >= low[0] && box[0] <= high[0] && box[4] >= low[1] && box[1] <= high[1] &&
+                  box[5] >= low[2] && box[2] <= high[2]))
+                continue;
+            Py_ssize_t j = near[k];
+            const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
+            Orient side_p = orient3d_fast(a, b, c, p, bound), side_q = orient3d_fast(a, b, c, q, bound);
+            Orient volumes[3] = {orient3d_fast(q, c, b, p, bound), orient3d_fast(q, a, c, p, bound),
+                                 orient3d_fast(q, b, a, p, bound)};
+            if (!sure(side_p, relative_accuracy) || !sure(side_q, relative_accuracy) ||
+                !sure(volumes[0], relative_accuracy) || !sure(volumes[1], relative_accuracy) ||
+                !sure(volumes[2], relative_accuracy)) {
+                result = Py_None; /* the exact path decides this call */
+                Py_INCREF(result);
+                goto done;
+            }
+            int sp = sign_of(side_p.det), sq = sign_of(side_q.det);
+            int v0 = sign_of(volumes[0].det), v1 = sign_of(volumes[1].det), v2 = sign_of(volumes[2].det);
+            int lowest = v0 < v1 ? (v0 < v2 ? v0 : v2) : (v1 < v2 ? v1 : v2);
+            int highest = v0 > v1 ? (v0 > v2 ? v0 : v2) : (v1 > v2 ? v1 : v2);
+            int crossing = sp * sq <= 0 && !(sp == 0 && sq == 0);
+            if (!crossing || !(lowest >= 0 || highest <= 0))
+                continue;
+            double weights[3] = {fabs(volumes[0].det), fabs(volumes[1].det), fabs(volumes[2].det)};
+            double total = weights[0] + weights[1] + weights[2];
+            if (!(total > 0) || !isfinite(total) || side_p.det == side_q.det) {
+                result = Py_None;
+                Py_INCREF(result);
+                goto done;
+            }
+            double t = side_p.det / (side_p.det - side_q.det);
+            t = t >= 0.0 ? t : 0.0; /* np.maximum(t, 0.0), then np.minimum(t, 1.0) */
+            t = t <= 1.0 ? t : 1.0;
+            double barycentric[3] = {weights[0] / total, weights[1] / total, weights[2] / total};
+            long long segment = s, triangle = triangles[j];
+            char entering = sp < 0 || (sp == 0 && sq > 0);
+            if (push(&columns[0], &segment) < 0 || push(&columns[1], &triangle) < 0 ||
+                push(&columns[2], &t) < 0 || push(&columns[3], barycentric) < 0 ||
+                push(&columns[4], &entering) < 0)
+                goto done;
+        }
+    }
+    for (int k = 0; k < 5; k++)
+        if (PyByteArray_Resize(columns[k].bytes, columns[k].used) < 0)
+            goto done;
+    result = PyTuple_Pack(5, columns[0].bytes, columns[1].bytes, columns[2].bytes, columns[3].bytes,
+                          columns[4].bytes);
+done:
+    PyMem_Free(near);
+    for (int k = 0; k < 5; k++)
+        Py_XDECREF(columns[k].bytes);
+    for (int i = 0; i < held; i++)
+        PyBuffer_Release(&views[i]);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"crossings", crossings, METH_VARARGS,
+     "crossings(start, end, corners, triangles, bound, relative_accuracy): the segment-triangle crossings "
+     "among the listed triangles as five bytearrays (segment, triangle, t, barycentric, entering), or None "
+     "where floating point is not sure and the exact path must decide."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef crossings_module = {
+    PyModuleDef_HEAD_INIT, "sim.collision._crossings",
+    "The continuous collision test's segment-triangle crossings, compiled.", -1, methods,
+};
+
+PyMODINIT_FUNC
+PyInit__crossings(void)
+{
+    return PyModule_Create(&crossings_module);
+}

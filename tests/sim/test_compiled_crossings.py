@@ -1,0 +1,109 @@
+"""The continuous collision test's compiled crossings (sim/collision/_crossings.c) against the NumPy path
+they replace (candidate_pairs then intersect_pairs): the same hits, bit for bit and in the same order,
+or None where floating point is not sure and the exact path decides."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim.collision import _crossings
+from sim.collision.mesh import CollisionMesh
+from sim.collision.segments import (
+    SegmentHits,
+    bounding_boxes,
+    candidate_pairs,
+    compiled_crossings,
+    intersect_pairs,
+)
+from sim.mesh import box_mesh
+
+
+def numpy_path(start, end, corners, triangles) -> SegmentHits:
+    lower, upper = bounding_boxes(corners[triangles])
+    segments, local = candidate_pairs(start, end, lower, upper)
+    return intersect_pairs(start, end, corners, segments, triangles[local])
+
+
+def assert_same(compiled: SegmentHits, reference: SegmentHits) -> None:
+    for name in ("segment", "triangle", "t", "barycentric", "entering"):
+        ours, theirs = getattr(compiled, name), getattr(reference, name)
+        assert ours.dtype == theirs.dtype and ours.shape == theirs.shape, name
+        np.testing.assert_array_equal(ours, theirs, err_msg=name)  # equal values, not only close ones
+
+
+grid = st.integers(-2, 2).map(float)
+coordinate = st.one_of(grid, st.floats(-2.0, 2.0, allow_nan=False, width=64))
+points = st.integers(1, 6).flatmap(
+    lambda n: st.lists(st.tuples(coordinate, coordinate, coordinate), min_size=n, max_size=n)
+)
+
+
+@given(
+    st.lists(st.tuples(coordinate, coordinate, coordinate), min_size=3, max_size=24),
+    points,
+    st.randoms(use_true_random=False),
+)
+@settings(max_examples=1500, deadline=None)
+def test_the_same_hits_as_the_numpy_path_or_none_where_unsure(corner_list, ends, random):
+    """Grid coordinates make segments through edges and vertices and in planes (the unsure cases)
+    common; reals cover the rest."""
+    corners = np.array(corner_list[: len(corner_list) // 3 * 3], dtype=float).reshape(-1, 3, 3)
+    start = np.array(ends, dtype=float)
+    end = start[::-1].copy() + np.array([random.uniform(-1, 1) for _ in range(3)])
+    triangles = np.array(
+        random.sample(range(len(corners)), random.randint(1, len(corners))), dtype=np.int64
+    )  # any subset, in any order: the order of the listed ids is the hits' order
+    found = compiled_crossings(start, end, corners, triangles)
+    reference = numpy_path(start, end, corners, triangles)
+    if found is None:  # the exact path decides: some sign too close to call in floating point
+        return
+    assert_same(found, reference)
+
+
+def test_a_needle_through_a_box_mesh_finds_what_numpy_finds():
+    """Real inputs (a needle polyline swept through the cube's top), every triangle listed: all the
+    hits, and none of the calls left to the exact path."""
+    mesh = box_mesh(0.01, 6)
+    collision = CollisionMesh(mesh)
+    rng = np.random.default_rng(7)
+    triangles = np.arange(len(collision.corners), dtype=np.int64)
+    hits = 0
+    for _ in range(200):
+        start = rng.uniform(-0.002, 0.012, size=(9, 3))
+        end = start + rng.normal(0, 0.004, size=(9, 3))
+        found = compiled_crossings(start, end, collision.corners, triangles)
+        assert found is not None
+        assert_same(found, numpy_path(start, end, collision.corners, triangles))
+        hits += len(found)
+        assert_same(collision.crossings_among(start, end, triangles), found)
+    assert hits > 100
+
+
+def test_unsure_signs_leave_the_call_to_the_exact_path():
+    """A segment lying in a triangle's plane (both ends' determinants exactly zero) is not decided in
+    floating point: the compiled test says None and crossings_among gives the exact answer (no hit)."""
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], dtype=float)
+    start, end = np.array([[0.1, 0.1, 0.0]]), np.array([[0.3, 0.2, 0.0]])
+    triangles = np.array([0], dtype=np.int64)
+    assert compiled_crossings(start, end, corners, triangles) is None
+    down = np.array([[0.2, 0.2, 1.0]]), np.array([[0.2, 0.2, -1.0]])
+    through = compiled_crossings(*down, corners, triangles)
+    assert through is not None and len(through) == 1
+    assert through.t[0] == 0.5 and bool(through.entering[0]) is True  # from the front (+z, its normal side)
+    np.testing.assert_allclose(through.barycentric[0], [0.6, 0.2, 0.2])
+    assert_same(through, numpy_path(*down, corners, triangles))
+
+
+def test_nan_segments_meet_nothing_and_bad_input_is_refused():
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], dtype=float)
+    start, end = np.array([[0.2, 0.2, 1.0], [np.nan, 0, 0]]), np.array([[0.2, 0.2, -1.0], [0, 0, 0]])
+    found = compiled_crossings(start, end, corners, np.array([0], dtype=np.int64))
+    assert found is not None and len(found) == 0  # as NumPy: a NaN spoils every segment's box
+    assert len(numpy_path(start, end, corners, np.array([0]))) == 0
+    with pytest.raises(ValueError, match="triangle id 3 is not one of the 1 triangles"):
+        _crossings.crossings(start, end, corners, np.array([3], dtype=np.int64), 1e-16, 1e-9)
+    with pytest.raises(ValueError, match=r"start and end must be \(S, 3\) alike"):
+        _crossings.crossings(start, end[:1], corners, np.array([0], dtype=np.int64), 1e-16, 1e-9)
+    with pytest.raises(TypeError, match="triangles must be int64"):
+        _crossings.crossings(start, end, corners, np.array([0], dtype=np.int32), 1e-16, 1e-9)
