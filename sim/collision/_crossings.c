@@ -1,10 +1,12 @@
 /* The continuous collision test's segment-triangle crossings among the triangles within reach, compiled.
  *
- *   crossings(start, end, corners, triangles, bound, relative_accuracy)
+ *   crossings(start, end, corners, triangles, bound, relative_accuracy[, lower, upper])
  *       -> (segment, triangle, t, barycentric, entering) as five bytearrays, or None
  *
  * start, end (S, 3) float64: the segments; corners (T, 3, 3) float64: every triangle's corners;
- * triangles (n,) int64: the ids to test. The same answer, bit for bit and in the same order, as
+ * triangles (n,) int64: the ids to test; lower, upper (n, 3) float64, optional: those triangles'
+ * bounding boxes, where the caller keeps them (the global test's x-sorted window: read in order, not
+ * gathered from the corners). The same answer, bit for bit and in the same order, as
  * sim.collision.segments' NumPy path (candidate_pairs, then intersect_pairs): the pairs whose closed
  * bounding boxes overlap, segment by segment and in the listed triangles' order; for each, the five
  * floating-point orient3d determinants of predicates.orient3d_fast (the same operations in the same
@@ -84,18 +86,19 @@ static PyObject *
 crossings(PyObject *module, PyObject *args)
 {
     (void)module;
-    PyObject *objects[4];
+    PyObject *objects[6] = {NULL, NULL, NULL, NULL, Py_None, Py_None};
     double bound, relative_accuracy;
-    if (!PyArg_ParseTuple(args, "OOOOdd", &objects[0], &objects[1], &objects[2], &objects[3], &bound,
-                          &relative_accuracy))
+    if (!PyArg_ParseTuple(args, "OOOOdd|OO", &objects[0], &objects[1], &objects[2], &objects[3], &bound,
+                          &relative_accuracy, &objects[4], &objects[5]))
         return NULL;
-    static const char *names[4] = {"start", "end", "corners", "triangles"};
-    Py_buffer views[4];
+    static const char *names[6] = {"start", "end", "corners", "triangles", "lower", "upper"};
+    int given_boxes = objects[4] != Py_None && objects[5] != Py_None, wanted = given_boxes ? 6 : 4;
+    Py_buffer views[6];
     int held = 0;
     PyObject *result = NULL;
     Column columns[5] = {{NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 24}, {NULL, 0, 1}};
     Py_ssize_t *near = NULL;
-    for (; held < 4; held++)
+    for (; held < wanted; held++)
         if (get_view(objects[held], &views[held], 0, held == 3 ? 'q' : 'd', names[held]) < 0)
             goto done;
     Py_ssize_t n = cells(&views[0]), count = cells(&views[2]) / 9, listed = cells(&views[3]);
@@ -103,6 +106,11 @@ crossings(PyObject *module, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "start and end must be (S, 3) alike and corners (T, 3, 3)");
         goto done;
     }
+    if (given_boxes && (cells(&views[4]) != 3 * listed || cells(&views[5]) != 3 * listed)) {
+        PyErr_SetString(PyExc_ValueError, "lower and upper must be (n, 3), one box per listed triangle");
+        goto done;
+    }
+    const double *given_lower = given_boxes ? views[4].buf : NULL, *given_upper = given_boxes ? views[5].buf : NULL;
     const double *start = views[0].buf, *end = views[1].buf, *corners = views[2].buf;
     const long long *triangles = views[3].buf;
     for (Py_ssize_t j = 0; j < listed; j++)
@@ -131,9 +139,19 @@ crossings(PyObject *module, PyObject *args)
     double *boxes = (double *)(near + (listed ? listed : 1));
     Py_ssize_t kept = 0;
     for (Py_ssize_t j = 0; j < listed && finite; j++) {
-        const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
         int overlap = 1;
         double *box = boxes + 6 * kept;
+        if (given_boxes) { /* the caller's boxes of these triangles (NaN where a corner is) */
+            for (int i = 0; i < 3 && overlap; i++) {
+                box[i] = given_lower[3 * j + i];
+                box[3 + i] = given_upper[3 * j + i];
+                overlap = box[3 + i] >= reach_low[i] && box[i] <= reach_high[i];
+            }
+            if (overlap)
+                near[kept++] = j;
+            continue;
+        }
+        const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
         for (int i = 0; i < 3 && overlap; i++) {
             if (isnan(a[i]) || isnan(b[i]) || isnan(c[i])) {
                 overlap = 0;

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.collision import _near as near
+from sim.collision.grid import PointGrid
 from sim.collision.segments import (
     SegmentHits,
     bounding_boxes,
@@ -110,7 +111,7 @@ class CollisionMesh:
         """(valid triangle ids, edge ids) that may reach into any of the boxes ``lower``-``upper``
         (B, 3) (m): those whose centroid (midpoint) lies within a box's half-diagonal plus their own
         reach (and how far the subordinate hand has moved the mesh) of its centre; a superset."""
-        triangles, reach, edges, half = self._trees
+        _, reach, half = self._trees
         centres = 0.5 * (lower + upper)
         radii = 0.5 * np.sqrt(np.einsum("ij,ij->i", upper - lower, upper - lower)) + self._moved
         cached = self._near_cache
@@ -120,23 +121,17 @@ class CollisionMesh:
             if np.all(shift + radii <= cached[1]):
                 return cached[2]
         radii = radii + NEAR_PADDING
-        nearest, _ = triangles.query(centres, distance_upper_bound=float(radii.max()) + reach + half)
-        close = np.isfinite(nearest)
-        if not close.any():  # nothing within reach of any box: one vectorised query
-            result = (self._valid_ids[:0], np.zeros(0, dtype=np.int64))
-        else:
-            near_centres, near_radii = centres[close], radii[close]  # only the boxes with something near
-            found = triangles.query_ball_point(near_centres, near_radii + reach, return_sorted=False)
-            crossed = edges.query_ball_point(near_centres, near_radii + half, return_sorted=False)
-            near_triangles = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
-            near_edges = np.unique(np.concatenate([np.asarray(e, dtype=np.int64) for e in crossed]))
-            result = (self._valid_ids[near_triangles], near_edges)
+        triangles, edges = self._grids
+        result = (
+            self._valid_ids[triangles.within(centres, radii + reach)],
+            edges.within(centres, radii + half),
+        )
         self._near_cache = (centres, radii, result)
         return result
 
     def _build_trees(self) -> None:
-        """KD-trees of the valid triangles' centroids and the edges' midpoints at rest (built once:
-        a deformed mesh pads the queries by how far it moved instead)."""
+        """KD-trees and grids of the valid triangles' centroids and the edges' midpoints at rest (built
+        once: a deformed mesh pads the queries by how far it moved instead)."""
         from scipy.spatial import cKDTree
 
         rest = self.mesh.points
@@ -145,7 +140,9 @@ class CollisionMesh:
         reach = float(np.linalg.norm(corners - centroids[:, None, :], axis=2).max()) if len(corners) else 0.0
         ends = rest[self.edges]
         half = 0.5 * float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max()) if len(ends) else 0.0
-        self._trees = (cKDTree(centroids), reach, cKDTree(ends.mean(axis=1)), half)
+        self._trees = (cKDTree(centroids), reach, half)  # the tree: nearest_to_surface
+        # the broad phase's grids (near_boxes), cells about a triangle across
+        self._grids = (PointGrid(centroids, 2 * reach), PointGrid(ends.mean(axis=1), 2 * reach))
 
     def nearest_to_surface(
         self, points: NDArray[np.float64], within: float, count: int
@@ -179,9 +176,11 @@ class CollisionMesh:
         start, end = ends[:, 0], ends[:, 1]
         if len(edges) == 0:
             return edges, intersect_pairs(start, end, triangles, np.zeros(0, np.int64), np.zeros(0, np.int64))
-        lower, upper = bounding_boxes(triangles)
-        found, given = candidate_pairs(start, end, lower, upper)
-        hits = intersect_pairs(start, end, triangles, found, given)
+        hits = compiled_crossings(start, end, triangles, np.arange(len(triangles), dtype=np.int64))
+        if hits is None:  # some sign unsure in floating point: the exact path
+            lower, upper = bounding_boxes(triangles)
+            found, given = candidate_pairs(start, end, lower, upper)
+            hits = intersect_pairs(start, end, triangles, found, given)
         return edges[hits.segment], hits
 
     def crossings(self, start: NDArray[np.float64], end: NDArray[np.float64]) -> SegmentHits:
@@ -191,6 +190,10 @@ class CollisionMesh:
         high_x = max(start[:, 0].max(), end[:, 0].max())
         keys = self._sorted_lower[:, 0]
         window = slice(int(np.searchsorted(keys, low_x, "left")), int(np.searchsorted(keys, high_x, "right")))
+        boxes = (self._sorted_lower[window], self._sorted_upper[window])
+        found = compiled_crossings(start, end, self.corners, self._sorted_ids[window], boxes)
+        if found is not None:
+            return found
         segments, local = candidate_pairs(start, end, self._sorted_lower[window], self._sorted_upper[window])
         return intersect_pairs(start, end, self.corners, segments, self._sorted_ids[window][local])
 

@@ -100,13 +100,19 @@ def candidate_pairs(
 
 
 def compiled_crossings(
-    seg_start: NDArray, seg_end: NDArray, corners: NDArray, triangles: NDArray[np.int64]
+    seg_start: NDArray,
+    seg_end: NDArray,
+    corners: NDArray,
+    triangles: NDArray[np.int64],
+    boxes: tuple[NDArray, NDArray] | None = None,
 ) -> SegmentHits | None:
     """The crossings of segments seg_start -> seg_end (S, 3) with the listed triangles (ids into
     ``corners`` (T, 3, 3)), compiled (sim/collision/_crossings.c): what candidate_pairs then
     intersect_pairs give, bit for bit and in their order, or None where floating point is not sure of
     some sign (the exact path must decide). The continuous collision test of each FEM step: its NumPy
-    form cost 40-80 us of a step's 140 in array calls on a few dozen pairs."""
+    form cost 40-80 us of a step's 140 in array calls on a few dozen pairs. ``boxes``: the listed
+    triangles' (lower, upper) (n, 3) corners where the caller keeps them (read in order, not gathered)."""
+    extra = () if boxes is None else tuple(np.ascontiguousarray(b, dtype=np.float64) for b in boxes)
     found = _crossings.crossings(
         np.ascontiguousarray(seg_start, dtype=np.float64),
         np.ascontiguousarray(seg_end, dtype=np.float64),
@@ -114,6 +120,7 @@ def compiled_crossings(
         np.ascontiguousarray(triangles, dtype=np.int64),
         ORIENT3D_BOUND,
         ORIENT3D_ACCURACY,
+        *extra,
     )
     if found is None:
         return None

@@ -1,6 +1,7 @@
-"""The continuous collision test's compiled crossings (sim/collision/_crossings.c) against the NumPy path
+"""The continuous collision test compiled: its crossings (sim/collision/_crossings.c) against the NumPy path
 they replace (candidate_pairs then intersect_pairs): the same hits, bit for bit and in the same order,
-or None where floating point is not sure and the exact path decides."""
+or None where floating point is not sure and the exact path decides; and its broad phase's grid
+(sim/collision/_grid.c) against the KD-tree queries it replaced."""
 
 import numpy as np
 import pytest
@@ -44,7 +45,7 @@ points = st.integers(1, 6).flatmap(
     points,
     st.randoms(use_true_random=False),
 )
-@settings(max_examples=1500, deadline=None)
+@settings(max_examples=800, deadline=None)
 def test_the_same_hits_as_the_numpy_path_or_none_where_unsure(corner_list, ends, random):
     """Grid coordinates make segments through edges and vertices and in planes (the unsure cases)
     common; reals cover the rest."""
@@ -107,3 +108,69 @@ def test_nan_segments_meet_nothing_and_bad_input_is_refused():
         _crossings.crossings(start, end[:1], corners, np.array([0], dtype=np.int64), 1e-16, 1e-9)
     with pytest.raises(TypeError, match="triangles must be int64"):
         _crossings.crossings(start, end, corners, np.array([0], dtype=np.int32), 1e-16, 1e-9)
+
+
+@given(st.integers(0, 400), st.integers(1, 12), st.floats(1e-4, 5e-3), st.integers(0, 2**32 - 1))
+@settings(max_examples=300, deadline=None)
+def test_the_grid_finds_what_a_kd_tree_finds(count, balls, cell, seed):
+    """PointGrid.within against scipy's cKDTree.query_ball_point then numpy.unique (the broad phase it
+    replaced), with balls inside, across and outside the points' extent, some of them empty."""
+    from scipy.spatial import cKDTree
+
+    from sim.collision.grid import PointGrid
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-0.01, 0.01, size=(count, 3)) * rng.uniform(0.1, 1.0, size=3)
+    centres = rng.uniform(-0.015, 0.015, size=(balls, 3))
+    radii = rng.uniform(0.0, 0.006, size=balls)
+    radii[rng.random(balls) < 0.2] = 0.0
+    found = PointGrid(points, cell).within(centres, radii)
+    if count:
+        lists = cKDTree(points).query_ball_point(centres, radii, return_sorted=False)
+        expected = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in lists]))
+    else:
+        expected = np.zeros(0, dtype=np.int64)
+    assert found.dtype == np.int64
+    np.testing.assert_array_equal(found, expected)
+
+
+def test_the_grid_refuses_what_it_cannot_read():
+    from sim.collision import _grid
+    from sim.collision.grid import PointGrid
+
+    with pytest.raises(ValueError, match="finite points"):
+        PointGrid(np.array([[0.0, 0.0, np.nan]]), 1e-3)
+    grid = PointGrid(np.zeros((2, 3)), 1e-3)
+    assert len(grid.within(np.zeros((1, 3)), np.array([np.nan]))) == 0  # a NaN ball holds nothing
+    with pytest.raises(ValueError, match="one start per cell"):
+        _grid.within(np.zeros((1, 3)), np.ones(1), grid._points, grid._ids, grid._starts[:1], grid.origin,
+                     grid.cell, grid.dims)  # fmt: skip
+    with pytest.raises(ValueError, match="id 5 is not one of the 2 points"):
+        _grid.within(np.zeros((1, 3)), np.ones(1), grid._points, np.array([0, 5]), grid._starts,
+                     grid.origin, grid.cell, grid.dims)  # fmt: skip
+
+
+def test_the_global_test_and_the_edge_sweep_find_what_numpy_finds(monkeypatch):
+    """CollisionMesh.crossings (the graphics layer's global test over its x-sorted window) and
+    edges_among (surface edges through a segment's swept path), compiled and on the NumPy path."""
+    import sim.collision.mesh as module
+
+    collision = CollisionMesh(box_mesh(0.01, 6))
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(100):
+        start = rng.uniform(-0.002, 0.012, size=(9, 3))
+        end = start + rng.normal(0, 0.004, size=(9, 3))
+        swept = rng.uniform(-0.002, 0.012, size=(4, 3, 3))
+        edges = rng.choice(len(collision.edges), size=60, replace=False)
+        cases.append((start, end, swept, edges))
+    compiled = [(collision.crossings(s, e), collision.edges_among(w, k)) for s, e, w, k in cases]
+    monkeypatch.setattr(module, "compiled_crossings", lambda *arguments: None)
+    found = 0
+    for (start, end, swept, edges), (hits, (crossed, edge_hits)) in zip(cases, compiled, strict=True):
+        assert_same(hits, collision.crossings(start, end))
+        reference_edges, reference_hits = collision.edges_among(swept, edges)
+        np.testing.assert_array_equal(crossed, reference_edges)
+        assert_same(edge_hits, reference_hits)
+        found += len(hits) + len(edge_hits)
+    assert found > 50
