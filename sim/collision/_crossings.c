@@ -1,26 +1,27 @@
 /* The continuous collision test's segment-triangle crossings among the triangles within reach, compiled.
  *
  *   crossings(start, end, corners, triangles, bound, relative_accuracy[, lower, upper])
- *       -> (segment, triangle, t, barycentric, entering) as five bytearrays, or None
+ *       -> (segment, triangle, t, barycentric, entering, place, unsure_segment, unsure_place)
  *
  * start, end (S, 3) float64: the segments; corners (T, 3, 3) float64: every triangle's corners;
  * triangles (n,) int64: the ids to test; lower, upper (n, 3) float64, optional: those triangles'
  * bounding boxes, where the caller keeps them (the global test's x-sorted window: read in order, not
- * gathered from the corners). The same answer, bit for bit and in the same order, as
- * sim.collision.segments' NumPy path (candidate_pairs, then intersect_pairs): the pairs whose closed
- * bounding boxes overlap, segment by segment and in the listed triangles' order; for each, the five
- * floating-point orient3d determinants of predicates.orient3d_fast (the same operations in the same
- * order, so this file is compiled without fused multiply-adds) with their error bounds (``bound``
- * times the permanent). A pair crosses where the segment's ends are not on one side of the plane
- * and the three volumes around the line share a sign; its t and barycentrics are those of
- * intersect_pairs.
+ * gathered from the corners). The hits are sim.collision.segments' NumPy path's (candidate_pairs,
+ * then intersect_pairs), bit for bit and in its order: the pairs whose closed bounding boxes overlap,
+ * segment by segment and in the listed triangles' order; for each, the five floating-point orient3d
+ * determinants of predicates.orient3d_fast (the same operations in the same order, so this file is
+ * compiled without fused multiply-adds) with their error bounds (``bound`` times the permanent). A
+ * pair crosses where the segment's ends are not on one side of the plane and the three volumes
+ * around the line share a sign; its t and barycentrics are those of intersect_pairs. ``place`` is
+ * each hit's position in ``triangles``.
  *
- * None means "ask the exact path": some determinant of some pair is not sure to ``relative_accuracy``
- * of its magnitude (|det| * relative_accuracy <= bound, a NaN included), or a crossing's volumes
- * sum to nothing usable. Then NumPy and exact arithmetic decide, as before this file existed. A NaN
- * in any segment makes no pair (NumPy's boxes of every segment then compare false); a triangle with
- * a NaN corner meets nothing. Sizes, types and triangle ids are checked before anything is read.
- * The hits come back as bytearrays (int64, int64, float64, float64 x 3, bool) for numpy.frombuffer.
+ * A pair some determinant of which is not sure to ``relative_accuracy`` of its magnitude
+ * (|det| * relative_accuracy <= bound, a NaN included), or whose crossing's volumes sum to nothing
+ * usable, is not decided here: it comes back as (unsure_segment, unsure_place) for the exact path.
+ * A NaN in any segment makes no pair (NumPy's boxes of every segment then compare false); a triangle
+ * with a NaN corner meets nothing. Sizes, types and triangle ids are checked before anything is read.
+ * Every column is a bytearray (int64, int64, float64, float64 x 3, bool, int64, int64, int64) for
+ * numpy.frombuffer.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -64,6 +65,14 @@ sign_of(double x)
     return (x > 0) - (x < 0);
 }
 
+/* A triangle kept by the first filter: its place in the list and its box (lower x, y, z, upper x, y, z). */
+typedef struct {
+    Py_ssize_t index;
+    double box[6];
+} Near;
+
+#define COLUMNS 8
+
 /* A growing array of fixed-size items in a bytearray. */
 typedef struct {
     PyObject *bytes;
@@ -96,8 +105,11 @@ crossings(PyObject *module, PyObject *args)
     Py_buffer views[6];
     int held = 0;
     PyObject *result = NULL;
-    Column columns[5] = {{NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 24}, {NULL, 0, 1}};
-    Py_ssize_t *near = NULL;
+    /* the hits' segment, triangle, t, barycentrics, entering and place in the list; the unsure pairs'
+     * segment and place in the list */
+    Column columns[COLUMNS] = {{NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 24},
+                               {NULL, 0, 1},    {NULL, 0, 8}, {NULL, 0, 8}, {NULL, 0, 8}};
+    Near *near = NULL;
     for (; held < wanted; held++)
         if (get_view(objects[held], &views[held], 0, held == 3 ? 'q' : 'd', names[held]) < 0)
             goto done;
@@ -119,7 +131,7 @@ crossings(PyObject *module, PyObject *args)
                          count);
             goto done;
         }
-    for (int k = 0; k < 5; k++)
+    for (int k = 0; k < COLUMNS; k++)
         if ((columns[k].bytes = PyByteArray_FromStringAndSize(NULL, 0)) == NULL)
             goto done;
     Py_ssize_t segments = n / 3;
@@ -130,39 +142,50 @@ crossings(PyObject *module, PyObject *args)
         reach_low[i % 3] = fmin(reach_low[i % 3], fmin(start[i], end[i]));
         reach_high[i % 3] = fmax(reach_high[i % 3], fmax(start[i], end[i]));
     }
-    /* the triangles whose boxes meet the box of every segment (NumPy's first filter), with their boxes */
-    near = PyMem_Malloc((size_t)(listed ? listed : 1) * (sizeof(Py_ssize_t) + 6 * sizeof(double)));
-    if (near == NULL) {
-        PyErr_NoMemory();
-        goto done;
-    }
-    double *boxes = (double *)(near + (listed ? listed : 1));
-    Py_ssize_t kept = 0;
+    /* the triangles whose boxes meet the box of every segment (NumPy's first filter), with their boxes,
+     * in a buffer that grows as they are found (a global test's window lists thousands, keeps few) */
+    Py_ssize_t kept = 0, capacity = 0;
+    int ascending = 1;    /* the kept boxes' lower x never decreases (an x-sorted window) */
+    double widest = 0.0;  /* the widest kept box along x */
     for (Py_ssize_t j = 0; j < listed && finite; j++) {
+        double box[6];
         int overlap = 1;
-        double *box = boxes + 6 * kept;
         if (given_boxes) { /* the caller's boxes of these triangles (NaN where a corner is) */
             for (int i = 0; i < 3 && overlap; i++) {
                 box[i] = given_lower[3 * j + i];
                 box[3 + i] = given_upper[3 * j + i];
                 overlap = box[3 + i] >= reach_low[i] && box[i] <= reach_high[i];
             }
-            if (overlap)
-                near[kept++] = j;
-            continue;
         }
-        const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
-        for (int i = 0; i < 3 && overlap; i++) {
-            if (isnan(a[i]) || isnan(b[i]) || isnan(c[i])) {
-                overlap = 0;
-                break;
+        else {
+            const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
+            for (int i = 0; i < 3 && overlap; i++) {
+                if (isnan(a[i]) || isnan(b[i]) || isnan(c[i])) {
+                    overlap = 0;
+                    break;
+                }
+                box[i] = fmin(fmin(a[i], b[i]), c[i]);
+                box[3 + i] = fmax(fmax(a[i], b[i]), c[i]);
+                overlap = box[3 + i] >= reach_low[i] && box[i] <= reach_high[i];
             }
-            box[i] = fmin(fmin(a[i], b[i]), c[i]);
-            box[3 + i] = fmax(fmax(a[i], b[i]), c[i]);
-            overlap = box[3 + i] >= reach_low[i] && box[i] <= reach_high[i];
         }
-        if (overlap)
-            near[kept++] = j;
+        if (!overlap)
+            continue;
+        if (kept == capacity) {
+            capacity = capacity ? 2 * capacity : 64;
+            Near *grown = PyMem_Realloc(near, (size_t)capacity * sizeof(Near));
+            if (grown == NULL) {
+                PyErr_NoMemory();
+                goto done;
+            }
+            near = grown;
+        }
+        near[kept].index = j;
+        memcpy(near[kept].box, box, sizeof(box));
+        if (kept > 0 && box[0] < near[kept - 1].box[0])
+            ascending = 0;
+        widest = fmax(widest, box[3] - box[0]);
+        kept++;
     }
     for (Py_ssize_t s = 0; s < segments && finite; s++) {
         const double *p = start + 3 * s, *q = end + 3 * s;
@@ -171,22 +194,40 @@ crossings(PyObject *module, PyObject *args)
             low[i] = p[i] < q[i] ? p[i] : q[i];
             high[i] = p[i] < q[i] ? q[i] : p[i];
         }
-        for (Py_ssize_t k = 0; k < kept; k++) {
-            const double *box = boxes + 6 * k;
+        /* in an x-sorted list only the boxes whose lower x lies in [low x - widest, high x] can meet
+         * the segment's: from the first of them (binary search) to the first beyond */
+        Py_ssize_t from = 0;
+        if (ascending) { /* a margin for the subtraction's rounding: the pair test below decides */
+            double threshold = low[0] - widest - 1e-12 * (fabs(low[0]) + widest);
+            Py_ssize_t below = 0, above = kept;
+            while (below < above) {
+                Py_ssize_t middle = below + (above - below) / 2;
+                if (near[middle].box[0] < threshold)
+                    below = middle + 1;
+                else
+                    above = middle;
+            }
+            from = below;
+        }
+        for (Py_ssize_t k = from; k < kept; k++) {
+            const double *box = near[k].box;
+            if (ascending && box[0] > high[0])
+                break;
             if (!(box[3] >= low[0] && box[0] <= high[0] && box[4] >= low[1] && box[1] <= high[1] &&
                   box[5] >= low[2] && box[2] <= high[2]))
                 continue;
-            Py_ssize_t j = near[k];
+            Py_ssize_t j = near[k].index;
             const double *a = corners + 9 * triangles[j], *b = a + 3, *c = a + 6;
             Orient side_p = orient3d_fast(a, b, c, p, bound), side_q = orient3d_fast(a, b, c, q, bound);
             Orient volumes[3] = {orient3d_fast(q, c, b, p, bound), orient3d_fast(q, a, c, p, bound),
                                  orient3d_fast(q, b, a, p, bound)};
+            long long segment = s, place = j;
             if (!sure(side_p, relative_accuracy) || !sure(side_q, relative_accuracy) ||
                 !sure(volumes[0], relative_accuracy) || !sure(volumes[1], relative_accuracy) ||
                 !sure(volumes[2], relative_accuracy)) {
-                result = Py_None; /* the exact path decides this call */
-                Py_INCREF(result);
-                goto done;
+                if (push(&columns[6], &segment) < 0 || push(&columns[7], &place) < 0)
+                    goto done; /* the exact path decides this pair */
+                continue;
             }
             int sp = sign_of(side_p.det), sq = sign_of(side_q.det);
             int v0 = sign_of(volumes[0].det), v1 = sign_of(volumes[1].det), v2 = sign_of(volumes[2].det);
@@ -198,30 +239,36 @@ crossings(PyObject *module, PyObject *args)
             double weights[3] = {fabs(volumes[0].det), fabs(volumes[1].det), fabs(volumes[2].det)};
             double total = weights[0] + weights[1] + weights[2];
             if (!(total > 0) || !isfinite(total) || side_p.det == side_q.det) {
-                result = Py_None;
-                Py_INCREF(result);
-                goto done;
+                if (push(&columns[6], &segment) < 0 || push(&columns[7], &place) < 0)
+                    goto done; /* volumes under- or overflowed: exactly, as NumPy's path does */
+                continue;
             }
             double t = side_p.det / (side_p.det - side_q.det);
             t = t >= 0.0 ? t : 0.0; /* np.maximum(t, 0.0), then np.minimum(t, 1.0) */
             t = t <= 1.0 ? t : 1.0;
             double barycentric[3] = {weights[0] / total, weights[1] / total, weights[2] / total};
-            long long segment = s, triangle = triangles[j];
+            long long triangle = triangles[j];
             char entering = sp < 0 || (sp == 0 && sq > 0);
             if (push(&columns[0], &segment) < 0 || push(&columns[1], &triangle) < 0 ||
                 push(&columns[2], &t) < 0 || push(&columns[3], barycentric) < 0 ||
-                push(&columns[4], &entering) < 0)
+                push(&columns[4], &entering) < 0 || push(&columns[5], &place) < 0)
                 goto done;
         }
     }
-    for (int k = 0; k < 5; k++)
-        if (PyByteArray_Resize(columns[k].bytes, columns[k].used) < 0)
+    result = PyTuple_New(COLUMNS);
+    if (result == NULL)
+        goto done;
+    for (int k = 0; k < COLUMNS; k++) {
+        if (PyByteArray_Resize(columns[k].bytes, columns[k].used) < 0) {
+            Py_CLEAR(result);
             goto done;
-    result = PyTuple_Pack(5, columns[0].bytes, columns[1].bytes, columns[2].bytes, columns[3].bytes,
-                          columns[4].bytes);
+        }
+        Py_INCREF(columns[k].bytes);
+        PyTuple_SET_ITEM(result, k, columns[k].bytes);
+    }
 done:
     PyMem_Free(near);
-    for (int k = 0; k < 5; k++)
+    for (int k = 0; k < COLUMNS; k++)
         Py_XDECREF(columns[k].bytes);
     for (int i = 0; i < held; i++)
         PyBuffer_Release(&views[i]);
@@ -230,9 +277,9 @@ done:
 
 static PyMethodDef methods[] = {
     {"crossings", crossings, METH_VARARGS,
-     "crossings(start, end, corners, triangles, bound, relative_accuracy): the segment-triangle crossings "
-     "among the listed triangles as five bytearrays (segment, triangle, t, barycentric, entering), or None "
-     "where floating point is not sure and the exact path must decide."},
+     "crossings(start, end, corners, triangles, bound, relative_accuracy[, lower, upper]): the "
+     "segment-triangle crossings among the listed triangles as bytearrays (segment, triangle, t, "
+     "barycentric, entering, place) and the pairs floating point is not sure of (segment, place)."},
     {NULL, NULL, 0, NULL},
 };
 

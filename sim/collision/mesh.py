@@ -17,8 +17,6 @@ from sim.collision import _near as near
 from sim.collision.grid import PointGrid
 from sim.collision.segments import (
     SegmentHits,
-    bounding_boxes,
-    candidate_pairs,
     compiled_crossings,
     intersect_pairs,
 )
@@ -211,12 +209,7 @@ class CollisionMesh:
         """Every crossing of segments start -> end (S, 3) with the given triangles (ids)."""
         if len(triangles) == 0 or len(start) == 0:
             return intersect_pairs(start, end, self.corners, np.zeros(0, np.int64), np.zeros(0, np.int64))
-        found = compiled_crossings(start, end, self.corners, triangles)
-        if found is not None:
-            return found
-        lower, upper = bounding_boxes(self.corners[triangles])
-        segments, local = candidate_pairs(start, end, lower, upper)
-        return intersect_pairs(start, end, self.corners, segments, triangles[local])
+        return compiled_crossings(start, end, self.corners, triangles)
 
     def edges_among(
         self, triangles: NDArray[np.float64], edges: NDArray[np.int64]
@@ -229,10 +222,6 @@ class CollisionMesh:
         if len(edges) == 0:
             return edges, intersect_pairs(start, end, triangles, np.zeros(0, np.int64), np.zeros(0, np.int64))
         hits = compiled_crossings(start, end, triangles, np.arange(len(triangles), dtype=np.int64))
-        if hits is None:  # some sign unsure in floating point: the exact path
-            lower, upper = bounding_boxes(triangles)
-            found, given = candidate_pairs(start, end, lower, upper)
-            hits = intersect_pairs(start, end, triangles, found, given)
         return edges[hits.segment], hits
 
     def crossings(self, start: NDArray[np.float64], end: NDArray[np.float64]) -> SegmentHits:
@@ -243,11 +232,7 @@ class CollisionMesh:
         keys = self._sorted_lower[:, 0]
         window = slice(int(np.searchsorted(keys, low_x, "left")), int(np.searchsorted(keys, high_x, "right")))
         boxes = (self._sorted_lower[window], self._sorted_upper[window])
-        found = compiled_crossings(start, end, self.corners, self._sorted_ids[window], boxes)
-        if found is not None:
-            return found
-        segments, local = candidate_pairs(start, end, self._sorted_lower[window], self._sorted_upper[window])
-        return intersect_pairs(start, end, self.corners, segments, self._sorted_ids[window][local])
+        return compiled_crossings(start, end, self.corners, self._sorted_ids[window], boxes)
 
     def query(self, vertices: NDArray[np.float64]) -> SegmentHits:
         """Every crossing of a needle polyline (vertices tip first) with the valid triangles.

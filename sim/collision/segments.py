@@ -105,32 +105,54 @@ def compiled_crossings(
     corners: NDArray,
     triangles: NDArray[np.int64],
     boxes: tuple[NDArray, NDArray] | None = None,
-) -> SegmentHits | None:
+) -> SegmentHits:
     """The crossings of segments seg_start -> seg_end (S, 3) with the listed triangles (ids into
-    ``corners`` (T, 3, 3)), compiled (sim/collision/_crossings.c): what candidate_pairs then
-    intersect_pairs give, bit for bit and in their order, or None where floating point is not sure of
-    some sign (the exact path must decide). The continuous collision test of each FEM step: its NumPy
-    form cost 40-80 us of a step's 140 in array calls on a few dozen pairs. ``boxes``: the listed
-    triangles' (lower, upper) (n, 3) corners where the caller keeps them (read in order, not gathered)."""
+    ``corners`` (T, 3, 3)): what candidate_pairs then intersect_pairs give, bit for bit and in their
+    order, compiled (sim/collision/_crossings.c); the few pairs floating point is not sure of are
+    decided here by intersect_pairs (exact arithmetic) and put in their place. The continuous collision
+    test of each FEM step (its NumPy form cost 40-80 us of a step's 140 in array calls on a few dozen
+    pairs) and the graphics layer's global test. ``boxes``: the listed triangles' (lower, upper) (n, 3)
+    corners where the caller keeps them (read in order, not gathered)."""
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     extra = () if boxes is None else tuple(np.ascontiguousarray(b, dtype=np.float64) for b in boxes)
-    found = _crossings.crossings(
+    columns = _crossings.crossings(
         np.ascontiguousarray(seg_start, dtype=np.float64),
         np.ascontiguousarray(seg_end, dtype=np.float64),
         np.ascontiguousarray(corners, dtype=np.float64),
-        np.ascontiguousarray(triangles, dtype=np.int64),
+        triangles,
         ORIENT3D_BOUND,
         ORIENT3D_ACCURACY,
         *extra,
     )
-    if found is None:
-        return None
-    segment, triangle, t, barycentric, entering = found
+    kinds = (np.int64, np.int64, np.float64, np.float64, np.bool_, np.int64, np.int64, np.int64)
+    segment, triangle, t, barycentric, entering, place, unsure_segment, unsure_place = (
+        np.frombuffer(column, dtype=kind) for column, kind in zip(columns, kinds, strict=True)
+    )
+    hits = SegmentHits(segment, triangle, t, barycentric.reshape(-1, 3), entering)
+    if unsure_segment.size == 0:
+        return hits
+    # the pairs floating point could not decide, exactly (one call), then every hit in the NumPy path's
+    # order; a decided hit's place: its pair's, the hits being a subsequence of the pairs in order
+    decided = intersect_pairs(seg_start, seg_end, corners, unsure_segment, triangles[unsure_place])
+    pairs = list(
+        zip(unsure_segment.tolist(), triangles[unsure_place].tolist(), unsure_place.tolist(), strict=True)
+    )
+    decided_places, k = [], 0
+    for s, tri in zip(decided.segment.tolist(), decided.triangle.tolist(), strict=True):
+        while pairs[k][:2] != (s, tri):
+            k += 1
+        decided_places.append(pairs[k][2])
+        k += 1
+    found = [hits, decided]
+    segments = np.concatenate([h.segment for h in found])
+    places = np.concatenate([place, np.array(decided_places, dtype=np.int64)])
+    order = np.argsort(segments * len(triangles) + places, kind="stable")
     return SegmentHits(
-        np.frombuffer(segment, dtype=np.int64),
-        np.frombuffer(triangle, dtype=np.int64),
-        np.frombuffer(t, dtype=np.float64),
-        np.frombuffer(barycentric, dtype=np.float64).reshape(-1, 3),
-        np.frombuffer(entering, dtype=np.bool_),
+        segments[order],
+        np.concatenate([h.triangle for h in found])[order],
+        np.concatenate([h.t for h in found])[order],
+        np.concatenate([h.barycentric for h in found])[order],
+        np.concatenate([h.entering for h in found])[order],
     )
 
 

@@ -1,6 +1,6 @@
 """The continuous collision test compiled: its crossings (sim/collision/_crossings.c) against the NumPy path
 they replace (candidate_pairs then intersect_pairs): the same hits, bit for bit and in the same order,
-or None where floating point is not sure and the exact path decides; and its broad phase's grid
+the pairs floating point is not sure of decided exactly; and its broad phase's grid
 (sim/collision/_grid.c) against the KD-tree queries it replaced."""
 
 import numpy as np
@@ -46,25 +46,23 @@ points = st.integers(1, 6).flatmap(
     st.randoms(use_true_random=False),
 )
 @settings(max_examples=800, deadline=None)
-def test_the_same_hits_as_the_numpy_path_or_none_where_unsure(corner_list, ends, random):
-    """Grid coordinates make segments through edges and vertices and in planes (the unsure cases)
-    common; reals cover the rest."""
+def test_the_same_hits_as_the_numpy_path_whatever_the_input(corner_list, ends, random):
+    """Grid coordinates make segments through edges and vertices and in planes (the pairs floating
+    point is not sure of, decided exactly) common; reals cover the rest."""
     corners = np.array(corner_list[: len(corner_list) // 3 * 3], dtype=float).reshape(-1, 3, 3)
     start = np.array(ends, dtype=float)
     end = start[::-1].copy() + np.array([random.uniform(-1, 1) for _ in range(3)])
     triangles = np.array(
         random.sample(range(len(corners)), random.randint(1, len(corners))), dtype=np.int64
     )  # any subset, in any order: the order of the listed ids is the hits' order
-    found = compiled_crossings(start, end, corners, triangles)
-    reference = numpy_path(start, end, corners, triangles)
-    if found is None:  # the exact path decides: some sign too close to call in floating point
-        return
-    assert_same(found, reference)
+    assert_same(
+        compiled_crossings(start, end, corners, triangles), numpy_path(start, end, corners, triangles)
+    )
 
 
 def test_a_needle_through_a_box_mesh_finds_what_numpy_finds():
     """Real inputs (a needle polyline swept through the cube's top), every triangle listed: all the
-    hits, and none of the calls left to the exact path."""
+    hits."""
     mesh = box_mesh(0.01, 6)
     collision = CollisionMesh(mesh)
     rng = np.random.default_rng(7)
@@ -74,33 +72,42 @@ def test_a_needle_through_a_box_mesh_finds_what_numpy_finds():
         start = rng.uniform(-0.002, 0.012, size=(9, 3))
         end = start + rng.normal(0, 0.004, size=(9, 3))
         found = compiled_crossings(start, end, collision.corners, triangles)
-        assert found is not None
         assert_same(found, numpy_path(start, end, collision.corners, triangles))
         hits += len(found)
         assert_same(collision.crossings_among(start, end, triangles), found)
     assert hits > 100
 
 
-def test_unsure_signs_leave_the_call_to_the_exact_path():
+def test_unsure_pairs_are_decided_exactly_in_their_place():
     """A segment lying in a triangle's plane (both ends' determinants exactly zero) is not decided in
-    floating point: the compiled test says None and crossings_among gives the exact answer (no hit)."""
-    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], dtype=float)
-    start, end = np.array([[0.1, 0.1, 0.0]]), np.array([[0.3, 0.2, 0.0]])
-    triangles = np.array([0], dtype=np.int64)
-    assert compiled_crossings(start, end, corners, triangles) is None
-    down = np.array([[0.2, 0.2, 1.0]]), np.array([[0.2, 0.2, -1.0]])
-    through = compiled_crossings(*down, corners, triangles)
-    assert through is not None and len(through) == 1
-    assert through.t[0] == 0.5 and bool(through.entering[0]) is True  # from the front (+z, its normal side)
-    np.testing.assert_allclose(through.barycentric[0], [0.6, 0.2, 0.2])
-    assert_same(through, numpy_path(*down, corners, triangles))
+    floating point: the compiled test hands that pair to the exact path (no hit) and keeps the hits
+    before and after it in the NumPy path's order."""
+    corners = np.array(
+        [
+            [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+            [[0, 0, 1], [1, 0, 1], [0, 1, 1]],
+            [[0, 0, -1], [1, 0, -1], [0, 1, -1]],
+        ],
+        dtype=float,
+    )
+    triangles = np.array([1, 0, 2], dtype=np.int64)
+    start = np.array([[0.1, 0.1, 0.0], [0.2, 0.2, 2.0]])  # in the plane of triangle 0; down through all three
+    end = np.array([[0.3, 0.2, 0.0], [0.2, 0.2, -2.0]])
+    columns = _crossings.crossings(start, end, corners, triangles, 1.1e-16, 1e-9)
+    assert np.frombuffer(columns[6], dtype=np.int64).tolist() == [0]  # one pair left to the exact path
+    found = compiled_crossings(start, end, corners, triangles)
+    assert found.segment.tolist() == [1, 1, 1] and found.triangle.tolist() == [1, 0, 2]
+    np.testing.assert_allclose(found.t, [0.25, 0.5, 0.75])
+    assert found.entering.all()  # from the front (+z)
+    np.testing.assert_allclose(found.barycentric, [[0.6, 0.2, 0.2]] * 3)
+    assert_same(found, numpy_path(start, end, corners, triangles))
 
 
 def test_nan_segments_meet_nothing_and_bad_input_is_refused():
     corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], dtype=float)
     start, end = np.array([[0.2, 0.2, 1.0], [np.nan, 0, 0]]), np.array([[0.2, 0.2, -1.0], [0, 0, 0]])
     found = compiled_crossings(start, end, corners, np.array([0], dtype=np.int64))
-    assert found is not None and len(found) == 0  # as NumPy: a NaN spoils every segment's box
+    assert len(found) == 0  # as NumPy: a NaN spoils every segment's box
     assert len(numpy_path(start, end, corners, np.array([0]))) == 0
     with pytest.raises(ValueError, match="triangle id 3 is not one of the 1 triangles"):
         _crossings.crossings(start, end, corners, np.array([3], dtype=np.int64), 1e-16, 1e-9)
@@ -150,27 +157,35 @@ def test_the_grid_refuses_what_it_cannot_read():
                      grid.origin, grid.cell, grid.dims)  # fmt: skip
 
 
-def test_the_global_test_and_the_edge_sweep_find_what_numpy_finds(monkeypatch):
+def test_the_global_test_and_the_edge_sweep_find_what_numpy_finds():
     """CollisionMesh.crossings (the graphics layer's global test over its x-sorted window) and
-    edges_among (surface edges through a segment's swept path), compiled and on the NumPy path."""
-    import sim.collision.mesh as module
-
+    edges_among (surface edges through a segment's swept path) against the NumPy path they took."""
     collision = CollisionMesh(box_mesh(0.01, 6))
     rng = np.random.default_rng(11)
-    cases = []
+    found = 0
     for _ in range(100):
         start = rng.uniform(-0.002, 0.012, size=(9, 3))
         end = start + rng.normal(0, 0.004, size=(9, 3))
+        keys = collision._sorted_lower[:, 0]
+        low_x = min(start[:, 0].min(), end[:, 0].min()) - collision._widest_x
+        high_x = max(start[:, 0].max(), end[:, 0].max())
+        window = slice(int(np.searchsorted(keys, low_x, "left")), int(np.searchsorted(keys, high_x, "right")))
+        pairs, local = candidate_pairs(
+            start, end, collision._sorted_lower[window], collision._sorted_upper[window]
+        )
+        reference = intersect_pairs(
+            start, end, collision.corners, pairs, collision._sorted_ids[window][local]
+        )
+        hits = collision.crossings(start, end)
+        assert_same(hits, reference)
         swept = rng.uniform(-0.002, 0.012, size=(4, 3, 3))
         edges = rng.choice(len(collision.edges), size=60, replace=False)
-        cases.append((start, end, swept, edges))
-    compiled = [(collision.crossings(s, e), collision.edges_among(w, k)) for s, e, w, k in cases]
-    monkeypatch.setattr(module, "compiled_crossings", lambda *arguments: None)
-    found = 0
-    for (start, end, swept, edges), (hits, (crossed, edge_hits)) in zip(cases, compiled, strict=True):
-        assert_same(hits, collision.crossings(start, end))
-        reference_edges, reference_hits = collision.edges_among(swept, edges)
-        np.testing.assert_array_equal(crossed, reference_edges)
+        ends = collision.points[collision.edges[edges]]
+        lower, upper = bounding_boxes(swept)
+        pairs, given = candidate_pairs(ends[:, 0], ends[:, 1], lower, upper)
+        reference_hits = intersect_pairs(ends[:, 0], ends[:, 1], swept, pairs, given)
+        crossed, edge_hits = collision.edges_among(swept, edges)
+        np.testing.assert_array_equal(crossed, edges[reference_hits.segment])
         assert_same(edge_hits, reference_hits)
         found += len(hits) + len(edge_hits)
     assert found > 50
