@@ -57,8 +57,8 @@ class CollisionMesh:
         """Move the collision mesh to new node positions (rest + subordinate-hand displacement).
 
         Only the triangles on nodes that moved since the last update are recomputed (a grasp moves a
-        few dozen nodes a graphics frame: 1.3 ms for the whole interrupted-stitch patch, a tenth of
-        it so); the result is the full recomputation's, value for value, in new arrays (a cache
+        few dozen nodes a graphics frame: 1.3 ms for the whole interrupted-stitch patch, 0.47 ms
+        so); the result is the full recomputation's, value for value, in new arrays (a cache
         keyed on the corners' identity sees the change)."""
         points = np.array(points, dtype=np.float64)
         previous = getattr(self, "points", None)
