@@ -143,16 +143,15 @@ def compiled_crossings(
             k += 1
         decided_places.append(pairs[k][2])
         k += 1
-    found = [hits, decided]
-    segments = np.concatenate([h.segment for h in found])
     places = np.concatenate([place, np.array(decided_places, dtype=np.int64)])
+    segments = np.concatenate([hits.segment, decided.segment])
     order = np.argsort(segments * len(triangles) + places, kind="stable")
     return SegmentHits(
         segments[order],
-        np.concatenate([h.triangle for h in found])[order],
-        np.concatenate([h.t for h in found])[order],
-        np.concatenate([h.barycentric for h in found])[order],
-        np.concatenate([h.entering for h in found])[order],
+        np.concatenate([hits.triangle, decided.triangle])[order],
+        np.concatenate([hits.t, decided.t])[order],
+        np.concatenate([hits.barycentric, decided.barycentric])[order],
+        np.concatenate([hits.entering, decided.entering])[order],
     )
 
 
