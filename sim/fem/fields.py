@@ -292,6 +292,38 @@ WOUND_EDGE_RADIUS = 3e-3
 1-2 mm from the edge; farther edge elements carry a fraction of the load)."""
 
 
+def _decreasing(values: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Positions of ``values`` from the largest down, nan first (a nan is read, never skipped)."""
+    return np.argsort(-np.where(np.isnan(values), np.inf, values), kind="stable").astype(np.int64)
+
+
+def _reading_bounds(
+    operator: NDArray, split: int, response: NDArray, rest: NDArray, rest_length: NDArray
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], float]:
+    """What lets the compiled measures skip the elements and edges that cannot hold the largest
+    stress or stretch (see sim/fem/_local_stress.c): (element order, (E, 1 + q) bounds in that order:
+    each one's squared Frobenius norm then its column norms; edge order, (n, 3) bounds in that order:
+    a_e = |D_e^T r_e| / L_e decreasing, the largest c from there on, c_e = |D_e|_F^2 / L_e; the
+    largest |r_e|^2 / L_e). The local elements are ordered among themselves, then the watched ones."""
+    q = operator.shape[1] if operator.ndim == 2 else 1
+    blocks = operator.reshape(-1, 6, q)
+    columns = np.sqrt((blocks**2).sum(axis=1))
+    norms = (blocks**2).sum(axis=(1, 2))
+    order = np.concatenate([_decreasing(norms[:split]), split + _decreasing(norms[split:])])
+    element_bound = np.ascontiguousarray(np.column_stack([norms, columns])[order])
+    rows = response.reshape(-1, 3, q)
+    along = np.sqrt((np.einsum("eiq,ei->eq", rows, rest) ** 2).sum(axis=1)) / rest_length
+    spread = (rows**2).sum(axis=(1, 2)) / rest_length
+    edge_order = _decreasing(along)
+    spread = spread[edge_order]
+    beyond = np.maximum.accumulate(spread[::-1])[::-1] if len(spread) else spread
+    if np.isnan(spread).any():  # a nan anywhere: no edge is skipped
+        beyond = np.full_like(spread, np.nan)
+    edge_bound = np.ascontiguousarray(np.column_stack([along[edge_order], beyond, spread]))
+    base = float(np.max((rest**2).sum(axis=1) / rest_length)) if len(rest_length) else 1.0
+    return order, element_bound, edge_order, edge_bound, base
+
+
 class LocalStress:
     """The largest von Mises stress (Pa) of the elements near a contact, for any load on its nodes.
 
@@ -302,7 +334,16 @@ class LocalStress:
     (q right-hand sides), then each FEM step is a (6E x q) product and a maximum.
     """
 
-    __slots__ = ("_operator", "_response", "_rest", "_rest_length", "_split", "elements", "watched")
+    __slots__ = (
+        "_bounds",
+        "_operator",
+        "_response",
+        "_rest",
+        "_rest_length",
+        "_split",
+        "elements",
+        "watched",
+    )
 
     def __init__(
         self,
@@ -349,13 +390,23 @@ class LocalStress:
         self._response = np.ascontiguousarray(
             (per_node[edges[:, 1]] - per_node[edges[:, 0]]).reshape(3 * len(edges), -1)
         )
+        self._bounds = _reading_bounds(
+            self._operator, self._split, self._response, self._rest, self._rest_length
+        )
 
     def measures(self, forces: NDArray[np.float64], scale: float = 1.0) -> tuple[float, float, float]:
         """(local, watched, stretch) for the generalised forces (q,): :meth:`maxima` and
         :meth:`stretch` in one compiled pass (what each FEM step reads)."""
         forces = np.ascontiguousarray(forces, dtype=np.float64).reshape(-1)
         return compiled.measures(
-            self._operator, self._split, self._response, self._rest, self._rest_length, forces, float(scale)
+            self._operator,
+            self._split,
+            self._response,
+            self._rest,
+            self._rest_length,
+            forces,
+            float(scale),
+            *self._bounds,
         )
 
     def stretch(self, forces: NDArray[np.float64], scale: float = 1.0) -> float:

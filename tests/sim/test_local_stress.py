@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from sim.errors import ModelError
 from sim.fem import Material, TissueModel
 from sim.fem import _local_stress as compiled
-from sim.fem.fields import LocalStress
+from sim.fem.fields import LocalStress, _reading_bounds
 from sim.fem.stress import von_mises_rows
 
 
@@ -102,6 +102,65 @@ def test_the_compiled_field_measures_equal_the_numpy_reference(q, elements, edge
     got = compiled.measures(operator, split, deformation, rest, rest_length, forces, scale)
     expected = reference_measures(operator, split, deformation, rest, rest_length, forces, scale)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    q=st.integers(1, 9),
+    elements=st.integers(0, 40),
+    edges=st.integers(0, 30),
+    seed=st.integers(0, 2**32 - 1),
+    scale=st.floats(-10.0, 10.0),
+    decay=st.floats(0.0, 1.0),
+    poison=st.sampled_from(["none", "operator", "deformation", "rest", "forces", "zero forces", "huge"]),
+)
+def test_the_bounded_field_measures_are_the_whole_pass_to_the_last_bit(
+    q, elements, edges, seed, scale, decay, poison
+):
+    """With each element's and edge's bound the pass reads only what can hold the largest, and answers
+    as the whole pass does, bit for bit: the stress falling off away from the load (``decay`` per
+    element, the rows shuffled), nan anywhere, no load, loads near overflow."""
+    rng = np.random.default_rng(seed)
+    split = int(rng.integers(0, elements + 1))
+    falloff = np.exp(-decay * rng.permutation(max(elements, 1))[:elements] * 0.5)
+    operator = rng.normal(size=(elements, 6, q)) * falloff[:, None, None] * 1e4
+    operator = operator.reshape(6 * elements, q)
+    deformation = rng.normal(size=(edges, 3, q)) * np.exp(-decay * np.arange(edges))[:, None, None] * 1e-4
+    deformation = deformation.reshape(3 * edges, q)
+    rest = rng.normal(size=(edges, 3)) * 1e-3
+    rest_length = (rest**2).sum(axis=1)
+    forces = rng.normal(size=q)
+    where = int(rng.integers(0, 1 << 30))
+    if poison == "operator" and elements:
+        operator[where % (6 * elements), where % q] = np.nan
+    if poison == "deformation" and edges:
+        deformation[where % (3 * edges), where % q] = np.nan
+    if poison == "rest" and edges:
+        rest[where % edges, 0] = np.nan
+    if poison == "forces":
+        forces[where % q] = np.nan
+    if poison == "zero forces":
+        forces[:] = 0.0
+    if poison == "huge":
+        forces *= 1e150
+    args = (operator, split, deformation, rest, rest_length, forces, scale)
+    whole = compiled.measures(*args)
+    bounded = compiled.measures(*args, *_reading_bounds(operator, split, deformation, rest, rest_length))
+    np.testing.assert_array_equal(bounded, whole)
+
+
+def test_bounded_measures_refuse_orders_that_do_not_fit():
+    operator, deformation, rest = np.ones((12, 3)), np.ones((6, 3)), np.eye(3)[:2].copy()
+    args = (operator, 1, deformation, rest, np.ones(2), np.ones(3), 1.0)
+    order, bound, edge_order, edge_bound, base = _reading_bounds(*args[:5])
+    with pytest.raises(IndexError, match=r"element order entry 0 \(1\) is outside its group \[0, 1\)"):
+        compiled.measures(*args, order[::-1].copy(), bound, edge_order, edge_bound, base)
+    with pytest.raises(IndexError, match=r"edge order entry 1 \(2\)"):
+        compiled.measures(*args, order, bound, np.array([0, 2]), edge_bound, base)
+    with pytest.raises(ValueError, match="element order and bounds must hold 2 and 8 entries; got 2 and 4"):
+        compiled.measures(*args, order, bound[:1].copy(), edge_order, edge_bound, base)
+    with pytest.raises(TypeError, match="takes the element order and bounds with the edge order and bounds"):
+        compiled.measures(*args, order)
 
 
 def test_compiled_field_measures_refuse_what_does_not_fit():
