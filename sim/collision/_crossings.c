@@ -275,11 +275,84 @@ done:
     return result;
 }
 
+/* -1, 0, 1 or nan, as numpy.sign. */
+static double
+numpy_sign(double x)
+{
+    return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : (x == 0.0 ? 0.0 : NAN));
+}
+
+/* plane_crossing(vertices, normal, point): where the needle's polyline (V, 3) crosses the plane
+ * through ``point`` with ``normal``, the crossing nearest the point (the first of equals), as an
+ * (x, y, z) tuple, or None where it does not cross. The NumPy it replaces
+ * (NeedleInteraction._needle_point_at_plane: signed distances, np.sign, the pairs whose signs
+ * differ, a / (a - b) along each, np.argmin of the squared distances, a nan first) is read twice
+ * each FEM step a needle is through the wall; its answer here is the same to rounding (the signed
+ * distances are summed without the fused multiply-adds a BLAS may use). */
+static PyObject *
+plane_crossing(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *objects[3];
+    if (!PyArg_ParseTuple(args, "OOO", &objects[0], &objects[1], &objects[2]))
+        return NULL;
+    static const char *names[] = {"vertices", "normal", "point"};
+    Py_buffer views[3];
+    int held = 0;
+    PyObject *result = NULL;
+    for (; held < 3; held++)
+        if (get_view(objects[held], &views[held], 0, 'd', names[held]) < 0)
+            goto done;
+    if (cells(&views[0]) % 3 != 0 || cells(&views[1]) != 3 || cells(&views[2]) != 3) {
+        PyErr_Format(PyExc_ValueError, "vertices must be (V, 3) and normal and point (3,); got %zd, %zd and %zd values",
+                     cells(&views[0]), cells(&views[1]), cells(&views[2]));
+        goto done;
+    }
+    const double *v = (const double *)views[0].buf, *n = (const double *)views[1].buf;
+    const double *p = (const double *)views[2].buf;
+    Py_ssize_t count = cells(&views[0]) / 3;
+    double level = p[0] * n[0] + p[1] * n[1] + p[2] * n[2];
+    double best[3] = {0.0, 0.0, 0.0}, nearest = INFINITY;
+    int found = 0, nearest_nan = 0;
+    double previous = 0.0;
+    for (Py_ssize_t k = 0; k < count; k++) {
+        const double *x = v + 3 * k;
+        double side = x[0] * n[0] + x[1] * n[1] + x[2] * n[2] - level;
+        if (k > 0) {
+            double before = numpy_sign(previous), after = numpy_sign(side);
+            if (before != after) { /* nan != nan: a nan pair counts, as in NumPy */
+                const double *w = x - 3;
+                double t = previous / (previous - side), point[3], square = 0.0;
+                for (int i = 0; i < 3; i++) {
+                    point[i] = w[i] + t * (x[i] - w[i]);
+                    double offset = point[i] - p[i];
+                    square += offset * offset;
+                }
+                /* np.argmin: the first nan wins; otherwise the first of the smallest */
+                int better = !found || (!nearest_nan && (isnan(square) || square < nearest));
+                if (better) {
+                    memcpy(best, point, sizeof best);
+                    nearest = square, nearest_nan = isnan(square), found = 1;
+                }
+            }
+        }
+        previous = side;
+    }
+    result = found ? Py_BuildValue("(ddd)", best[0], best[1], best[2]) : Py_NewRef(Py_None);
+done:
+    for (int i = 0; i < held; i++)
+        PyBuffer_Release(&views[i]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"crossings", crossings, METH_VARARGS,
      "crossings(start, end, corners, triangles, bound, relative_accuracy[, lower, upper]): the "
      "segment-triangle crossings among the listed triangles as bytearrays (segment, triangle, t, "
      "barycentric, entering, place) and the pairs floating point is not sure of (segment, place)."},
+    {"plane_crossing", plane_crossing, METH_VARARGS,
+     "plane_crossing(vertices, normal, point): where the polyline crosses the plane through point with "
+     "normal, the crossing nearest the point, as (x, y, z), or None."},
     {NULL, NULL, 0, NULL},
 };
 

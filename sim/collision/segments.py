@@ -99,6 +99,14 @@ def candidate_pairs(
     return segments.astype(np.int64), near[local]
 
 
+def plane_crossing(vertices: NDArray[np.float64], normal: NDArray[np.float64], point: NDArray[np.float64]):
+    """Where the polyline ``vertices`` (V, 3) (a needle, tip first) crosses the plane through ``point``
+    with ``normal``: the crossing nearest the point (the first of equals), or None where it does not
+    cross (one compiled pass, sim/collision/_crossings.c; float64 C-contiguous arrays)."""
+    crossing = _crossings.plane_crossing(vertices, normal, point)
+    return None if crossing is None else np.array(crossing)
+
+
 def compiled_crossings(
     seg_start: NDArray,
     seg_end: NDArray,

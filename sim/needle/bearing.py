@@ -108,8 +108,9 @@ class WallBearing:
         if not forces.resists_passage:
             return np.zeros((kernels, 3))
         entry = self.contacts[0].point
-        depth = float(np.linalg.norm(vertices[0] - entry))
-        speed = float(self.tip_velocity @ tangent)
+        into = vertices[0] - entry
+        depth = math.sqrt(float(into.dot(into)))  # np.linalg.norm's own arithmetic, without its wrapper
+        speed = float(np.array(self._tip_velocity).dot(tangent))
         if self.state == "pierced":
             cutting = depth >= self._deepest
             self._deepest = max(self._deepest, depth)
@@ -119,7 +120,7 @@ class WallBearing:
             cutting, ramp = False, 0.0
             inside = float(np.linalg.norm(self.contacts[-1].point - entry))
         resistance = forces.axial_resistance(speed, inside, cutting, ramp)
-        return np.tile(resistance / kernels * tangent, (kernels, 1))
+        return (resistance / kernels * tangent)[None, :].repeat(kernels, axis=0)
 
     def _kernel_load(self, key: tuple) -> KernelLoad:
         """The force kernels of the contact set ``key`` (built, and the build timed, when it changes)."""
@@ -167,7 +168,7 @@ class WallBearing:
         share, kernel_forces, torn = step.share, step.kernel_forces, step.torn
         reactions = load.nodal_forces(kernel_forces)
         self.kernel_loads = (load.soft.force_map, kernel_forces.reshape(-1))
-        self.last_contact = (load.nodes, load.kernel_drive(kernel_forces, share))
+        self.last_contact = load.drive(kernel_forces, share)
         if self._stress is None:
             self.local_stress = self.wound_edge_stress = self.stretch = math.nan
         else:

@@ -43,7 +43,7 @@ loads (:mod:`sim.needle.bearing`).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -145,7 +145,7 @@ class NeedleInteraction(GraphicsRateTracking, WallBearing):
         self.needle_pose = Pose.identity()
         self.holder_pose = Pose.identity()
         self.contacts: list[TriangleContact] = []  # nominated triangles (entry, then exit)
-        self.last_contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # nodes, intended
+        self.last_contact: Sequence[NDArray] | None = None  # (nodes, intended): a pair or a KernelDrive
         self._handle = None
         self._handle_nodes: tuple[int, ...] = ()
         self._fem_time = 0.0

@@ -12,7 +12,7 @@ one's (one Poisson ratio), otherwise share K_soft d + (1 - share) K_stiff d.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -225,8 +225,38 @@ class KernelLoad:
         """(k, 3) forces (N) on :attr:`nodes` for the kernels' forces (m, 3)."""
         return self.soft.nodal_forces(kernel_forces.reshape(-1))
 
+    def drive(self, kernel_forces: NDArray[np.float64], share: float) -> KernelDrive:
+        """(nodes, :meth:`kernel_drive`) of this step's kernel forces, the drive worked out only when
+        read (by the graphics layer, 30 times a second, not by each FEM step)."""
+        return KernelDrive(self, kernel_forces, share)
+
     def kernel_drive(self, kernel_forces: NDArray[np.float64], share: float) -> NDArray[np.float64]:
         """(k, 3) penalty drive (m) of :attr:`nodes` that the tissue answers with the
         :meth:`nodal_forces` of ``kernel_forces`` (m, 3) when split between the phases by ``share``
         (what the display and the replay drive)."""
         return self.soft.kernel_drive(kernel_forces) / self.drive_scale(share)
+
+
+class KernelDrive(Sequence):
+    """(kernel nodes, their penalty drive (k, 3) m) of one FEM step's kernel forces, read as the pair
+    it is (``nodes, intended = drive``); the drive is worked out on first reading. It keeps its own
+    copy of the forces, so it can be handed to another thread as it is."""
+
+    __slots__ = ("_forces", "_intended", "_load", "_share", "nodes")
+
+    def __init__(self, load: KernelLoad, kernel_forces: NDArray[np.float64], share: float) -> None:
+        self.nodes = load.nodes
+        self._load, self._forces, self._share = load, np.array(kernel_forces, dtype=np.float64), share
+        self._intended: NDArray[np.float64] | None = None
+
+    @property
+    def intended(self) -> NDArray[np.float64]:
+        if self._intended is None:
+            self._intended = self._load.kernel_drive(self._forces, self._share)
+        return self._intended
+
+    def __len__(self) -> int:
+        return 2
+
+    def __getitem__(self, index):
+        return (self.nodes, self.intended)[index]

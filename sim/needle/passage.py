@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.collision.mesh import TriangleContact, segment_ends
+from sim.collision.segments import plane_crossing
 from sim.needle.events import NeedleEvent, entry_angle_deg
 
 HOLE_REACH = 1.5e-3
@@ -188,23 +189,9 @@ class GraphicsRateTracking:
 
     @staticmethod
     def _needle_point_at_plane(vertices: NDArray, contact: TriangleContact) -> NDArray | None:
-        """Where the needle crosses the contact's plane, the crossing nearest the contact point."""
-        side = vertices.dot(contact.normal) - float(contact.point.dot(contact.normal))
-        sign = np.sign(side)
-        (crossing,) = np.nonzero(sign[:-1] != sign[1:])  # flatnonzero's wrapper costs as much again
-        if crossing.size == 0:
-            return None
-        if crossing.size == 1:  # the usual case: the same arithmetic on one pair of vertices
-            k = int(crossing[0])
-            a, b = side[k], side[k + 1]
-            return vertices[k] + (a / (a - b)) * (vertices[k + 1] - vertices[k])
-        a, b = side[crossing], side[crossing + 1]
-        t = a / (a - b)
-        points = vertices[crossing] + t[:, None] * (vertices[crossing + 1] - vertices[crossing])
-        if len(points) == 1:
-            return points[0]
-        offsets = points - contact.point
-        return points[np.argmin(np.einsum("ij,ij->i", offsets, offsets))]
+        """Where the needle crosses the contact's plane, the crossing nearest the contact point (one
+        compiled pass: read twice each FEM step through the wall)."""
+        return plane_crossing(vertices, contact.normal, contact.point)
 
     def _event(
         self, kind: str, time: float, hits, k: int, detail: str, angle: float = math.nan

@@ -205,7 +205,7 @@ class Simulation:
         grasp = self._forceps_step(now, step)
         self.forces.push(now, step.needle_force)
         contact = self.interaction.last_contact
-        if contact is not None:
+        if type(contact) is tuple:  # a kernel drive is its own copy, worked out when the graphics reads it
             contact = (contact[0].copy(), contact[1].copy())
         vertices = self.interaction.needle_vertices()
         interaction = self.interaction

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import types
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -32,7 +33,7 @@ class FemSnapshot(NamedTuple):
     state: str
     contact_nodes: NDArray[np.int64]
     reaction_forces: NDArray[np.float64]
-    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
+    contact: Sequence[NDArray] | None = None  # (driven nodes, intended (m)): a pair, or a KernelDrive
     tip_speed: float = 0.0
     tip_tangent: NDArray[np.float64] | None = None
     contact_triangle: int = -1
@@ -57,7 +58,7 @@ class GraphicsSnapshot(NamedTuple):
     needle_vertices: NDArray[np.float64]
     state: str
     hits: object
-    contact: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # driven nodes, intended (m)
+    contact: Sequence[NDArray] | None = None  # (driven nodes, intended (m)): a pair, or a KernelDrive
     holder_time: float = math.nan  # s, the device sample whose needle the frame shows (motion to photon)
     loads: tuple[NDArray[np.int64], NDArray[np.float64], float] | None = None
     """The FEM step's nodal loads on the tissue (the needle's and the forceps' grasp): node ids, forces

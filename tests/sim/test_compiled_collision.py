@@ -16,6 +16,7 @@ from sim.collision.segments import (
     candidate_pairs,
     compiled_crossings,
     intersect_pairs,
+    plane_crossing,
 )
 from sim.mesh import box_mesh
 
@@ -215,3 +216,62 @@ def test_an_update_of_a_few_nodes_equals_the_whole_recomputation():
             assert moving._widest_x == whole._widest_x and moving._moved == whole._moved
             changed = not np.array_equal(corners_before, moving.corners)
             assert (moving.corners is not corners_before) or not changed
+
+
+def numpy_plane_crossing(vertices, normal, point):
+    """The NumPy the compiled plane crossing replaced (NeedleInteraction._needle_point_at_plane)."""
+    side = vertices.dot(normal) - float(point.dot(normal))
+    sign = np.sign(side)
+    (crossing,) = np.nonzero(sign[:-1] != sign[1:])
+    if crossing.size == 0:
+        return None
+    a, b = side[crossing], side[crossing + 1]
+    t = a / (a - b)
+    points = vertices[crossing] + t[:, None] * (vertices[crossing + 1] - vertices[crossing])
+    offsets = points - point
+    return points[np.argmin(np.einsum("ij,ij->i", offsets, offsets))]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    vertices=st.integers(2, 30),
+    seed=st.integers(0, 2**32 - 1),
+    kind=st.sampled_from(["curve", "zigzag", "on the plane", "nan", "parallel"]),
+)
+def test_the_compiled_plane_crossing_is_the_numpy_one(vertices, seed, kind):
+    """A needle's polyline against a plane: the same crossing (the nearest, the first of equals, a
+    vertex on the plane, a nan) or None, to rounding."""
+    rng = np.random.default_rng(seed)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    point = rng.normal(size=3) * 1e-3
+    if kind == "curve":  # a needle's arc through the plane, possibly twice
+        angles = np.linspace(0.0, rng.uniform(0.5, 3.0), vertices)
+        radius = rng.uniform(2e-3, 8e-3)
+        line = point + radius * np.column_stack([np.cos(angles), np.sin(angles), np.zeros(vertices)])
+        line = line @ np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    else:
+        line = point + rng.normal(size=(vertices, 3)) * 2e-3
+    if kind == "on the plane":  # vertices exactly on it (a zero sign), a crossing at a vertex
+        line[:: max(1, vertices // 3)] = point
+    if kind == "parallel":  # nowhere across it
+        offset = np.abs(rng.normal()) * 1e-3 + 1e-4
+        line = line - np.outer(line @ normal - point @ normal, normal) + offset * normal
+    if kind == "nan":
+        line[int(rng.integers(0, vertices))] = np.nan
+    line = np.ascontiguousarray(line)
+    got = plane_crossing(line, normal, point)
+    expected = numpy_plane_crossing(line, normal, point)
+    if expected is None:
+        assert got is None
+        return
+    assert got is not None
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-18)
+
+
+def test_the_plane_crossing_refuses_what_does_not_fit():
+    with pytest.raises(ValueError, match=r"vertices must be \(V, 3\) and normal and point \(3,\); got 4"):
+        plane_crossing(np.zeros(4), np.ones(3), np.zeros(3))
+    with pytest.raises(TypeError, match="normal must be float64"):
+        plane_crossing(np.zeros((2, 3)), np.ones(3, dtype=np.float32), np.zeros(3))
+    assert plane_crossing(np.zeros((0, 3)), np.ones(3), np.zeros(3)) is None
