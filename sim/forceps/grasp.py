@@ -217,7 +217,7 @@ class ForcepsInteraction:
         elif needle_nodes is not None and len(needle_nodes):  # what holds the nodes against the needle
             forces = hand - (self._against(needle_nodes) @ np.reshape(needle_forces, -1)).reshape(-1, 3)
         total = forces.sum(axis=0)
-        pull = float(np.linalg.norm(total))
+        pull = math.sqrt(float(total.dot(total)))  # np.linalg.norm's own arithmetic, without its wrapper
         if pull > self.forceps.edge_tear_force:
             triangle = self.triangle
             self._let_go()

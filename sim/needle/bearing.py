@@ -118,7 +118,8 @@ class WallBearing:
             ramp = depth - (self._wall_path - forces.emergence_ramp)
         else:  # through both walls: the shaft spans the wall from entry to exit
             cutting, ramp = False, 0.0
-            inside = float(np.linalg.norm(self.contacts[-1].point - entry))
+            across = self.contacts[-1].point - entry
+            inside = math.sqrt(float(across.dot(across)))
         resistance = forces.axial_resistance(speed, inside, cutting, ramp)
         return (resistance / kernels * tangent)[None, :].repeat(kernels, axis=0)
 
@@ -161,9 +162,10 @@ class WallBearing:
             surface,
             self._tangential_ratio,
         )
-        for m, rank in enumerate(ranks):
-            if step.shifts[m].any():
-                self._move_contact(rank, step.shifts[m])
+        if step.shifts.any():  # a hold slid or tore (rare): move those contacts
+            for m, rank in enumerate(ranks):
+                if step.shifts[m].any():
+                    self._move_contact(rank, step.shifts[m])
         self._indentation, self.soft_share = step.indentation, step.share
         share, kernel_forces, torn = step.share, step.kernel_forces, step.torn
         reactions = load.nodal_forces(kernel_forces)
