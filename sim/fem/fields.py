@@ -294,7 +294,7 @@ WOUND_EDGE_RADIUS = 3e-3
 
 def _decreasing(values: NDArray[np.float64]) -> NDArray[np.int64]:
     """Positions of ``values`` from the largest down, nan first (a nan is read, never skipped)."""
-    return np.argsort(-np.where(np.isnan(values), np.inf, values), kind="stable").astype(np.int64)
+    return np.argsort(np.where(np.isnan(values), -np.inf, -values)).astype(np.int64)
 
 
 def _reading_bounds(
@@ -306,21 +306,24 @@ def _reading_bounds(
     a_e = |D_e^T r_e| / L_e decreasing, the largest c from there on, c_e = |D_e|_F^2 / L_e; the
     largest |r_e|^2 / L_e). The local elements are ordered among themselves, then the watched ones."""
     q = operator.shape[1] if operator.ndim == 2 else 1
-    blocks = operator.reshape(-1, 6, q)
-    columns = np.sqrt((blocks**2).sum(axis=1))
-    norms = (blocks**2).sum(axis=(1, 2))
-    order = np.concatenate([_decreasing(norms[:split]), split + _decreasing(norms[split:])])
-    element_bound = np.ascontiguousarray(np.column_stack([norms, columns])[order])
-    rows = response.reshape(-1, 3, q)
-    along = np.sqrt((np.einsum("eiq,ei->eq", rows, rest) ** 2).sum(axis=1)) / rest_length
-    spread = (rows**2).sum(axis=(1, 2)) / rest_length
-    edge_order = _decreasing(along)
-    spread = spread[edge_order]
+    elements, edges = np.empty((len(operator) // 6, 1 + q)), np.empty((len(rest_length), 2))
+    base = compiled.measure_bounds(
+        np.ascontiguousarray(operator, dtype=np.float64),
+        q,
+        np.ascontiguousarray(response, dtype=np.float64),
+        np.ascontiguousarray(rest, dtype=np.float64),
+        np.ascontiguousarray(rest_length, dtype=np.float64),
+        elements,
+        edges,
+    )
+    order = np.concatenate([_decreasing(elements[:split, 0]), split + _decreasing(elements[split:, 0])])
+    edge_order = _decreasing(edges[:, 0])
+    along, spread = edges[edge_order].T
     beyond = np.maximum.accumulate(spread[::-1])[::-1] if len(spread) else spread
     if np.isnan(spread).any():  # a nan anywhere: no edge is skipped
         beyond = np.full_like(spread, np.nan)
-    edge_bound = np.ascontiguousarray(np.column_stack([along[edge_order], beyond, spread]))
-    base = float(np.max((rest**2).sum(axis=1) / rest_length)) if len(rest_length) else 1.0
+    element_bound = elements[order]
+    edge_bound = np.column_stack([along, beyond, spread])
     return order, element_bound, edge_order, edge_bound, base
 
 

@@ -149,6 +149,51 @@ def test_the_bounded_field_measures_are_the_whole_pass_to_the_last_bit(
     np.testing.assert_array_equal(bounded, whole)
 
 
+def test_the_bounds_are_the_norms_they_say():
+    """Each element's squared Frobenius norm and column norms, each edge's first- and second-order gains
+    and the largest rest ratio, against NumPy's."""
+    rng = np.random.default_rng(7)
+    q, elements, edges, split = 6, 40, 25, 17
+    operator = (
+        rng.normal(size=(6 * elements, q)) * np.repeat(np.exp(-rng.uniform(0, 5, elements)), 6)[:, None]
+    )
+    deformation, rest = rng.normal(size=(3 * edges, q)), rng.normal(size=(edges, 3))
+    rest_length = (rest**2).sum(axis=1) * rng.uniform(0.9, 1.1, edges)
+    order, element_bound, edge_order, edge_bound, base = _reading_bounds(
+        operator, split, deformation, rest, rest_length
+    )
+    blocks = operator.reshape(-1, 6, q)
+    np.testing.assert_allclose(element_bound[:, 0], (blocks**2).sum(axis=(1, 2))[order], rtol=1e-14)
+    np.testing.assert_allclose(element_bound[:, 1:], np.sqrt((blocks**2).sum(axis=1))[order], rtol=1e-14)
+    assert sorted(order[:split]) == list(range(split)) and sorted(order[split:]) == list(
+        range(split, elements)
+    )
+    assert (np.diff(element_bound[:split, 0]) <= 0).all() and (np.diff(element_bound[split:, 0]) <= 0).all()
+    rows = deformation.reshape(-1, 3, q)
+    along = np.linalg.norm(np.einsum("eiq,ei->eq", rows, rest), axis=1) / rest_length
+    spread = (rows**2).sum(axis=(1, 2)) / rest_length
+    np.testing.assert_allclose(edge_bound[:, 0], along[edge_order], rtol=1e-14)
+    np.testing.assert_allclose(edge_bound[:, 2], spread[edge_order], rtol=1e-14)
+    np.testing.assert_allclose(
+        edge_bound[:, 1], [spread[edge_order][k:].max() for k in range(edges)], rtol=1e-14
+    )
+    assert base == pytest.approx(((rest**2).sum(axis=1) / rest_length).max(), rel=1e-14)
+    with pytest.raises(ValueError, match=r"operator \(6E, 6\) and elements \(E, 7\) do not fit"):
+        compiled.measure_bounds(
+            operator, q, deformation, rest, rest_length, np.empty((elements, 6)), np.empty((25, 2))
+        )
+    with pytest.raises(ValueError, match="must match rest_length's 24 edges"):
+        compiled.measure_bounds(
+            operator,
+            q,
+            deformation,
+            rest,
+            rest_length[:24].copy(),
+            np.empty((elements, 7)),
+            np.empty((24, 2)),
+        )
+
+
 def test_bounded_measures_refuse_orders_that_do_not_fit():
     operator, deformation, rest = np.ones((12, 3)), np.ones((6, 3)), np.eye(3)[:2].copy()
     args = (operator, 1, deformation, rest, np.ones(2), np.ones(3), 1.0)
