@@ -7,7 +7,7 @@ Run:  .venv/bin/python benchmarks/forceps.py [--repeats 3]
   porcine-artery preset's soft phase, 300 kPa), by the jaws rule (every surface node within the
   1.5 mm jaws' footprint) and the source paper's triangle rule (the nearest triangle's three nodes),
   on uniform meshes of 0.5, 0.3, 0.2 and 0.15 mm cells;
-- cost: on the interrupted stitch's 10k-node artery, a scripted expert's whole stitch in simulated
+- cost: on the interrupted stitch's 6,624-node patch, a scripted expert's whole stitch in simulated
   time with both hands against the needle hand alone: the FEM step's median and p99 compute (the
   budget: <= 200 us), the haptic step's, and the wall time of building a grasp (the grasped nodes'
   K0^-1 columns solved, then the three unit patterns), median over ``--repeats``;
