@@ -50,6 +50,21 @@ def held_faces(tissue: Tissue) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     return held, distance <= HELD_EDGE_REACH
 
 
+def _mean_of(vectors: list[NDArray]) -> NDArray:
+    """np.mean(vectors, axis=0) of a few 3-vectors, in its order of additions, without its wrapper."""
+    total = vectors[0]
+    for vector in vectors[1:]:
+        total = total + vector
+    return total / len(vectors)
+
+
+def _cross(a: NDArray, b: NDArray) -> NDArray:
+    """np.cross of two 3-vectors, the same products and differences in plain floats (np.cross's
+    wrapper cost 45 us a step of a released needle)."""
+    (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 class WallBearing:
     """The FEM-rate loads of a needle in or on the wall (see the module docstring); the state it
     reads and sets (contacts, forces, the tissue, the stress operator) is the interaction's."""
@@ -75,12 +90,12 @@ class WallBearing:
         if not points or not elapsed > 0:
             return vertices
         share = -math.expm1(-elapsed / self.forces.recoil_time)  # of the way there, this step
-        centre, goal = np.mean(points, axis=0), np.mean(targets, axis=0)
+        centre, goal = _mean_of(points), _mean_of(targets)
         rotation = np.eye(3)
         if len(points) >= 2:
             chord, wanted = points[-1] - points[0], targets[-1] - targets[0]
-            axis = np.cross(chord, wanted)
-            sine = float(np.linalg.norm(axis))
+            axis = _cross(chord, wanted)
+            sine = math.sqrt(float(axis.dot(axis)))  # np.linalg.norm's own arithmetic
             if sine > 1e-15:
                 rotation = rotation_about(axis, share * math.atan2(sine, float(chord @ wanted)))
         pose = self.needle_pose

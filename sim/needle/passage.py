@@ -102,9 +102,7 @@ class GraphicsRateTracking:
         points = hits.points(*segment_ends(vertices)) if len(hits) else np.zeros((0, 3))
         # the crossing back through the entry surface: the entry triangle, or (on a fine mesh, as the
         # needle's body sweeps a little sideways) an entering crossing the wall still holds
-        near_entry = np.array(
-            [bool(hits.entering[k]) and self._holds(entry, points[k]) for k in range(len(hits))], dtype=bool
-        )
+        near_entry = hits.entering & self._within_reach(entry, points, self._hold_margin(entry))
         through_entry = np.flatnonzero((hits.triangle == entry.triangle) | near_entry)
         still_held = [
             c
@@ -148,12 +146,16 @@ class GraphicsRateTracking:
         nominated triangle's size plus 1 mm of the contact point, so a needle held sideways in the
         wound still counts as passing through it, and one whose other end crosses the plane far
         away (as it is pulled clear) does not."""
-        margin = 1e-3
-        if self.contacts and contact is self.contacts[0] and 0 in self._torn:
-            margin += TORN_HOLE  # a torn entry is a slit the needle was levered along
-        reach = self._triangle_reach(contact) + margin
+        reach = self._triangle_reach(contact) + self._hold_margin(contact)
         offset = point - contact.point
         return float(offset.dot(offset)) <= reach * reach
+
+    def _hold_margin(self, contact: TriangleContact) -> float:
+        """How far (m) beyond its triangle's size the wall holds a needle crossing its plane (see
+        :meth:`_holds`)."""
+        if self.contacts and contact is self.contacts[0] and 0 in self._torn:
+            return 1e-3 + TORN_HOLE  # a torn entry is a slit the needle was levered along
+        return 1e-3
 
     def _triangle_reach(self, contact: TriangleContact) -> float:
         """The contact triangle's size seen from the contact point (m): its farthest corner's distance,

@@ -4,12 +4,15 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sim.collision import intersect_segments_triangles
 from sim.collision.mesh import CollisionMesh
 from sim.fem import BiphaseTissue, Material, TissueModel
 from sim.mesh import box_mesh
 from sim.needle import Needle, Pose, rotation_about, rotation_aligning
+from sim.needle.bearing import _cross, _mean_of
 from sim.needle.events import NEEDLE_STATES
 from sim.needle.forces import NeedleForces
 from sim.needle.interaction import NeedleInteraction, PiercingRules, entry_angle_deg
@@ -325,3 +328,18 @@ def test_a_released_needle_levered_in_the_wall_settles_and_unloads_it(wall, forc
     recoiling = forces_seen[(steps > release_at) & (steps <= release_at + 0.01)]
     assert float(np.abs(recoiling[:, 0]).max()) > 0.3 * lateral_levered  # damped: not in one step
     assert interaction.state != "free"  # still in the wall, where the hand can take it again
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    a=st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+    b=st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+    more=st.lists(st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3), max_size=4),
+)
+def test_the_settling_needles_plain_float_cross_and_mean_are_numpys_to_the_bit(a, b, more):
+    """A released needle's settling step takes np.cross and np.mean's answers without their wrappers."""
+    a, b = np.array(a), np.array(b)
+    np.testing.assert_array_equal(_cross(a, b), np.cross(a, b))
+    vectors = [a, b] + [np.array(v) for v in more]
+    np.testing.assert_array_equal(_mean_of(vectors), np.mean(vectors, axis=0))
+    np.testing.assert_array_equal(_mean_of([a]), np.mean([a], axis=0))
