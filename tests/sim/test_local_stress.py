@@ -78,32 +78,6 @@ def reference_measures(operator, split, deformation, rest, rest_length, forces, 
     return local, watched, float(np.sqrt(((deformed**2).sum(axis=1) / rest_length).max()))
 
 
-@settings(max_examples=80, deadline=None)
-@given(
-    q=st.integers(1, 9),
-    elements=st.integers(0, 12),
-    edges=st.integers(0, 10),
-    seed=st.integers(0, 2**32 - 1),
-    scale=st.floats(0.01, 10.0),
-    poison=st.sampled_from(["none", "operator", "deformation"]),
-)
-def test_the_compiled_field_measures_equal_the_numpy_reference(q, elements, edges, seed, scale, poison):
-    rng = np.random.default_rng(seed)
-    split = int(rng.integers(0, elements + 1))
-    operator = rng.normal(size=(6 * elements, q)) * 1e4
-    deformation = rng.normal(size=(3 * edges, q)) * 1e-4
-    rest = rng.normal(size=(edges, 3)) * 1e-3
-    rest_length = (rest**2).sum(axis=1)
-    forces = rng.normal(size=q)
-    if poison == "operator" and elements:  # a nan is the answer of its group, as NumPy's max says
-        operator[int(rng.integers(0, 6 * elements)), 0] = np.nan
-    if poison == "deformation" and edges:
-        deformation[int(rng.integers(0, 3 * edges)), 0] = np.nan
-    got = compiled.measures(operator, split, deformation, rest, rest_length, forces, scale)
-    expected = reference_measures(operator, split, deformation, rest, rest_length, forces, scale)
-    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0)
-
-
 @settings(max_examples=150, deadline=None)
 @given(
     q=st.integers(1, 9),
@@ -114,11 +88,12 @@ def test_the_compiled_field_measures_equal_the_numpy_reference(q, elements, edge
     decay=st.floats(0.0, 1.0),
     poison=st.sampled_from(["none", "operator", "deformation", "rest", "forces", "zero forces", "huge"]),
 )
-def test_the_bounded_field_measures_are_the_whole_pass_to_the_last_bit(
+def test_the_compiled_field_measures_equal_the_numpy_reference(
     q, elements, edges, seed, scale, decay, poison
 ):
-    """With each element's and edge's bound the pass reads only what can hold the largest, and answers
-    as the whole pass does, bit for bit: the stress falling off away from the load (``decay`` per
+    """The compiled pass equals the NumPy reference (a nan is the answer of its group, as NumPy's max
+    says); with each element's and edge's bound it reads only what can hold the largest and answers as
+    the whole pass does, bit for bit: the stress falling off away from the load (``decay`` per
     element, the rows shuffled), nan anywhere, no load, loads near overflow."""
     rng = np.random.default_rng(seed)
     split = int(rng.integers(0, elements + 1))
@@ -145,6 +120,8 @@ def test_the_bounded_field_measures_are_the_whole_pass_to_the_last_bit(
         forces *= 1e150
     args = (operator, split, deformation, rest, rest_length, forces, scale)
     whole = compiled.measures(*args)
+    if poison != "huge":  # near overflow the two sum in different orders: inf or not
+        np.testing.assert_allclose(whole, reference_measures(*args), rtol=1e-12, atol=0)
     bounded = compiled.measures(*args, *_reading_bounds(operator, split, deformation, rest, rest_length))
     np.testing.assert_array_equal(bounded, whole)
 
