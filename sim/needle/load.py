@@ -258,5 +258,5 @@ class KernelDrive(Sequence):
     def __len__(self) -> int:
         return 2
 
-    def __getitem__(self, index):
+    def __getitem__(self, index: int | slice):  # the pair's items, as a tuple's
         return (self.nodes, self.intended)[index]

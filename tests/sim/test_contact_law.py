@@ -187,6 +187,15 @@ def test_kernel_step_on_a_real_kernel_set_equals_the_reference():
         for value, wanted in zip(got, expected, strict=True):
             np.testing.assert_allclose(value, wanted, rtol=1e-12, atol=1e-300)
     assert step.torn == (0, 1) and step.share < 1.0  # the deepest press tore both and met the stiff phase
+    # the step's drive, worked out when the graphics layer reads it, is the eager one, kept from the
+    # forces as they were (the FEM step may reuse its array)
+    kernel_forces = step.kernel_forces.copy()
+    drive = load.drive(step.kernel_forces, step.share)
+    step.kernel_forces[:] = 0.0
+    nodes, intended = drive
+    assert nodes is load.nodes and len(drive) == 2 and drive[0] is nodes
+    np.testing.assert_array_equal(intended, load.kernel_drive(kernel_forces, step.share))
+    assert drive.intended is intended  # worked out once
 
 
 def test_the_compiled_law_refuses_what_does_not_fit():
