@@ -125,6 +125,7 @@ def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **opt
     tissue = tissue_for(spec, cache_dir)
     if options.get("subordinate") is not None and "grasp_sites" not in options:
         options["grasp_sites"] = grasp_sites(spec)
+    options.setdefault("bites", spec.bites())
     simulation = Simulation(
         tissue,
         Needle.curved(),

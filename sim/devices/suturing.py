@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.collision.mesh import segment_ends
 from sim.devices.base import DeviceError, Trajectory
 from sim.geometry import circle_through
 from sim.needle import Needle, Pose, TurnAbout, rotation_about
@@ -353,3 +354,17 @@ def blend_poses(start: Pose, stop: Pose, fraction: float) -> Pose:
         rotation = start.rotation @ rotation_about(axis / np.linalg.norm(axis), w * angle)
     position = start.position + w * (stop.position - start.position)
     return Pose.unchecked(position, rotation)
+
+
+def planned_exits(needle: Needle, collision, bites: list[tuple]) -> NDArray[np.float64]:
+    """(k, 3) where ``needle``, planned square on each of ``bites`` ((entry, normal, bite_direction)
+    each) and turned through a pass's insertion, crosses out of the wall of ``collision`` (a
+    :class:`sim.collision.CollisionMesh`, at rest; m): what a real-time run solves ahead for."""
+    sites = []
+    for entry, normal, bite_direction in bites:
+        plan = SuturingPass(needle, entry, normal, bite_direction)
+        vertices = needle.world_vertices(plan.turned(math.radians(plan.p.insertion_arc_deg)))
+        hits = collision.query(vertices)
+        if len(hits):
+            sites.append(hits.points(*segment_ends(vertices))[~hits.entering])
+    return np.concatenate(sites) if sites else np.zeros((0, 3))

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sim.devices.base import GRIP_BUTTON, STOP_BUTTON, Device, DeviceLostError
+from sim.devices.suturing import planned_exits
 from sim.fem import Tissue
 from sim.fem.kernel import warm_kernel_geometry
 from sim.forceps import Forceps, ForcepsEvent, ForcepsInteraction
@@ -43,6 +44,10 @@ from sim.runtime.safety import ForceSafety
 from sim.runtime.settings import RuntimeSettings
 from sim.runtime.snapshots import FemSnapshot, GraphicsSnapshot, HolderSnapshot, Mailbox, RuntimeEvent
 from sim.runtime.telemetry import LAYERS, LoopTelemetry, RunResult
+
+EXIT_REACH_KERNELS = 1.5
+"""Surface nodes this many kernel radii from a bite's planned exit are asked of the column worker as a
+real-time run starts (the reach it asks round a predicted crossing)."""
 
 
 class Simulation:
@@ -63,6 +68,7 @@ class Simulation:
         subordinate: Device | None = None,
         forceps: Forceps | None = None,
         grasp_sites: ArrayLike | None = None,
+        bites: list[tuple] | None = None,
     ) -> None:
         self.settings = settings or RuntimeSettings()
         self.device = device
@@ -81,6 +87,10 @@ class Simulation:
         """Where the task expects the forceps to take the edge (m, (k, 3)): a real-time run solves the
         columns of the nodes the jaws would hold there before its clock starts, and those of the nodes
         near the open jaws as they come (the graphics layer), so a grasp waits for no solve."""
+        self.bites = list(bites or [])
+        """The task's bites, (entry, normal, bite_direction) each: a real-time run has the whole
+        columns of the surface nodes where a needle placed square on each mark comes out of the wall
+        (:func:`sim.devices.suturing.planned_exits`) solved in the background from its start."""
         self.safety = ForceSafety(device.limits, self.settings.safety, tick=self.settings.period("haptic"))
         self.holder = Mailbox()
         self.fem = Mailbox()
@@ -383,6 +393,18 @@ class Simulation:
                 self.forceps.model.prefetch(near, full=True)
                 self.forceps.rehearse(site)
 
+    def _ask_for_exit_sites(self) -> None:
+        """As the clock starts: ask the column worker for the whole K0^-1 columns of the surface nodes
+        within the kernels' reach of where a needle planned square on each bite comes out, solved in
+        the background while the hand approaches (the live stress reads them when the tip comes out:
+        at the station the worker, asked only once the needle was in the wall, had left 24 of a
+        first exit's nodes unsolved, and that exit waited 0.2 s for them)."""
+        if self._prefetcher is None:
+            return
+        reach = EXIT_REACH_KERNELS * self.interaction.forces.kernel_radius
+        for site in planned_exits(self.interaction.needle, self.interaction.collision, self.bites):
+            self._prefetcher.near(site, reach)
+
     def _start_prefetching(self, whole_columns: bool = False) -> None:
         """Start solving on-demand columns ahead of contact, if some contact could need them (with
         ``whole_columns``, as the live local stress in real time does: whole columns of precomputed
@@ -463,6 +485,7 @@ class Simulation:
             self._cast_candidate_depths()
             self._start_prefetching(whole_columns=self.interaction.live_stress)
             self._solve_grasp_sites()
+            self._ask_for_exit_sites()
             try:
                 return run_realtime(self, duration, pin_cpus)
             finally:

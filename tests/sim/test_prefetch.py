@@ -10,6 +10,7 @@ import pytest
 
 from sim.errors import SolverError
 from sim.fem import BiphaseTissue, Material, TissueModel
+from sim.mesh import box_mesh
 from sim.needle.forces import NeedleForces
 from sim.runtime.prefetch import ColumnWorker, Prefetcher, arc_ahead, line_ahead
 
@@ -316,3 +317,43 @@ def test_a_live_stress_run_starts_a_worker_for_a_precomputed_model(small_box, tm
                 assert simulation._prefetcher.full_columns
         finally:
             simulation.close()
+
+
+def test_a_real_time_run_asks_for_its_bites_exit_faces_from_the_start(tmp_path):
+    """Seen at the station: the worker, asked for a first exit's nodes only once the needle was in the
+    wall, had 24 unsolved when it came out (a 0.2 s wait). As a real-time run starts, the nodes round
+    where a needle planned square on each bite comes out are asked for, and solved whole, before any
+    needle is near."""
+    from sim.devices import ScriptedDevice
+    from sim.devices.suturing import planned_exits
+    from sim.needle import Needle, Pose
+    from sim.runtime import Simulation
+    from sim.runtime.simulation import EXIT_REACH_KERNELS
+
+    wall = box_mesh((0.006, 0.005, 0.0015), (12, 10, 3))  # a 1.5 mm wall held at two sides
+    held = np.union1d(wall.node_sets["x0"], wall.node_sets["x1"])
+    tissue = BiphaseTissue.build(wall, held)
+    tissue.precompute(tmp_path)
+    entry = np.array([0.002, 0.0025, 0.0015])
+    device = ScriptedDevice(lambda t: (Pose(np.array([0.0, 0.0, 0.05]), np.eye(3)), False))
+    simulation = Simulation(tissue, Needle.curved(0.003), device, bites=[(entry, (0, 0, 1), (1, 0, 0))])
+    simulation.interaction.live_stress = True
+    try:
+        needle, collision = simulation.interaction.needle, simulation.interaction.collision
+        sites = planned_exits(needle, collision, simulation.bites)
+        # out through the far face, 0.4 mm on along the bite (a 3 mm circle turned 30 deg down 1.5 mm)
+        assert len(sites) and np.linalg.norm(sites - [0.0024, 0.0025, 0.0], axis=1).min() < 0.15e-3, sites
+        reach = EXIT_REACH_KERNELS * simulation.interaction.forces.kernel_radius
+        surface = np.setdiff1d(wall.surface_nodes, held)
+        near = [surface[np.linalg.norm(wall.points[surface] - site, axis=1) <= reach] for site in sites]
+        wanted = np.unique(np.concatenate(near))
+        assert wanted.size and all(tissue.soft.needs_solve(int(n), full=True) for n in wanted)
+        simulation._start_prefetching(whole_columns=True)  # as run_realtime does, then asks
+        simulation._ask_for_exit_sites()
+        deadline = time.monotonic() + 30
+        while any(tissue.soft.needs_solve(int(n), full=True) for n in wanted) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert simulation._prefetcher.error is None
+        assert not any(tissue.soft.needs_solve(int(n), full=True) for n in wanted)
+    finally:
+        simulation.close()

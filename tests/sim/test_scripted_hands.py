@@ -61,3 +61,26 @@ def test_a_skilled_hand_does_not_overstress_the_wall(task, cache):
         assert "overstress" not in kinds and "tear" not in kinds, (task, trial)
         assert "implausible_hit" not in kinds, (task, trial)
         assert np.nanmax(stretch) <= 1.6, (task, trial, np.nanmax(stretch))
+
+
+@pytest.mark.parametrize("task", ["interrupted-stitch", "arteriotomy-closure"])
+def test_a_skilled_hands_exits_are_where_the_run_asks_for_columns_ahead(task, cache):
+    """A real-time run asks the column worker, from its start, for the surface nodes round where a
+    needle planned square on each bite comes out (sim.devices.suturing.planned_exits): a skilled
+    hand's exits come out within half a millimetre of one of them (its entries are 1.5 mm away),
+    well inside the reach asked round each."""
+    from sim.devices.suturing import planned_exits
+    from sim.runtime.simulation import EXIT_REACH_KERNELS
+
+    plan = SessionPlan(study="s", participant="p", task=task, device="scripted", trial=1)
+    device, duration, _ = open_device("scripted", plan, None, pass_parameters(0.95, seed=1))
+    simulation = task_simulation(task_spec(task), device, cache)
+    sites = planned_exits(simulation.interaction.needle, simulation.interaction.collision, simulation.bites)
+    assert len(simulation.bites) == len(task_spec(task).bites()) and len(sites) >= len(simulation.bites)
+    simulation.run_simulated(duration)
+    corners = simulation.interaction.collision.corners
+    exits = [np.asarray(e.barycentric) @ corners[e.triangle] for e in simulation.events if e.kind == "exit"]
+    assert len(exits) == len(simulation.bites)
+    assert EXIT_REACH_KERNELS * simulation.interaction.forces.kernel_radius >= 1e-3
+    for point in exits:
+        assert np.linalg.norm(sites - point, axis=1).min() <= 0.5e-3, (task, point, sites)
