@@ -17,10 +17,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sessions.catalog import Catalog
+from sessions.config import cache_dir
 from sessions.running.live import LiveView
 from sessions.running.screens import Line, Screen, wrapped
 from sessions.scoring.review import SessionReview, experts_on_task, review_session
-from sessions.tasks import TaskSpec, task_spec
+from sessions.tasks import TaskSpec, task_spec, warm_exit_columns
 from sim.devices.base import DeviceError
 
 COUNTDOWN_S = 3
@@ -221,7 +222,8 @@ def run_station(
             screen.show(instruction_lines(spec, plan.device, plan.participant, note, plan.sub_device))
             if _wait_to_start(screen, start_device) != "start":
                 break
-            _countdown(screen)
+            # the countdown's waits solve what the trial's first exit will read (sessions.tasks)
+            _countdown(screen, lambda until: warm_exit_columns(spec, cache_dir(home), until))
             screen.close()
             screen = None
             uid = run_trial()
@@ -260,9 +262,14 @@ def _wait_to_start(screen: Screen, start_device: Callable[[], object] | None) ->
             device.close()
 
 
-def _countdown(screen: Screen) -> None:
+def _countdown(screen: Screen, prepare: Callable[[float], object] | None = None) -> None:
+    """Three seconds counted down on the screen; ``prepare(until)`` works in each second's wait up to
+    ``until`` (``time.monotonic()``), which the count keeps to."""
     for left in range(COUNTDOWN_S, 0, -1):
         screen.show(
             [Line(f"Starting in {left}", "title"), Line("Esc stops the trial; it is kept and scored.")]
         )
-        clock.sleep(1.0)
+        until = clock.monotonic() + 1.0
+        if prepare is not None:
+            prepare(until)
+        clock.sleep(max(0.0, until - clock.monotonic()))

@@ -17,6 +17,7 @@ from sessions.tasks.build import (
     task_preset,
     task_simulation,
     tissue_for,
+    warm_exit_columns,
 )
 from sessions.tasks.library import TASKS
 from sessions.tasks.spec import TaskSpec
@@ -59,4 +60,5 @@ __all__ = [
     "tissue_for",
     "user_tasks",
     "user_tasks_dir",
+    "warm_exit_columns",
 ]

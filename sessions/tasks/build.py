@@ -4,6 +4,7 @@ the subordinate hand's grasp sites and the simulation."""
 from __future__ import annotations
 
 import json
+import time as clock
 from pathlib import Path
 
 import numpy as np
@@ -12,11 +13,14 @@ from sessions.tasks.kinds import kind_of
 from sessions.tasks.spec import TaskSpec
 from sessions.tasks.user import known_task, task_spec
 from sim.calibration.presets import tissue_preset
+from sim.collision.mesh import CollisionMesh
 from sim.devices.assisting import edge_grasp
+from sim.devices.suturing import planned_exits
 from sim.fem import BiphaseTissue
 from sim.needle import Needle
 from sim.needle.reach import WristLimit, WristStop
 from sim.runtime import Simulation
+from sim.runtime.simulation import EXIT_REACH_KERNELS
 
 
 def task_mesh(spec: TaskSpec):
@@ -138,3 +142,30 @@ def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **opt
     if stop is not None:  # the approach stops the wrist short of square to the resting wall
         simulation.interaction.wrist = WristLimit(stop, simulation.interaction.needle)
     return simulation
+
+
+def warm_exit_columns(spec: TaskSpec, cache_dir: Path | None, until: float) -> int:
+    """Solve, in this process's tissue model of the task (:func:`tissue_for`), the whole K0^-1 columns
+    of the surface nodes round where a needle planned square on each bite comes out of the wall, three
+    at a time, until ``until`` (``time.monotonic()``) or all are solved; returns how many were solved.
+    The station does it in its start countdown, where the process would only wait, so a trial's first
+    exit finds them (a real-time run's column worker, sharing a core with the display, reaches them
+    only after a fast hand's first exit)."""
+    tissue = tissue_for(spec, cache_dir)
+    mesh = tissue.mesh
+    models = [model for model in tissue.models if model.inverse_source is None]  # a shared one divides
+    reach = EXIT_REACH_KERNELS * task_preset(spec).forces.kernel_radius
+    surface = np.setdiff1d(mesh.surface_nodes, tissue.base.clamped_nodes)
+    wanted: list[int] = []
+    for site in planned_exits(Needle.curved(), CollisionMesh(mesh), spec.bites()):
+        distance = np.linalg.norm(mesh.points[surface] - site, axis=1)
+        near = surface[distance <= reach][np.argsort(distance[distance <= reach])]  # nearest first
+        wanted += [int(n) for n in near if int(n) not in wanted]
+    missing = [n for n in wanted if any(model.needs_solve(n, full=True) for model in models)]
+    solved = 0
+    while missing and clock.monotonic() < until:
+        chunk, missing = missing[:3], missing[3:]
+        for model in models:
+            model.prefetch(np.array(chunk), full=True)
+        solved += len(chunk)
+    return solved
