@@ -223,7 +223,7 @@ def run_station(
             if _wait_to_start(screen, start_device) != "start":
                 break
             # the countdown's waits solve what the trial's first exit will read (sessions.tasks)
-            _countdown(screen, lambda until: warm_exit_columns(spec, cache_dir(home), until))
+            _countdown(screen, warm_exit_columns(spec, cache_dir(home)))
             screen.close()
             screen = None
             uid = run_trial()

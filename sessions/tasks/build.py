@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import time as clock
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -144,28 +145,43 @@ def task_simulation(spec: TaskSpec, device, cache_dir: Path | None = None, **opt
     return simulation
 
 
-def warm_exit_columns(spec: TaskSpec, cache_dir: Path | None, until: float) -> int:
-    """Solve, in this process's tissue model of the task (:func:`tissue_for`), the whole K0^-1 columns
-    of the surface nodes round where a needle planned square on each bite comes out of the wall, three
-    at a time, until ``until`` (``time.monotonic()``) or all are solved; returns how many were solved.
-    The station does it in its start countdown, where the process would only wait, so a trial's first
-    exit finds them (a real-time run's column worker, sharing a core with the display, reaches them
-    only after a fast hand's first exit)."""
-    tissue = tissue_for(spec, cache_dir)
+def warm_exit_columns(spec: TaskSpec, cache_dir: Path | None) -> Callable[[float], int]:
+    """``solve(until)``: solves, in this process's tissue model of the task (:func:`tissue_for`), the
+    whole K0^-1 columns of the surface nodes round where a needle planned square on each bite comes out
+    of the wall, nearest first, three at a time, until ``until`` (``time.monotonic()``) or all are
+    solved; returns how many it solved. The nodes are found at its first call. The station calls it in
+    its start countdown, where the process would only wait, so a trial's first exit finds them (a
+    real-time run's column worker, sharing a core with the display, reaches them only after a fast
+    hand's first exit)."""
+    missing: list[int] | None = None
+
+    def solve(until: float) -> int:
+        nonlocal missing
+        tissue = tissue_for(spec, cache_dir)
+        models = [model for model in tissue.models if model.inverse_source is None]  # a shared one divides
+        if missing is None:
+            missing = [
+                n for n in _exit_face_nodes(spec, tissue) if any(m.needs_solve(n, full=True) for m in models)
+            ]
+        solved = 0
+        while missing and clock.monotonic() < until:
+            chunk, missing = missing[:3], missing[3:]
+            for model in models:
+                model.prefetch(np.array(chunk), full=True)
+            solved += len(chunk)
+        return solved
+
+    return solve
+
+
+def _exit_face_nodes(spec: TaskSpec, tissue) -> list[int]:
+    """The free surface nodes within the kernels' reach of the task's planned exits, nearest first."""
     mesh = tissue.mesh
-    models = [model for model in tissue.models if model.inverse_source is None]  # a shared one divides
     reach = EXIT_REACH_KERNELS * task_preset(spec).forces.kernel_radius
     surface = np.setdiff1d(mesh.surface_nodes, tissue.base.clamped_nodes)
-    wanted: list[int] = []
+    wanted: dict[int, None] = {}  # ordered, each once
     for site in planned_exits(Needle.curved(), CollisionMesh(mesh), spec.bites()):
         distance = np.linalg.norm(mesh.points[surface] - site, axis=1)
-        near = surface[distance <= reach][np.argsort(distance[distance <= reach])]  # nearest first
-        wanted += [int(n) for n in near if int(n) not in wanted]
-    missing = [n for n in wanted if any(model.needs_solve(n, full=True) for model in models)]
-    solved = 0
-    while missing and clock.monotonic() < until:
-        chunk, missing = missing[:3], missing[3:]
-        for model in models:
-            model.prefetch(np.array(chunk), full=True)
-        solved += len(chunk)
-    return solved
+        close = distance <= reach
+        wanted.update(dict.fromkeys(surface[close][np.argsort(distance[close])].tolist()))
+    return list(wanted)

@@ -319,9 +319,8 @@ def _reading_bounds(
     order = np.concatenate([_decreasing(elements[:split, 0]), split + _decreasing(elements[split:, 0])])
     edge_order = _decreasing(edges[:, 0])
     along, spread = edges[edge_order].T
+    # a nan spread has a nan along (the same rows): it is read first, and the suffix maxima carry it
     beyond = np.maximum.accumulate(spread[::-1])[::-1] if len(spread) else spread
-    if np.isnan(spread).any():  # a nan anywhere: no edge is skipped
-        beyond = np.full_like(spread, np.nan)
     element_bound = elements[order]
     edge_bound = np.column_stack([along, beyond, spread])
     return order, element_bound, edge_order, edge_bound, base

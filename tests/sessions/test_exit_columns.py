@@ -23,7 +23,8 @@ def test_the_countdown_solves_the_exit_faces_whole_and_keeps_to_its_deadline():
         np.concatenate([surface[np.linalg.norm(mesh.points[surface] - s, axis=1) <= reach] for s in sites])
     )
     assert wanted.size and all(tissue.base.needs_solve(int(n), full=True) for n in wanted)
-    assert warm_exit_columns(spec, None, time.monotonic() - 1.0) == 0  # no time left: nothing solved
-    assert warm_exit_columns(spec, None, time.monotonic() + 120.0) == wanted.size
+    solve = warm_exit_columns(spec, None)
+    assert solve(time.monotonic() - 1.0) == 0  # no time left: nothing solved
+    assert solve(time.monotonic() + 120.0) == wanted.size
     assert not any(model.needs_solve(int(n), full=True) for model in tissue.models for n in wanted)
-    assert warm_exit_columns(spec, None, time.monotonic() + 120.0) == 0  # solved once
+    assert solve(time.monotonic() + 120.0) == 0  # solved once
