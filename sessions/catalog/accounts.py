@@ -7,6 +7,7 @@ catalog keeps only the SHA-256, so a copied catalog signs nobody in.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import re
 import secrets
@@ -25,8 +26,14 @@ MIN_PASSWORD_LENGTH = 10
 USERNAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{1,63}$")
 STATION_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
 _HASHER = PasswordHasher()
-# verified against when a username does not exist, so a wrong name costs as much time as a wrong password
-_DUMMY_HASH = _HASHER.hash(secrets.token_hex(16))
+
+
+@functools.cache
+def _dummy_hash() -> str:
+    """Verified against when a username does not exist, so a wrong name costs as much time as a wrong
+    password. Made at the first sign-in (whatever its name), not at import: a hash costs ~0.1 s, which
+    every process that opens a catalog would pay."""
+    return _HASHER.hash(secrets.token_hex(16))
 
 
 class AccountError(CatalogError):
@@ -98,8 +105,9 @@ def set_active(orm: OrmSession, user: User, active: bool) -> None:
 def authenticate(orm: OrmSession, username: str, password: str) -> User | None:
     """The active user with this name and password, or None (same work whether or not the name exists)."""
     user = orm.scalar(select(User).where(User.username == username))
+    dummy = _dummy_hash()  # made (once) whether or not the name exists
     try:
-        _HASHER.verify(user.password_hash if user else _DUMMY_HASH, password)
+        _HASHER.verify(user.password_hash if user else dummy, password)
     except (VerificationError, InvalidHashError):
         return None
     if user is None or not user.active:
