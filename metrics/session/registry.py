@@ -8,6 +8,7 @@ definition or a threshold changes, so old and new numbers are never mixed.
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -76,10 +77,13 @@ class Metric:
 
 
 class Registry:
-    """Ordered collection of metrics, looked up by name."""
+    """Ordered collection of metrics, looked up by name. Reading it first imports the metric groups
+    (:data:`metrics.session.compute.METRIC_GROUPS`, whose ``@metric`` functions fill it), so no
+    reader depends on which modules happened to be imported before."""
 
     def __init__(self) -> None:
         self._metrics: dict[str, Metric] = {}
+        self._complete = False
 
     def add(self, metric: Metric) -> Metric:
         if metric.name in self._metrics:
@@ -87,24 +91,31 @@ class Registry:
         self._metrics[metric.name] = metric
         return metric
 
+    @property
+    def _every(self) -> dict[str, Metric]:
+        if not self._complete:
+            self._complete = True  # before the import: a group reading the registry as it loads
+            importlib.import_module("metrics.session.compute")
+        return self._metrics
+
     def __getitem__(self, name: str) -> Metric:
         try:
-            return self._metrics[name]
+            return self._every[name]
         except KeyError:
             known = ", ".join(self._metrics)
             raise MetricsError(f"unknown metric {name!r}; known metrics: {known}") from None
 
     def __contains__(self, name: object) -> bool:
-        return name in self._metrics
+        return name in self._every
 
     def __iter__(self) -> Iterator[Metric]:
-        return iter(self._metrics.values())
+        return iter(self._every.values())
 
     def __len__(self) -> int:
-        return len(self._metrics)
+        return len(self._every)
 
     def names(self) -> list[str]:
-        return list(self._metrics)
+        return list(self._every)
 
     def select(self, names: list[str] | None) -> list[Metric]:
         return list(self) if names is None else [self[n] for n in names]
