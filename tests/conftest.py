@@ -125,7 +125,9 @@ def demo_template(tmp_path_factory):
 
     home = tmp_path_factory.mktemp("demo-template")
     catalog = Catalog(f"sqlite:///{home / 'catalog.sqlite'}")
-    result = run_demo(catalog, home, DemoSize(**REDUCED_DEMO_SIZE))
+    # in this process: the other pytest worker has the second core (a pool of two would spawn two
+    # interpreters that import everything again; the whole demo's tests run the pool)
+    result = run_demo(catalog, home, DemoSize(**REDUCED_DEMO_SIZE), workers=1)
     catalog.close()
     return home, result
 
