@@ -32,7 +32,7 @@ def test_a_rerun_keeps_accounts_linked_and_removes_the_old_replays(tmp_path, cop
 
     size = DemoSize(experts=2, expert_sessions=1, trainees=2, practice_sessions=2, retention=False,
                     closures=False, ratings=False)  # fmt: skip
-    result = run_demo(catalog, home, size)
+    result = run_demo(catalog, home, size, workers=1)  # in this process: the other pytest worker has a core
 
     assert result.relinked == ("T01",) and result.unlinked == ("T03",) and result.videos_removed == 2
     with catalog.session() as orm:
