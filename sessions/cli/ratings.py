@@ -8,7 +8,6 @@ import click
 import pandas as pd
 
 from metrics.instruments import INSTRUMENTS, instrument
-from metrics.study.reliability import agreement_shown, rater_agreement
 from sessions.catalog import CatalogError
 from sessions.cli.base import open_catalog, print_frame, print_json, user_errors
 from sessions.scoring.ratings import add_rating, import_ratings, study_ratings
@@ -110,6 +109,8 @@ def ratings_list(study: str, instrument_name: str | None, as_json: bool) -> None
 def ratings_reliability(study: str, instrument_name: str, as_json: bool) -> None:
     """Inter-rater reliability per item and of the total: ICC(2,1) and ICC(2,k) (two-way random,
     absolute agreement) on the sessions every rater rated, and Krippendorff's alpha on all ratings."""
+    from metrics.study.reliability import agreement_shown, rater_agreement  # SciPy's statistics: 0.4 s
+
     catalog, _ = open_catalog()
     frame = study_ratings(catalog, study, instrument_name)
     if frame.empty:
