@@ -95,7 +95,11 @@ class Registry:
     def _every(self) -> dict[str, Metric]:
         if not self._complete:
             self._complete = True  # before the import: a group reading the registry as it loads
-            importlib.import_module("metrics.session.compute")
+            try:
+                importlib.import_module("metrics.session.compute")
+            except BaseException:
+                self._complete = False  # a failed import is raised again by the next read
+                raise
         return self._metrics
 
     def __getitem__(self, name: str) -> Metric:
