@@ -85,7 +85,9 @@ def board_video(tmp_path_factory):
     from sim.tracking.synthetic import board_views_video
 
     video = tmp_path_factory.mktemp("board") / "board.mp4"
-    board_views_video(video, size=(960, 540))
+    # each view held a second (a file is read as fast as the window draws, ~30 ms a frame): the window
+    # stays up for several seconds, long enough for the test to see the picture change
+    board_views_video(video, size=(960, 540), hold_frames=10)
     return video
 
 
