@@ -9,7 +9,10 @@ then the body's pose:
   continuing the last frame's rotation does;
 - **two or more seen**: that single-marker pose of the largest marker in the image starts a
   Levenberg-Marquardt refinement over every corner of every seen marker at once, which is both more
-  accurate (more points, wider baseline) and free of the mirror ambiguity.
+  accurate (more points, wider baseline) and free of the mirror ambiguity;
+- then, in both cases, the pose is refined on every black-white cell edge of the seen markers that face
+  the camera (:mod:`sim.tracking.edges`): a marker seen alone and small is where the corners alone
+  leave the tilt, and so the tip's depth, uncertain.
 
 The instrument tip is the body pose applied to the body's tip offset. Everything is in the camera
 frame (x right, y down, z along the optical axis), metres.
@@ -23,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.tracking.camera import Camera, aruco_dictionary
+from sim.tracking.edges import refine_on_edges
 from sim.tracking.markers import MarkerBody
 
 AMBIGUOUS_FIT_RATIO = 0.5
@@ -30,6 +34,11 @@ AMBIGUOUS_FIT_RATIO = 0.5
 MIN_FACING = 0.35
 """A face turned further than ~70 deg from the camera (cosine below this) is left out of a pose that
 other faces can give: its corners are foreshortened to a few pixels and blurred."""
+MAX_REFINE_TURN_DEG = 5.0
+MAX_REFINE_SHIFT_M = 0.01
+"""An edge refinement (:mod:`sim.tracking.edges`) that turns the body further or moves it further than
+this from its corners' pose is not trusted: the corners' pose is kept (the single-marker tilt it mends is
+a fraction of a degree, its depth a few mm)."""
 SEARCH_MARGIN = 1.5
 """The window searched first spans the last sighting plus this many times its size on each side."""
 
@@ -179,12 +188,16 @@ class BodyTracker:
         low = np.maximum(points.min(axis=0) - margin, 0).astype(int)
         high = np.minimum(points.max(axis=0) + margin, [grey.shape[1], grey.shape[0]]).astype(int)
         self._roi = (int(low[0]), int(low[1]), int(high[0]), int(high[1]))
-        pose = self._solve(seen)
+        pose = self._solve(seen, grey)
         if pose is not None:
             self._previous_rotation = pose.rotation
         return pose
 
-    def _solve(self, seen: dict[int, NDArray[np.float64]]) -> BodyPose | None:
+    def _solve(
+        self, seen: dict[int, NDArray[np.float64]], grey: NDArray[np.uint8] | None = None
+    ) -> BodyPose | None:
+        """The body pose from the corners of the markers seen, refined on the cell edges of those facing
+        the camera when the image is given."""
         import cv2
 
         matrix, distortion = self.camera.matrix, self.camera.distortion
@@ -208,10 +221,26 @@ class BodyTracker:
             )  # fmt: skip
             if ok:
                 rotation, translation = cv2.Rodrigues(r)[0], t.ravel()
-                projected, _ = cv2.projectPoints(object_points, r, t, matrix, distortion)
-                error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - image_points) ** 2, 1))))
+                error = self._corner_error(seen, rotation, translation)
+        facing = [k for k in seen if self._facing(k, rotation, translation) >= MIN_FACING]
+        if facing and grey is not None:
+            refined = refine_on_edges(grey, self.camera, self.body, facing, rotation, translation)
+            if refined is not None and _near(refined, (rotation, translation)):
+                rotation, translation = refined
+                error = self._corner_error(seen, rotation, translation)
         tip = rotation @ np.asarray(self.body.tip_offset_m, dtype=np.float64) + translation
         return BodyPose(rotation, translation, tip, error, len(seen))
+
+    def _corner_error(self, seen: dict[int, NDArray[np.float64]], rotation, translation) -> float:
+        """The seen corners' RMS reprojection error (px) under a body pose."""
+        import cv2
+
+        object_points = np.concatenate([self.body.corners(k) for k in seen])
+        image_points = np.concatenate(list(seen.values()))
+        projected, _ = cv2.projectPoints(
+            object_points, cv2.Rodrigues(rotation)[0], translation, self.camera.matrix, self.camera.distortion
+        )
+        return float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - image_points) ** 2, 1))))
 
     def _facing(self, marker_id: int, rotation, translation) -> float:
         """Cosine of the angle between a face's outward normal and the direction to the camera."""
@@ -248,6 +277,18 @@ class BodyTracker:
                 best = int(np.argmin([np.linalg.norm(R - self._previous_rotation) for R, _ in choices]))
         rotation, translation = choices[best]
         return rotation, translation, float(residuals[best])
+
+
+def _near(refined, start) -> bool:
+    """Whether an edge refinement stayed within :data:`MAX_REFINE_TURN_DEG` and :data:`MAX_REFINE_SHIFT_M`
+    of the corners' pose (a face seen small and at a slant can pull it to a far, wrong minimum)."""
+    (rotation, translation), (start_rotation, start_translation) = refined, start
+    cosine = np.clip((np.trace(rotation @ start_rotation.T) - 1) / 2, -1.0, 1.0)
+    return bool(
+        np.all(np.isfinite(translation))
+        and np.degrees(np.arccos(cosine)) <= MAX_REFINE_TURN_DEG
+        and np.linalg.norm(translation - start_translation) <= MAX_REFINE_SHIFT_M
+    )
 
 
 def _area(corners: NDArray[np.float64]) -> float:
