@@ -14,13 +14,16 @@ the dark cell to the bright one (within :data:`REACH_OF_CELL` of a cell, so a ne
 reached); then Gauss-Newton on the body's six pose parameters minimises the located points' distances
 to their projected segments (Huber-weighted, Jacobian from ``cv2.projectPoints``), and the edges are
 located once more from the refined pose. Measured on the synthetic wrist roll (benchmarks/camera.py,
-``--part accuracy``): the tip's RMS error 1.28 -> 0.97 mm at 640x480 (frames with one marker seen
-1.45 -> 1.09 mm), 0.43 -> 0.39 mm at 1280x720.
+``--part accuracy``): the tip's RMS error 1.28 -> 0.93 mm at 640x480 (frames with one marker seen
+1.45 -> 1.09 mm), for about 2 ms more a frame; at 1280x720, where the markers are 92 px across, 0.43 ->
+0.39 mm, too little for its cost, so the tracker refines only markers seen smaller
+(:data:`sim.tracking.pose.EDGES_BELOW_PX`).
 """
 
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,58 +89,88 @@ def cell_edges(body: MarkerBody, marker_id: int) -> tuple[NDArray[np.float64], N
     return segments, np.asarray(into_black) @ frame.T
 
 
+@dataclass(frozen=True)
+class EdgeSet:
+    """The cell edges of some markers of a body, ready to project: ``samples`` (k * m, 3) the points
+    along each edge where it is located (:data:`SAMPLES_ALONG`), ``ends`` (3k, 3) each edge's start,
+    every stop, then a point just inside each edge's black cell (which way is dark)."""
+
+    samples: NDArray[np.float64]
+    ends: NDArray[np.float64]
+
+    @property
+    def count(self) -> int:
+        return len(self.ends) // 3
+
+
+@functools.cache
+def edge_set(body: MarkerBody, marker_ids: tuple[int, ...]) -> EdgeSet:
+    """The :class:`EdgeSet` of ``marker_ids`` (kept per body and set of markers)."""
+    segments = np.concatenate([cell_edges(body, marker_id)[0] for marker_id in marker_ids])
+    into_black = np.concatenate([cell_edges(body, marker_id)[1] for marker_id in marker_ids])
+    starts, stops = segments[:, 0], segments[:, 1]
+    samples = starts[:, None] + SAMPLES_ALONG[None, :, None] * (stops - starts)[:, None]
+    cell = body.side_m / 6
+    ends = np.concatenate([starts, stops, starts + 0.1 * cell * into_black])
+    return EdgeSet(samples.reshape(-1, 3), ends)
+
+
+_STEPS = np.linspace(-1.0, 1.0, PROFILE_STEPS)
+
+
 def locate_edges(
-    image: NDArray[np.float32],
+    grey: NDArray[np.uint8],
     camera: Camera,
-    segments: NDArray[np.float64],
-    into_black: NDArray[np.float64],
+    edges: EdgeSet,
     rvec: NDArray[np.float64],
     tvec: NDArray[np.float64],
-    offset: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Edge points located in ``image`` near the segments projected with (rvec, tvec): their body-frame
-    points (n, 3), image points (n, 2) and the image's unit normals from dark to bright (n, 2).
-    ``offset``: where ``image``'s top-left pixel lies in the camera's image (a window of it)."""
+    """Edge points located in ``grey`` near the edges projected with (rvec, tvec): their body-frame
+    points (n, 3), image points (n, 2) and the image's unit normals from dark to bright (n, 2)."""
     import cv2
 
-    starts, stops = segments[:, 0], segments[:, 1]
-    count, along = len(segments), len(SAMPLES_ALONG)
-    points = starts[:, None] + SAMPLES_ALONG[None, :, None] * (stops - starts)[:, None]
-    cell = float(np.linalg.norm(stops[0] - starts[0]))
-    inside = starts + 0.1 * cell * into_black
+    nothing = np.empty((0, 3)), np.empty((0, 2)), np.empty((0, 2))
+    count, along = edges.count, len(SAMPLES_ALONG)
     projected, _ = cv2.projectPoints(
-        np.concatenate([points.reshape(-1, 3), starts, stops, inside]),
-        rvec, tvec, camera.matrix, camera.distortion,
-    )  # fmt: skip
+        np.concatenate([edges.samples, edges.ends]), rvec, tvec, camera.matrix, camera.distortion
+    )
     projected = projected.reshape(-1, 2)
+    if not np.all(np.isfinite(projected)):
+        return nothing
     on_edge = projected[: count * along].reshape(count, along, 2)
     start_px, stop_px, inside_px = np.split(projected[count * along :], 3)
     direction = stop_px - start_px
     length = np.hypot(direction[:, 0], direction[:, 1])
     usable = length >= MIN_EDGE_PX
     if not usable.any():
-        return np.empty((0, 3)), np.empty((0, 2)), np.empty((0, 2))
-    on_edge, points, length = on_edge[usable], points[usable], length[usable]
+        return nothing
+    on_edge, length = on_edge[usable], length[usable]
+    points = edges.samples.reshape(count, along, 3)[usable]
     unit = direction[usable] / length[:, None]
     normal = np.column_stack([-unit[:, 1], unit[:, 0]])
     towards_black = np.sum(normal * (inside_px[usable] - start_px[usable]), axis=1)
     normal *= -np.sign(towards_black)[:, None]  # dark to bright
-    reach = np.minimum(MAX_REACH_PX, REACH_OF_CELL * length)
-    steps = np.linspace(-1.0, 1.0, PROFILE_STEPS)
-    offsets = reach[:, None] * steps[None, :]  # (k, s)
+    offsets = np.minimum(MAX_REACH_PX, REACH_OF_CELL * length)[:, None] * _STEPS  # (k, s)
     samples = on_edge[:, :, None, :] + offsets[:, None, :, None] * normal[:, None, None, :]  # (k, m, s, 2)
     flat = samples.reshape(-1, PROFILE_STEPS, 2).astype(np.float32)
-    if offset is not None:
-        flat -= offset.astype(np.float32)
-    profile = cv2.remap(image, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR, borderValue=np.nan)
+    # only the window the profiles cover is converted to floating point
+    height, width = grey.shape[:2]
+    centres = on_edge.reshape(-1, 2)
+    room = MAX_REACH_PX + 2.0
+    low = np.clip(np.floor(centres.min(axis=0) - room), 0, [width, height]).astype(int)
+    high = np.clip(np.ceil(centres.max(axis=0) + room) + 1, 0, [width, height]).astype(int)
+    if np.any(high - low < 2):
+        return nothing
+    window = grey[low[1] : high[1], low[0] : high[0]].astype(np.float32)
+    flat -= low.astype(np.float32)
+    profile = cv2.remap(window, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR, borderValue=np.nan)
     rise = np.diff(profile, axis=1)
     rise = np.maximum(rise - 0.2 * np.nanmax(rise, axis=1, keepdims=True), 0.0)
     weight = rise.sum(axis=1)
-    middle = (offsets[:, 1:] + offsets[:, :-1]) / 2
-    middle = np.repeat(middle, len(SAMPLES_ALONG), axis=0)
+    middle = np.repeat((offsets[:, 1:] + offsets[:, :-1]) / 2, along, axis=0)
     shift = (rise * middle).sum(axis=1) / np.where(weight > 0, weight, 1.0)
     found = np.isfinite(shift) & (weight > 0)
-    normals = np.repeat(normal, len(SAMPLES_ALONG), axis=0)
+    normals = np.repeat(normal, along, axis=0)
     image_points = on_edge.reshape(-1, 2) + shift[:, None] * normals
     return points.reshape(-1, 3)[found], image_points[found], normals[found]
 
@@ -157,21 +190,18 @@ def refine_on_edges(
 
     rvec = cv2.Rodrigues(np.asarray(rotation, dtype=np.float64))[0]
     tvec = np.asarray(translation, dtype=np.float64).reshape(3, 1).copy()
-    edges = [cell_edges(body, marker_id) for marker_id in marker_ids]
-    segments = np.concatenate([e[0] for e in edges])
-    into_black = np.concatenate([e[1] for e in edges])
-    image, offset = _window(grey, camera, segments, rvec, tvec)
-    if image is None:
-        return None
+    edges = edge_set(body, tuple(marker_ids))
     for _ in range(MEASUREMENTS):
-        points, located, normals = locate_edges(image, camera, segments, into_black, rvec, tvec, offset)
+        points, located, normals = locate_edges(grey, camera, edges, rvec, tvec)
         if len(points) < MIN_POINTS:
             return None
+        scale = None
         for _ in range(ITERATIONS):
             projected, jacobian = cv2.projectPoints(points, rvec, tvec, camera.matrix, camera.distortion)
             residual = np.sum(normals * (projected.reshape(-1, 2) - located), axis=1)
             rows = np.einsum("ni,nij->nj", normals, jacobian[:, :6].reshape(-1, 2, 6))
-            scale = 1.4826 * float(np.median(np.abs(residual))) + 1e-3
+            if scale is None:  # the residuals' robust spread, from where this measurement started
+                scale = 1.4826 * float(np.median(np.abs(residual))) + 1e-3
             weight = np.minimum(1.0, HUBER_K * scale / np.maximum(np.abs(residual), 1e-12))
             weighted = rows * weight[:, None]
             try:
@@ -184,21 +214,3 @@ def refine_on_edges(
             if float(np.abs(step).max()) < STEP_TOLERANCE:
                 break
     return cv2.Rodrigues(rvec)[0], tvec.ravel()
-
-
-def _window(grey, camera, segments, rvec, tvec) -> tuple[NDArray[np.float32] | None, NDArray[np.float64]]:
-    """The part of the image the segments project into (with room for the search across them) as
-    float32, and its top-left corner (px); None when it lies outside the image."""
-    import cv2
-
-    projected, _ = cv2.projectPoints(segments.reshape(-1, 3), rvec, tvec, camera.matrix, camera.distortion)
-    projected = projected.reshape(-1, 2)
-    if not np.all(np.isfinite(projected)):
-        return None, np.zeros(2)
-    room = MAX_REACH_PX + 4.0
-    height, width = grey.shape[:2]
-    low = np.maximum(np.floor(projected.min(axis=0) - room), 0).astype(int)
-    high = np.minimum(np.ceil(projected.max(axis=0) + room), [width, height]).astype(int)
-    if np.any(high - low < 2):
-        return None, np.zeros(2)
-    return grey[low[1] : high[1], low[0] : high[0]].astype(np.float32), low.astype(np.float64)

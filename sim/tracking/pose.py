@@ -39,6 +39,11 @@ MAX_REFINE_SHIFT_M = 0.01
 """An edge refinement (:mod:`sim.tracking.edges`) that turns the body further or moves it further than
 this from its corners' pose is not trusted: the corners' pose is kept (the single-marker tilt it mends is
 a fraction of a degree, its depth a few mm)."""
+EDGES_BELOW_PX = 64.0
+"""The pose is refined on the markers' cell edges when a facing marker is seen smaller than this
+(px across): at 640x480 the cube's 24 mm markers are 46 px at 30 cm and the edges take the tip from
+1.28 to 0.93 mm RMS; at 1280x720 they are 92 px, the corners alone give 0.43 mm and the edges 0.39 mm
+for 1-2 ms more a frame (benchmarks/camera.py)."""
 SEARCH_MARGIN = 1.5
 """The window searched first spans the last sighting plus this many times its size on each side."""
 
@@ -223,7 +228,8 @@ class BodyTracker:
                 rotation, translation = cv2.Rodrigues(r)[0], t.ravel()
                 error = self._corner_error(seen, rotation, translation)
         facing = [k for k in seen if self._facing(k, rotation, translation) >= MIN_FACING]
-        if facing and grey is not None:
+        small = facing and min(np.sqrt(_area(seen[k])) for k in facing) < EDGES_BELOW_PX
+        if small and grey is not None:
             refined = refine_on_edges(grey, self.camera, self.body, facing, rotation, translation)
             if refined is not None and _near(refined, (rotation, translation)):
                 rotation, translation = refined
