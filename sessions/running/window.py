@@ -13,6 +13,7 @@ task's target marks and each bite's entry and exit as it happens, and the heads-
 
 from __future__ import annotations
 
+import math
 import os
 import time as clock
 from collections.abc import Callable
@@ -26,7 +27,7 @@ from sessions.running.hud import HudLimits, HudTracker
 from sim.devices.mouse import GRIP_KEYS, MouseHand, PoseChannel
 from sim.errors import VascsimError
 from sim.render import TissueRenderer
-from sim.runtime.display import DisplayScene
+from sim.runtime.display import DisplayScene, instruments_now
 
 FORCEPS_KEYS = ("f",)
 """The key (or a second foot pedal sending it) that closes and opens camera-tracked forceps' jaws."""
@@ -199,6 +200,8 @@ class LiveWindow:
 
     def _draw(self, snapshot) -> None:
         renderer = self._renderer
+        # the wall as the graphics frame left it (at most a frame old, as in the paper), solved first
+        frame = self.scene.frame_of(snapshot) if snapshot is not None else None
         now = self._now()
         fem = self.simulation.fem.get() if self.simulation is not None else None
         force = np.zeros(3) if fem is None else np.asarray(fem.needle_force)
@@ -216,8 +219,10 @@ class LiveWindow:
             problem = ask() if ask is not None else None
             if problem:  # said for as long as it lasts: the instrument does not move while it does
                 self.tracker.warn(now, problem)
-        if snapshot is not None:
-            frame = self.scene.frame_of(snapshot)
+        shown = math.nan
+        if frame is not None:
+            frame, shown = instruments_now(frame, snapshot, fem)
+            self._needle = frame.needle
             renderer.update(frame)
             self._place_shadow(frame.needle)
         self._show_bites()
@@ -226,8 +231,8 @@ class LiveWindow:
         self.frames += 1
         if self.published is not None and self.frames % LIVE_VIEW_EVERY == 0:
             self._publish()
-        if snapshot is not None and self.latency_log is not None:
-            self._latencies.append((snapshot.holder_time, self._session_time()))
+        if frame is not None and self.latency_log is not None:
+            self._latencies.append((shown, self._session_time()))
 
     def _add_overlays(self, renderer) -> None:
         import pyvista as pv

@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING
 
 from sim.runtime.osrt import leave_interrupts_to_parent, report_failure, stop_with_parent
 from sim.runtime.prefetch import WORKER_NICENESS
-from sim.runtime.shared import ControlBlock, SharedTelemetry
+from sim.runtime.shared import ControlBlock
+from sim.runtime.telemetry import SharedTelemetry
 
 if TYPE_CHECKING:
     from sim.runtime.simulation import Simulation

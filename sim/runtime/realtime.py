@@ -57,10 +57,9 @@ from sim.runtime.shared import (
     SharedGraphics,
     SharedHapticLog,
     SharedHolder,
-    SharedTelemetry,
 )
 from sim.runtime.snapshots import RuntimeEvent
-from sim.runtime.telemetry import LAYERS, LoopTelemetry, RunResult
+from sim.runtime.telemetry import LAYERS, LoopTelemetry, RunResult, SharedTelemetry
 
 if TYPE_CHECKING:  # the simulation it runs; the simulation imports this module
     from sim.runtime.simulation import Simulation

@@ -7,7 +7,7 @@ processes. Each channel has one writer:
 - :class:`SharedForceHistory` (FEM -> haptic): a ring of (time, force), published
   entry first, counter second;
 - :class:`SharedHapticLog` (haptic -> main): every tick's time, position, grip, force;
-- :class:`SharedTelemetry`, :class:`SharedEvents` and :class:`ControlBlock`.
+- :class:`SharedEvents` and :class:`ControlBlock` (the loops' telemetry: :mod:`sim.runtime.telemetry`).
 
 They offer the same methods as the in-process versions, so the haptic layer's
 step function runs unchanged on either side.
@@ -29,6 +29,7 @@ from sim.runtime.snapshots import (
     FEM_LAYOUT,
     HAPTIC_LOG_LAYOUT,
     HOLDER_LAYOUT,
+    MAX_SHARED_NEEDLE_VERTICES,
     STATE_CODES,
     FemSnapshot,
     GraphicsSnapshot,
@@ -192,33 +193,6 @@ class SharedHapticLog(HapticColumns):
         row, at = self._data[index], HAPTIC_LOG_LAYOUT.at
         row[at.time], row[at.position], row[at.grip], row[at.force] = time, position, float(grip), force
         self._count[0] = index + 1
-
-
-class SharedTelemetry:
-    """Start and compute times of the haptic process's steps."""
-
-    @staticmethod
-    def doubles(capacity: int) -> int:
-        """Its size in the arena: ``capacity`` (period, compute) pairs and a count."""
-        return capacity * 2 + 1
-
-    def __init__(self, arena: Arena, capacity: int) -> None:
-        self._data = arena.take(capacity, 2)
-        self._count = arena.take(1)
-
-    def record(self, start: float, compute: float) -> None:
-        index = int(self._count[0])
-        if index < len(self._data):
-            self._data[index] = (start, compute)
-            self._count[0] = index + 1
-
-    @property
-    def starts(self) -> NDArray[np.float64]:
-        return self._data[: int(self._count[0]), 0]
-
-    @property
-    def computes(self) -> NDArray[np.float64]:
-        return self._data[: int(self._count[0]), 1]
 
 
 EVENT_CODES = (
@@ -439,7 +413,6 @@ class SharedFem:
         self._local = None
 
     def put(self, snapshot) -> None:
-
         self._local = snapshot
         slot, at = self._slot, FEM_LAYOUT.at
         slot[0] += 1
@@ -453,27 +426,36 @@ class SharedFem:
         slot[at.needle_force] = snapshot.needle_force
         slot[at.local_stress] = snapshot.local_stress
         slot[at.stretch] = snapshot.stretch
-        slot[at.tip_velocity] = snapshot.tip_velocity if snapshot.tip_velocity is not None else math.nan
-        slot[at.grasp_force] = math.nan if snapshot.grasp_force is None else snapshot.grasp_force
-        slot[at.grasp_displacement] = (
-            math.nan if snapshot.grasp_displacement is None else snapshot.grasp_displacement
-        )
+        slot[at.tip_velocity] = _nan_if_none(snapshot.tip_velocity)
+        slot[at.grasp_force] = _nan_if_none(snapshot.grasp_force)
+        slot[at.grasp_displacement] = _nan_if_none(snapshot.grasp_displacement)
         slot[at.wrist_at_stop] = float(snapshot.wrist_at_stop)
+        vertices = snapshot.needle_vertices
+        whole = len(vertices) <= MAX_SHARED_NEEDLE_VERTICES
+        slot[at.needle_count] = len(vertices) if whole else 0
+        if whole:
+            slot[at.needle.start : at.needle.start + vertices.size] = vertices.ravel()
+        slot[at.holder_time] = snapshot.holder_time
+        jaws = snapshot.jaws
+        slot[at.jaw_point] = math.nan if jaws is None else jaws[0]
+        slot[at.jaws_closed] = math.nan if jaws is None else float(jaws[1])
         slot[0] += 1
 
     def get(self):
         if os.getpid() == self._owner:
             return self._local
-
         copy = consistent_copy(self._slot)
         if copy is None:
             return None
         at = FEM_LAYOUT.at
         state = _STATE_NAMES.get(int(copy[at.state]), "free")
+        count = int(copy[at.needle_count])
+        needle = copy[at.needle][: 3 * count].reshape(count, 3) if count else copy[at.tip].reshape(1, 3)
+        closed = copy[at.jaws_closed]
         return FemSnapshot(
             time=float(copy[at.time]),
             needle_force=copy[at.needle_force],
-            needle_vertices=copy[at.tip].reshape(1, 3),
+            needle_vertices=needle,
             state=state,
             contact_nodes=np.zeros(0, dtype=np.int64),
             reaction_forces=np.zeros((0, 3)),
@@ -484,9 +466,17 @@ class SharedFem:
             local_stress=float(copy[at.local_stress]),
             stretch=float(copy[at.stretch]),
             tip_velocity=copy[at.tip_velocity],
-            grasp_force=None if math.isnan(copy[at.grasp_force][0]) else copy[at.grasp_force],
-            grasp_displacement=None
-            if math.isnan(copy[at.grasp_displacement][0])
-            else copy[at.grasp_displacement],
+            grasp_force=_none_if_nan(copy[at.grasp_force]),
+            grasp_displacement=_none_if_nan(copy[at.grasp_displacement]),
             wrist_at_stop=bool(copy[at.wrist_at_stop]),
+            holder_time=float(copy[at.holder_time]),
+            jaws=None if math.isnan(closed) else (copy[at.jaw_point], bool(closed)),
         )
+
+
+def _nan_if_none(value):
+    return math.nan if value is None else value
+
+
+def _none_if_nan(cells: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    return None if math.isnan(cells[0]) else cells

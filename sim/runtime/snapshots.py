@@ -124,6 +124,8 @@ these places by name (:data:`sim.runtime.force_path.HOLDER_FIELDS`) and writes t
 HAPTIC_LOG_LAYOUT = SlotLayout((("time", 1), ("position", 3), ("grip", 1), ("force", 3)))
 """A haptic log row: each tick's time, holder position, grip and the force sent (the Python logs and the
 compiled force path, which is given these places by name, write it)."""
+MAX_SHARED_NEEDLE_VERTICES = 64
+"""A needle of up to this many vertices (the default has 17) is shared whole; a longer one by its tip."""
 FEM_LAYOUT = SlotLayout(
     (
         ("seq", 1),
@@ -141,6 +143,13 @@ FEM_LAYOUT = SlotLayout(
         ("grasp_force", 3),
         ("grasp_displacement", 3),
         ("wrist_at_stop", 1),
+        ("needle_count", 1),
+        ("needle", 3 * MAX_SHARED_NEEDLE_VERTICES),
+        ("holder_time", 1),
+        ("jaw_point", 3),
+        ("jaws_closed", 1),
     )
 )
-"""The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first)."""
+"""The FEM snapshot's fields the haptic process records, in shared memory (a seqlock counter first),
+and what the display draws the instruments from (the whole needle, the holder sample's time, the
+forceps' jaws: a person's view shows the newest FEM step's instruments, docs/station.md)."""

@@ -1,4 +1,5 @@
-"""Per-layer loop telemetry in preallocated arrays: when each step started and how long it took."""
+"""Per-layer loop telemetry in preallocated arrays (in shared memory for the real-time run's processes:
+:class:`SharedTelemetry`): when each step started and how long it took."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:  # annotations of the run's result only
     from sim.needle.events import NeedleEvent
     from sim.runtime.logs import HapticLog
+    from sim.runtime.shared import Arena
     from sim.runtime.snapshots import RuntimeEvent
 
 
@@ -105,3 +107,30 @@ class RunResult:
     @property
     def completed(self) -> bool:
         return self.stop_reason == "completed"
+
+
+class SharedTelemetry:
+    """Start and compute times of the haptic process's steps."""
+
+    @staticmethod
+    def doubles(capacity: int) -> int:
+        """Its size in the arena: ``capacity`` (period, compute) pairs and a count."""
+        return capacity * 2 + 1
+
+    def __init__(self, arena: Arena, capacity: int) -> None:
+        self._data = arena.take(capacity, 2)
+        self._count = arena.take(1)
+
+    def record(self, start: float, compute: float) -> None:
+        index = int(self._count[0])
+        if index < len(self._data):
+            self._data[index] = (start, compute)
+            self._count[0] = index + 1
+
+    @property
+    def starts(self) -> NDArray[np.float64]:
+        return self._data[: int(self._count[0]), 0]
+
+    @property
+    def computes(self) -> NDArray[np.float64]:
+        return self._data[: int(self._count[0]), 1]

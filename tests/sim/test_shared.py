@@ -124,7 +124,7 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
         FemSnapshot(
             time=0.5,
             needle_force=np.array([0.1, 0.2, 0.3]),
-            needle_vertices=np.array([[7.0, 8.0, 9.0]]),
+            needle_vertices=np.array([[7.0, 8.0, 9.0], [7.5, 8.0, 9.0], [8.0, 8.5, 9.0]]),
             state="pierced",
             contact_nodes=np.zeros(0, dtype=np.int64),
             reaction_forces=np.zeros((0, 3)),
@@ -138,6 +138,8 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
             grasp_force=np.array([0.0, 0.2, 0.1]),
             grasp_displacement=np.array([0.0, 0.0, 3e-4]),
             wrist_at_stop=True,
+            holder_time=0.497,
+            jaws=(np.array([1e-3, 2e-3, 3e-3]), True),
         )
     )
     fem._owner = -1  # read as the haptic process does, from the slot
@@ -147,12 +149,18 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
     assert (seen.time, seen.state, seen.contact_triangle, seen.tip_speed) == (0.5, "pierced", 42, 0.004)
     assert seen.barycentric == (0.2, 0.3, 0.5) and (seen.local_stress, seen.stretch) == (5e5, 1.1)
     assert np.array_equal(seen.needle_force, [0.1, 0.2, 0.3])
-    assert np.array_equal(seen.needle_vertices, [[7, 8, 9]]) and np.array_equal(seen.tip_tangent, [0, 0, 1])
+    assert np.array_equal(seen.needle_vertices, [[7, 8, 9], [7.5, 8, 9], [8, 8.5, 9]])  # the display's
+    assert np.array_equal(seen.tip_tangent, [0, 0, 1])
+    assert (
+        seen.holder_time == 0.497
+        and seen.jaws[1] is True
+        and np.array_equal(seen.jaws[0], [1e-3, 2e-3, 3e-3])
+    )
     assert np.array_equal(seen.tip_velocity, [1e-3, 2e-3, 3e-3])
     assert np.array_equal(seen.grasp_force, [0, 0.2, 0.1])
     assert np.array_equal(seen.grasp_displacement, [0, 0, 3e-4])
     assert seen.wrist_at_stop is True
-    assert FEM_LAYOUT.size == SharedFem.doubles() == 29
+    assert FEM_LAYOUT.size == SharedFem.doubles() == 29 + 1 + 3 * 64 + 1 + 4
 
 
 def test_a_one_handed_snapshot_reads_back_with_no_grasp():
@@ -165,7 +173,11 @@ def test_a_one_handed_snapshot_reads_back_with_no_grasp():
     )
     fem._owner = -1
     seen = fem.get()
-    assert seen.grasp_force is None and seen.grasp_displacement is None
+    assert seen.grasp_force is None and seen.grasp_displacement is None and seen.jaws is None
+    long = np.zeros((65, 3))  # a needle of more vertices than the slot holds: its tip
+    long[0] = [1.0, 2.0, 3.0]
+    fem.put(FemSnapshot(0.2, np.zeros(3), long, "free", np.zeros(0, dtype=np.int64), np.zeros((0, 3))))
+    assert np.array_equal(fem.get().needle_vertices, [[1, 2, 3]])
 
 
 def test_the_display_gets_both_hands_loads_and_the_jaws():
@@ -222,3 +234,37 @@ def test_a_clamp_message_reads_back_whole():
         (1.25, "force_clamped", "1200 mN clamped to the rated 880 mN"),
         (2.0, "watchdog", ""),
     ]
+
+
+def test_the_window_draws_the_instruments_of_the_newest_fem_step_read_from_another_process():
+    """Motion to photon (issue 42): the live window draws the wall as the graphics frame left it and
+    the needle and forceps where the newest FEM step has them, read through shared memory as the
+    display process reads them (the whole needle, not its tip), with that step's device sample time;
+    a FEM step older than the graphics frame (or none yet) leaves the frame's own."""
+    from sim.needle import Needle, Pose
+    from sim.render import RenderFrame
+    from sim.runtime.display import instruments_now
+    from sim.runtime.shared import SharedFem
+    from sim.runtime.snapshots import FemSnapshot, GraphicsSnapshot
+
+    needle = Needle.curved()
+    then = needle.world_vertices(Pose(np.zeros(3), np.eye(3)))
+    now = needle.world_vertices(Pose(np.array([1e-3, 0.0, 0.0]), np.eye(3)))
+    graphics = GraphicsSnapshot(1.0, then, "free", None, holder_time=0.99, jaws=(np.zeros(3), False))
+    frame = RenderFrame(np.zeros((4, 3)), np.zeros(2), then, forceps=graphics.jaws)
+    fem = SharedFem(Arena(SharedFem.doubles()))
+    jaws = (np.array([0.0, 2e-3, 0.0]), True)
+    fem.put(
+        FemSnapshot(
+            1.012, np.zeros(3), now, "free", np.zeros(0, dtype=np.int64), np.zeros((0, 3)), holder_time=1.011,
+            jaws=jaws,
+        )
+    )  # fmt: skip
+    fem._owner = -1  # the display process's view of the slot
+    drawn, sample_time = instruments_now(frame, graphics, fem.get())
+    assert np.array_equal(drawn.needle, now) and len(drawn.needle) == len(then) > 1
+    assert drawn.forceps[1] is True and np.array_equal(drawn.forceps[0], jaws[0]) and sample_time == 1.011
+    assert drawn.points is frame.points  # the wall as the graphics frame left it
+    for stale in (None, fem.get()._replace(time=0.98)):
+        kept, kept_time = instruments_now(frame, graphics, stale)
+        assert kept is frame and kept_time == 0.99
