@@ -100,10 +100,11 @@ class DisplayScene:
 def instruments_now(frame: RenderFrame, snapshot, fem) -> tuple[RenderFrame, float]:
     """``frame`` (the wall as the graphics ``snapshot`` left it: at most a frame old, as in the paper)
     with the instruments where the hands have them now, in the newest FEM step ``fem`` (at most 2 ms
-    old) when it is not older than the snapshot; and the time of the device sample they follow (what
+    old) when it is not older than the snapshot and holds the whole needle (the shared slot gives
+    only the tip of a needle too long for it); and the time of the device sample they follow (what
     motion to photon is measured from). A frame's render is most of a person's motion to photon, so
     the instruments are not kept a graphics frame behind as well (docs/station.md)."""
-    if fem is None or fem.time < snapshot.time:
+    if fem is None or fem.time < snapshot.time or len(fem.needle_vertices) < 2:
         return frame, snapshot.holder_time
     return dataclasses.replace(
         frame, needle=np.asarray(fem.needle_vertices), forceps=fem.jaws

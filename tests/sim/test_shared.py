@@ -265,6 +265,7 @@ def test_the_window_draws_the_instruments_of_the_newest_fem_step_read_from_anoth
     assert np.array_equal(drawn.needle, now) and len(drawn.needle) == len(then) > 1
     assert drawn.forceps[1] is True and np.array_equal(drawn.forceps[0], jaws[0]) and sample_time == 1.011
     assert drawn.points is frame.points  # the wall as the graphics frame left it
-    for stale in (None, fem.get()._replace(time=0.98)):
+    tip_only = fem.get()._replace(needle_vertices=now[:1])  # what the slot gives of a very long needle
+    for stale in (None, fem.get()._replace(time=0.98), tip_only):
         kept, kept_time = instruments_now(frame, graphics, stale)
         assert kept is frame and kept_time == 0.99
