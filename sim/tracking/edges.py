@@ -110,7 +110,7 @@ def edge_set(body: MarkerBody, marker_ids: tuple[int, ...]) -> EdgeSet:
     into_black = np.concatenate([cell_edges(body, marker_id)[1] for marker_id in marker_ids])
     starts, stops = segments[:, 0], segments[:, 1]
     samples = starts[:, None] + SAMPLES_ALONG[None, :, None] * (stops - starts)[:, None]
-    cell = body.side_m / 6
+    cell = float(np.linalg.norm(stops[0] - starts[0]))  # every segment is one cell long
     ends = np.concatenate([starts, stops, starts + 0.1 * cell * into_black])
     return EdgeSet(samples.reshape(-1, 3), ends)
 

@@ -10,9 +10,10 @@ then the body's pose:
 - **two or more seen**: that single-marker pose of the largest marker in the image starts a
   Levenberg-Marquardt refinement over every corner of every seen marker at once, which is both more
   accurate (more points, wider baseline) and free of the mirror ambiguity;
-- then, in both cases, the pose is refined on every black-white cell edge of the seen markers that face
-  the camera (:mod:`sim.tracking.edges`): a marker seen alone and small is where the corners alone
-  leave the tilt, and so the tip's depth, uncertain.
+- then, in both cases, when a marker facing the camera is seen small (under :data:`EDGES_BELOW_PX`),
+  the pose is refined on every black-white cell edge of the facing markers (:mod:`sim.tracking.edges`):
+  a marker seen alone and small is where the corners alone leave the tilt, and so the tip's depth,
+  uncertain.
 
 The instrument tip is the body pose applied to the body's tip offset. Everything is in the camera
 frame (x right, y down, z along the optical axis), metres.
