@@ -407,10 +407,14 @@ class SharedFem:
         velocity."""
         return FEM_LAYOUT.size
 
-    def __init__(self, arena: Arena) -> None:
+    def __init__(self, arena: Arena, for_display: bool = False) -> None:
         self._slot = arena.take(self.doubles())
         self._owner = os.getpid()
         self._local = None
+        self.for_display = for_display
+        """Also share the whole needle, the jaws and the sample time (1.5 us a FEM step): a display
+        process draws the instruments from them (without: the tip, no jaws, no sample time)."""
+        self._slot[FEM_LAYOUT.at.holder_time] = self._slot[FEM_LAYOUT.at.jaws_closed] = math.nan
 
     def put(self, snapshot) -> None:
         self._local = snapshot
@@ -430,6 +434,12 @@ class SharedFem:
         slot[at.grasp_force] = _nan_if_none(snapshot.grasp_force)
         slot[at.grasp_displacement] = _nan_if_none(snapshot.grasp_displacement)
         slot[at.wrist_at_stop] = float(snapshot.wrist_at_stop)
+        if self.for_display:
+            self._put_instruments(slot, at, snapshot)
+        slot[0] += 1
+
+    @staticmethod
+    def _put_instruments(slot, at, snapshot) -> None:
         vertices = snapshot.needle_vertices
         whole = len(vertices) <= MAX_SHARED_NEEDLE_VERTICES
         slot[at.needle_count] = len(vertices) if whole else 0
@@ -439,7 +449,6 @@ class SharedFem:
         jaws = snapshot.jaws
         slot[at.jaw_point] = math.nan if jaws is None else jaws[0]
         slot[at.jaws_closed] = math.nan if jaws is None else float(jaws[1])
-        slot[0] += 1
 
     def get(self):
         if os.getpid() == self._owner:

@@ -1,6 +1,7 @@
 """The shared-memory channels against their in-process counterparts."""
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -116,7 +117,7 @@ def test_a_snapshot_read_from_shared_memory_is_the_one_written():
     from sim.runtime.snapshots import FEM_LAYOUT, FemSnapshot, HolderSnapshot
 
     arena = Arena(SharedHolder.doubles() + SharedFem.doubles())
-    holder, fem = SharedHolder(arena), SharedFem(arena)
+    holder, fem = SharedHolder(arena), SharedFem(arena, for_display=True)
     rotation = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     pose = Pose(np.array([1.0, 2.0, 3.0]), rotation)
     holder.put(HolderSnapshot(0.25, pose, np.array([4.0, 5.0, 6.0]), True))
@@ -174,6 +175,7 @@ def test_a_one_handed_snapshot_reads_back_with_no_grasp():
     fem._owner = -1
     seen = fem.get()
     assert seen.grasp_force is None and seen.grasp_displacement is None and seen.jaws is None
+    assert math.isnan(seen.holder_time)  # shared only for a display process
     long = np.zeros((65, 3))  # a needle of more vertices than the slot holds: its tip
     long[0] = [1.0, 2.0, 3.0]
     fem.put(FemSnapshot(0.2, np.zeros(3), long, "free", np.zeros(0, dtype=np.int64), np.zeros((0, 3))))
@@ -252,7 +254,7 @@ def test_the_window_draws_the_instruments_of_the_newest_fem_step_read_from_anoth
     now = needle.world_vertices(Pose(np.array([1e-3, 0.0, 0.0]), np.eye(3)))
     graphics = GraphicsSnapshot(1.0, then, "free", None, holder_time=0.99, jaws=(np.zeros(3), False))
     frame = RenderFrame(np.zeros((4, 3)), np.zeros(2), then, forceps=graphics.jaws)
-    fem = SharedFem(Arena(SharedFem.doubles()))
+    fem = SharedFem(Arena(SharedFem.doubles()), for_display=True)
     jaws = (np.array([0.0, 2e-3, 0.0]), True)
     fem.put(
         FemSnapshot(
