@@ -105,13 +105,15 @@ def diagnose(
     depth = -(offsets @ normal)
     across = np.linalg.norm(offsets + np.outer(depth, normal), axis=1)
     block = load.soft.compliance[:3, :3]
+    third = np.cross(normal, sideways)
     surface = per_newton[np.hypot(depth - 0.1e-3, across) < 0.12e-3].mean()
     mid = per_newton[np.hypot(depth - 0.5e-3, across) < 0.12e-3].mean()
     print(
-        f"  kernel compliance {normal @ block @ normal * 1e3:.2f} mm/N along the normal, "
-        f"{sideways @ block @ sideways * 1e3:.2f} mm/N sideways; stress per newton sideways: largest "
-        f"{per_newton.max() / 1e6:.3f} MPa, next to the surface {surface / 1e6:.3f}, 0.5 mm deep "
-        f"{mid / 1e6:.3f}",
+        f"  kernel ({kernel.radius * 1e3:.2f} mm, {len(kernel.nodes)} nodes) compliance "
+        f"{normal @ block @ normal * 1e3:.2f} mm/N along the normal, {sideways @ block @ sideways * 1e3:.2f} "
+        f"mm/N sideways, {third @ block @ third * 1e3:.2f} mm/N across both; stress per newton "
+        f"sideways: largest {per_newton.max() / 1e6:.3f} MPa, next to the surface {surface / 1e6:.3f}, "
+        f"0.5 mm deep {mid / 1e6:.3f}",
         flush=True,
     )
 
