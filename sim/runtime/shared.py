@@ -370,9 +370,7 @@ class SharedGraphics:
             slot[base + 1 : base + 1 + count] = loads[0][:count]
             start = base + 1 + self.MAX_CONTACT
             slot[start : start + 3 * count] = loads[1][:count].ravel()
-        jaws = snapshot.jaws
-        slot[-6:-3] = math.nan if jaws is None else jaws[0]
-        slot[-3] = math.nan if jaws is None else float(jaws[1])
+        slot[-6:-3], slot[-3] = _jaw_cells(snapshot.jaws)
         slot[-2] = math.nan if loads is None else loads[2]
         slot[-1] = snapshot.holder_time
         slot[0] += 1
@@ -390,7 +388,7 @@ class SharedGraphics:
             nodes = copy[base + 1 : base + 1 + count].astype(np.int64)
             start = base + 1 + self.MAX_CONTACT
             loads = (nodes, copy[start : start + 3 * count].reshape(count, 3), float(copy[-2]))
-        jaws = None if math.isnan(copy[-3]) else (copy[-6:-3], bool(copy[-3]))
+        jaws = _jaws_of(copy[-6:-3], copy[-3])
         return GraphicsSnapshot(float(copy[1]), vertices, "", None, None, float(copy[-1]), loads, jaws)
 
 
@@ -446,9 +444,7 @@ class SharedFem:
         if whole:
             slot[at.needle.start : at.needle.start + vertices.size] = vertices.ravel()
         slot[at.holder_time] = snapshot.holder_time
-        jaws = snapshot.jaws
-        slot[at.jaw_point] = math.nan if jaws is None else jaws[0]
-        slot[at.jaws_closed] = math.nan if jaws is None else float(jaws[1])
+        slot[at.jaw_point], slot[at.jaws_closed] = _jaw_cells(snapshot.jaws)
 
     def get(self):
         if os.getpid() == self._owner:
@@ -460,7 +456,6 @@ class SharedFem:
         state = _STATE_NAMES.get(int(copy[at.state]), "free")
         count = int(copy[at.needle_count])
         needle = copy[at.needle][: 3 * count].reshape(count, 3) if count else copy[at.tip].reshape(1, 3)
-        closed = copy[at.jaws_closed]
         return FemSnapshot(
             time=float(copy[at.time]),
             needle_force=copy[at.needle_force],
@@ -479,7 +474,7 @@ class SharedFem:
             grasp_displacement=_none_if_nan(copy[at.grasp_displacement]),
             wrist_at_stop=bool(copy[at.wrist_at_stop]),
             holder_time=float(copy[at.holder_time]),
-            jaws=None if math.isnan(closed) else (copy[at.jaw_point], bool(closed)),
+            jaws=_jaws_of(copy[at.jaw_point], copy[at.jaws_closed]),
         )
 
 
@@ -489,3 +484,12 @@ def _nan_if_none(value):
 
 def _none_if_nan(cells: NDArray[np.float64]) -> NDArray[np.float64] | None:
     return None if math.isnan(cells[0]) else cells
+
+
+def _jaw_cells(jaws: tuple[NDArray[np.float64], bool] | None) -> tuple:
+    """The forceps' jaws as slot cells: (jaw point, closed), nan for a one-handed scene."""
+    return (math.nan, math.nan) if jaws is None else (jaws[0], float(jaws[1]))
+
+
+def _jaws_of(point: NDArray[np.float64], closed: float) -> tuple[NDArray[np.float64], bool] | None:
+    return None if math.isnan(closed) else (point, bool(closed))

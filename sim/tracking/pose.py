@@ -226,15 +226,15 @@ class BodyTracker:
                 flags=cv2.SOLVEPNP_ITERATIVE,
             )  # fmt: skip
             if ok:
-                rotation, translation = cv2.Rodrigues(r)[0], t.ravel()
-                error = self._corner_error(seen, rotation, translation)
+                rotation, translation, error = cv2.Rodrigues(r)[0], t.ravel(), None
         facing = [k for k in seen if self._facing(k, rotation, translation) >= MIN_FACING]
         small = facing and min(np.sqrt(_area(seen[k])) for k in facing) < EDGES_BELOW_PX
         if small and grey is not None:
             refined = refine_on_edges(grey, self.camera, self.body, facing, rotation, translation)
             if refined is not None and _near(refined, (rotation, translation)):
-                rotation, translation = refined
-                error = self._corner_error(seen, rotation, translation)
+                (rotation, translation), error = refined, None
+        if error is None:  # the pose moved from IPPE's: the corners' error under the one returned
+            error = self._corner_error(seen, rotation, translation)
         tip = rotation @ np.asarray(self.body.tip_offset_m, dtype=np.float64) + translation
         return BodyPose(rotation, translation, tip, error, len(seen))
 
